@@ -1,0 +1,68 @@
+"""The paper's reward functions (Section III-C), as pure functions of what a step did."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """The facts a reward needs about one step."""
+
+    primitive: str
+    grasp_success: bool = False  # any object came up in the fingers
+    target_grasped: bool = False  # ... and it was the target
+    move_success: bool = False  # occlusion removed, target not picked up by the move
+    change_detected: bool = False
+    grasp_q_gain: float = 0.0  # grasp-net score after minus before (0 without a scorer)
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Reward values and thresholds of the paper's equations."""
+
+    success: float = 1.0
+    improved: float = 0.5
+    penalty: float = -0.5
+    move_q_gain: float = 0.5  # Q_g^im threshold of R_m
+    push_q_gain: float = 0.1  # Q_g^ip threshold of R_p
+
+
+def reward_grasp_any(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
+    """R_g1 (Stage I): 1 for grasping any object."""
+    return c.success if o.grasp_success else 0.0
+
+
+def reward_grasp_target(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
+    """R_g2 (Stage II): 1 for grasping the target; failed and wrong grasps earn 0."""
+    return c.success if o.target_grasped else 0.0
+
+
+def reward_move(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
+    """R_m (Stage III): 1 move success; 0.5 grasp-Q gain > 0.5 with change; -0.5 target
+    picked up by the move or no change; 0 otherwise."""
+    if o.target_grasped or not o.change_detected:
+        return c.penalty
+    if o.move_success:
+        return c.success
+    if o.grasp_q_gain > c.move_q_gain:
+        return c.improved
+    return 0.0
+
+
+def reward_push(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
+    """R_p (Stage IV): 0.5 grasp-Q gain > 0.1 with change; -0.5 no change; 0 otherwise."""
+    if not o.change_detected:
+        return c.penalty
+    if o.grasp_q_gain > c.push_q_gain:
+        return c.improved
+    return 0.0
+
+
+def reward_per_primitive(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
+    """Stage V and the test scenes: each primitive keeps its stage's reward."""
+    if o.primitive == "move":
+        return reward_move(o, c)
+    if o.primitive == "push":
+        return reward_push(o, c)
+    return reward_grasp_target(o, c)

@@ -1,0 +1,53 @@
+"""The training stages and the test scene as data: one :class:`StageSpec` per registered env."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from mpg_envs.rewards import (
+    RewardConfig,
+    StepOutcome,
+    reward_grasp_any,
+    reward_grasp_target,
+    reward_move,
+    reward_per_primitive,
+)
+
+RewardFn = Callable[[StepOutcome, RewardConfig], float]
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    """Everything that makes one env differ from another."""
+
+    name: str
+    primitives: tuple[str, ...]
+    scene: str  # key of mpg_envs.scenes.SCENES
+    num_objects: int
+    max_motions: int  # truncation cap
+    reward: RewardFn
+    mask_all_objects: bool = False  # Stage I: the mask shows every object, "grasp anything"
+    start_occluded: bool | None = None  # required initial occlusion of the target (None: any)
+    start_surrounded: int = 0  # required sectors (of 8) around the target with a neighbour close by
+    end_on_move_success: bool = False  # Stage III ends once a move uncovers the target
+    end_after_grasp: bool = False  # Stage IV: pushes, then one grasp ends the episode
+    min_objects: int = 1
+
+    @property
+    def env_id(self) -> str:
+        return f"MPG-{self.name}-v0"
+
+
+STAGES: dict[str, StageSpec] = {
+    s.name: s
+    for s in (
+        StageSpec("Stage1", ("grasp",), "scattered", 5, 15, reward_grasp_any, mask_all_objects=True),
+        StageSpec("Stage2", ("grasp",), "isolated_target", 5, 10, reward_grasp_target),
+        StageSpec("Stage3", ("move",), "occluded_target", 2, 5, reward_move, start_occluded=True, end_on_move_success=True, min_objects=2),
+        StageSpec("Stage4", ("push", "grasp"), "surrounded_target", 7, 6, reward_per_primitive, start_occluded=False, start_surrounded=6, end_after_grasp=True, min_objects=2),
+        StageSpec("Stage5", ("move", "push", "grasp"), "clustered", 10, 10, reward_per_primitive),
+        StageSpec("Occluded", ("move", "push", "grasp"), "test_scene", 15, 10, reward_per_primitive, start_occluded=True, min_objects=5),
+    )
+}
+"""Stage name -> spec. Stage IV allows 5 pushes and then a grasp (6 motions)."""

@@ -1,0 +1,33 @@
+"""Shared fixtures. Rendering tests need OpenGL: default to EGL on headless machines."""
+
+import os
+import sys
+
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from mpg_envs.objects import blocks_object_set  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def blocks():
+    """The blocks object set, by name."""
+    return {asset.name: asset for asset in blocks_object_set()}
+
+
+@pytest.fixture(scope="session")
+def vpg_dir():
+    """The VPG peer files (meshes and test cases), outside the repo; skip if absent."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "shared" / "peers" / "vpg"
+    if not path.is_dir():
+        pytest.skip(f"VPG peer files not found at {path}")
+    return path
+
+
+def flat_quat(yaw: float = 0.0) -> np.ndarray:
+    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])

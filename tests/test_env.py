@@ -1,0 +1,307 @@
+"""The registered env suite: API conformance, determinism, errors, scenes, rewards."""
+
+import math
+import warnings
+
+import cv2
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import mpg_envs
+from mpg_envs.env import MPGEnv
+from mpg_envs.occlusion import change_detected, is_occluded, surrounded_sectors
+from mpg_envs.policies import OraclePolicy
+from mpg_envs.rewards import StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
+from mpg_envs.scene_io import save_scene
+
+ALL_IDS = mpg_envs.ENV_IDS
+EXPECTED_PRIMITIVES = {
+    "MPG-Stage1-v0": ("grasp",),
+    "MPG-Stage2-v0": ("grasp",),
+    "MPG-Stage3-v0": ("move",),
+    "MPG-Stage4-v0": ("push", "grasp"),
+    "MPG-Stage5-v0": ("move", "push", "grasp"),
+    "MPG-Occluded-v0": ("move", "push", "grasp"),
+}
+INFO_KEYS = {
+    "primitive", "rotation", "pixel", "position", "grasp_success", "target_grasped", "wrong_grasp",
+    "change_detected", "occluded_before", "occluded", "move_success", "num_motions", "is_success",
+    "objects_left", "target_out_of_workspace",
+}
+
+
+def test_six_ids_registered_with_their_primitives():
+    assert set(ALL_IDS) == set(EXPECTED_PRIMITIVES)
+    for env_id, prims in EXPECTED_PRIMITIVES.items():
+        env = gym.make(env_id)
+        assert mpg_envs.env_primitives(env) == prims
+        assert env.action_space.n == len(prims) * 16 * 224 * 224
+        env.close()
+
+
+def test_make_with_module_prefix_in_a_fresh_interpreter():
+    import subprocess
+    import sys
+
+    code = "import gymnasium as gym; e = gym.make('mpg_envs:MPG-Stage5-v0'); print(e.unwrapped.primitives)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "('move', 'push', 'grasp')" in out.stdout
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_gymnasium_and_sb3_env_checkers_pass(env_id):
+    from gymnasium.utils.env_checker import check_env as gym_check
+    from stable_baselines3.common.env_checker import check_env as sb3_check
+
+    kwargs = {"num_objects": 5} if env_id == "MPG-Occluded-v0" else {}
+    env = gym.make(env_id, **kwargs).unwrapped
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # SB3 notes the image-like Box spaces; not errors
+        gym_check(env, skip_render_check=True)
+        sb3_check(env, warn=False)
+    env.close()
+
+
+def rollout(env, seed, actions):
+    obs, info = env.reset(seed=seed)
+    trace = [(obs, info)]
+    for a in actions:
+        obs, r, term, trunc, info = env.step(a)
+        trace.append((obs, r, term, trunc, info))
+        if term or trunc:
+            break
+    return trace
+
+
+def same(a, b):
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (tuple, list)):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    if isinstance(a, np.ndarray):
+        return a.dtype == b.dtype and np.array_equal(a, b)
+    return a == b
+
+
+def test_same_seed_and_actions_are_bit_identical():
+    env = gym.make("MPG-Stage5-v0")
+    rng = np.random.default_rng(0)
+    actions = [int(a) for a in rng.integers(env.action_space.n, size=4)]
+    assert same(rollout(env, 11, actions), rollout(env, 11, actions))
+    other = rollout(env, 12, actions)
+    assert not np.array_equal(other[0][0]["depth"], rollout(env, 11, actions)[0][0]["depth"])
+
+
+@pytest.mark.parametrize(
+    "action, match",
+    [
+        (-1, r"0\.\.802815"),
+        (802816, r"0\.\.802815"),
+        (1.5, "integer"),
+        ("3", "integer"),
+        (np.array([1, 2]), "single integer"),
+    ],
+)
+def test_malformed_action_raises_clearly(action, match):
+    env = gym.make("MPG-Stage2-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=match):
+        env.step(action)
+    obs, *_ = env.step(env.action_space.encode("grasp", 0, 100, 100))  # still usable
+    assert obs["depth"].shape == (224, 224)
+
+
+def test_primitive_not_allowed_raises():
+    env = gym.make("MPG-Stage4-v0").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="not allowed"):
+        env.action_space.encode("move", 0, 0, 0)
+    with pytest.raises(ValueError, match="must be one of"):
+        MPGEnv("Stage5", obs_mode="lidar")
+    with pytest.raises(ValueError, match="num_objects"):
+        MPGEnv("Stage3", num_objects=1)
+    with pytest.raises(ValueError, match="unknown stage"):
+        MPGEnv("Stage9")
+
+
+def test_info_has_every_key_and_is_fresh():
+    env = gym.make("MPG-Stage5-v0").unwrapped
+    env.reset(seed=1)
+    _, _, _, _, a = env.step(env.action_space.encode("push", 0, 100, 100))
+    _, _, _, _, b = env.step(env.action_space.encode("push", 4, 120, 100))
+    assert INFO_KEYS <= a.keys() and a is not b and a["num_motions"] == 1 and b["num_motions"] == 2
+
+
+@pytest.mark.parametrize("env_id, occluded", [("MPG-Stage3-v0", True), ("MPG-Occluded-v0", True)])
+def test_occluded_stages_start_occluded(env_id, occluded):
+    env = gym.make(env_id).unwrapped
+    seeds = range(10)
+    starts = [bool(env.reset(seed=s)[0]["occluded"][0]) for s in seeds]
+    assert sum(starts) >= 9
+
+
+def test_stage4_target_is_surrounded_but_not_occluded():
+    env = gym.make("MPG-Stage4-v0").unwrapped
+    for seed in range(10):
+        obs, info = env.reset(seed=seed)
+        assert not obs["occluded"][0]
+        # Neighbours within 3 cm of the target's footprint in most directions.
+        assert surrounded_sectors(obs["depth"], obs["mask"]) >= 6, f"seed {seed}"
+
+
+def test_surrounded_sectors_hand_made():
+    depth = np.zeros((60, 60), np.float32)
+    mask = np.zeros((60, 60), np.uint8)
+    mask[25:35, 25:35] = 1
+    assert surrounded_sectors(depth, mask, reach_pixels=5) == 0
+    depth[25:35, 37:39] = 0.04  # one neighbour to the +col side
+    assert surrounded_sectors(depth, mask, reach_pixels=5) in (1, 2)
+    depth[37:39, 20:40] = depth[21:23, 20:40] = depth[20:40, 21:23] = 0.04
+    assert surrounded_sectors(depth, mask, reach_pixels=5) == 8
+
+
+def test_scene_file_round_trip(tmp_path):
+    env = gym.make("MPG-Stage5-v0").unwrapped
+    obs, info = env.reset(seed=5)
+    path = save_scene(env, tmp_path / "scene.json")
+    obs2, info2 = env.reset(options={"scene": str(path)})
+    assert same(obs, obs2) and info2["target"] == info["target"]
+
+
+def test_vpg_test_case_loads_with_its_object_count(vpg_dir):
+    case = vpg_dir / "test-cases" / "test-10-obj-02.txt"
+    lines = [ln for ln in case.read_text().splitlines() if ln.strip()]
+    env = gym.make("MPG-Occluded-v0").unwrapped
+    obs, info = env.reset(options={"scene": str(case)})
+    assert env.world.num_objects == len(lines) == 10
+    names = [a.name for a in env.world.assets]
+    assert names == [ln.split()[0].split(".")[0] for ln in lines]  # VPG's own meshes
+    assert obs["depth"].max() > 0.02 and obs["mask"].any()
+
+
+def test_vpg_case_maps_onto_blocks_without_the_meshes(vpg_dir, tmp_path):
+    case = tmp_path / "cases" / "case.txt"
+    case.parent.mkdir()
+    case.write_text((vpg_dir / "test-cases" / "test-10-obj-03.txt").read_text())
+    env = gym.make("MPG-Stage5-v0").unwrapped
+    env.reset(options={"scene": str(case)})
+    assert env.world.num_objects == 10
+    assert {a.source for a in env.world.assets} == {"blocks"}
+
+
+def test_bad_scene_files_raise(tmp_path):
+    env = gym.make("MPG-Stage5-v0").unwrapped
+    with pytest.raises(FileNotFoundError):
+        env.reset(options={"scene": str(tmp_path / "missing.json")})
+    bad = tmp_path / "bad.txt"
+    bad.write_text("0.obj 1 2 3\n")
+    with pytest.raises(ValueError, match="expected 'mesh r g b"):
+        env.reset(options={"scene": str(bad)})
+    with pytest.raises(ValueError, match="unknown reset options"):
+        env.reset(options={"secne": "x"})
+
+
+# --------------------------------------------------------------------------- rewards
+def test_reward_equations_on_constructed_cases():
+    o = StepOutcome
+    assert reward_grasp_any(o("grasp", grasp_success=True)) == 1.0
+    assert reward_grasp_any(o("grasp")) == 0.0
+    assert reward_grasp_target(o("grasp", grasp_success=True, target_grasped=False)) == 0.0  # wrong grasp
+    assert reward_grasp_target(o("grasp", grasp_success=True, target_grasped=True)) == 1.0
+    assert reward_move(o("move", move_success=True, change_detected=True)) == 1.0
+    assert reward_move(o("move", change_detected=True, grasp_q_gain=0.6)) == 0.5
+    assert reward_move(o("move", change_detected=True, grasp_q_gain=0.4)) == 0.0
+    assert reward_move(o("move", change_detected=False)) == -0.5
+    assert reward_move(o("move", target_grasped=True, change_detected=True)) == -0.5
+    assert reward_push(o("push", change_detected=True, grasp_q_gain=0.2)) == 0.5
+    assert reward_push(o("push", change_detected=True, grasp_q_gain=0.05)) == 0.0
+    assert reward_push(o("push", change_detected=False, grasp_q_gain=0.9)) == -0.5
+
+
+def test_move_that_uncovers_the_target_earns_1_in_stage3():
+    env = gym.make("MPG-Stage3-v0").unwrapped
+    env.reset(seed=0)
+    oracle = OraclePolicy(env)
+    for _ in range(5):
+        obs, r, term, trunc, info = env.step(oracle.act())
+        if info["move_success"]:
+            assert r == 1.0 and term and info["occluded_before"] and not info["occluded"]
+            return
+    pytest.fail("the oracle's moves never uncovered the target")
+
+
+def test_push_rewards_no_change_and_scorer_gain():
+    # A scorer that likes empty space around the target: pushing a neighbour away pays.
+    def scorer(obs):
+        ring = cv2.dilate(obs["mask"], np.ones((31, 31), np.uint8)) & (1 - obs["mask"])
+        return -float(obs["depth"][ring > 0].mean()) * 100
+
+    env = gym.make("MPG-Stage4-v0", grasp_scorer=scorer).unwrapped
+    obs, _ = env.reset(seed=0)
+    # A push in an empty corner changes nothing.
+    _, r, *_, info = env.step(env.action_space.encode("push", 0, 5, 5))
+    assert not info["change_detected"] and abs(info["grasp_q_gain"]) < 0.01 and r == -0.5
+    before = scorer(env._obs)
+    oracle = OraclePolicy(env)
+    primitive, *rest = env.action_space.decode(oracle.act())
+    assert primitive == "push"  # the target is boxed in
+    obs, r, *_, info = env.step(env.action_space.encode("push", *rest))
+    assert info["change_detected"]
+    assert info["grasp_q_gain"] == pytest.approx(scorer(obs) - before)
+    assert r == (0.5 if info["grasp_q_gain"] > 0.1 else 0.0)
+
+
+def test_occlusion_and_change_detection_on_hand_made_maps():
+    depth = np.zeros((20, 20), np.float32)
+    mask = np.zeros((20, 20), np.uint8)
+    mask[5:15, 5:15] = 1
+    depth[5:15, 5:15] = 0.03  # the target, 3 cm tall
+    assert not is_occluded(depth, mask, target_top=0.03)
+    depth[8:12, 8:12] = 0.06  # something on top of it
+    assert is_occluded(depth, mask, target_top=0.03)
+    before = np.zeros((224, 224), np.float32)
+    after = before.copy()
+    after[:10, :10] = 0.05  # 100 changed pixels away from the target: not enough
+    tmask = np.zeros_like(before, np.uint8)
+    tmask[100:110, 100:110] = 1
+    assert not change_detected(before, after, tmask)
+    after[95:105, 95:105] = 0.05  # 100 pixels near the target
+    assert change_detected(before, after, tmask)
+    assert change_detected(before, before, tmask, grasp_success=True)
+
+
+# --------------------------------------------------------------------------- robustness
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_random_actions_keep_the_simulation_sane(env_id):
+    kwargs = {"num_objects": 8} if env_id == "MPG-Occluded-v0" else {}
+    env = gym.make(env_id, **kwargs).unwrapped
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    for step in range(40):
+        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        assert np.isfinite(env.world.data.qpos).all() and np.isfinite(obs["depth"]).all()
+        assert env.world.objects_out_of_room().size == 0
+        assert not env.world.warnings_raised(), env.world.warnings_raised()
+        if term or trunc:
+            env.reset(seed=step + 1)
+
+
+def test_vector_envs_run_with_two_workers():
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    venv = gym.vector.AsyncVectorEnv([lambda: gym.make("MPG-Stage2-v0")] * 2)
+    obs, _ = venv.reset(seed=0)
+    assert obs["depth"].shape == (2, 224, 224)
+    obs, r, term, trunc, info = venv.step(venv.action_space.sample())
+    assert r.shape == (2,)
+    venv.close()
+    # Worker processes start fresh: the "module:" prefix imports mpg_envs there.
+    sb3 = make_vec_env("mpg_envs:MPG-Stage2-v0", n_envs=2, vec_env_cls=SubprocVecEnv, seed=0)
+    obs = sb3.reset()
+    obs, r, done, infos = sb3.step(np.array([sb3.action_space.sample() for _ in range(2)]))
+    assert obs["color"].shape == (2, 224, 224, 3) and len(infos) == 2
+    sb3.close()
