@@ -43,6 +43,7 @@ class EnvConfig:
     occlusion: OcclusionConfig = OcclusionConfig()
     change: ChangeConfig = ChangeConfig()
     scene_tries: int = 20  # redraws allowed to meet a stage's start condition
+    raycast_threads: int | None = None  # threads per env for the heightmap; None: up to 2 (set 1 with one env per core)
     object_set_seed: int = 0
 
 
@@ -227,7 +228,7 @@ class MPGEnv(gym.Env):
         if self.obs_mode == "raycast":
             from mpg_envs.heightmap import RaycastHeightmapper
 
-            self._raycaster = RaycastHeightmapper(world.model, self.config.workspace)
+            self._raycaster = RaycastHeightmapper(world.model, self.config.workspace, num_threads=self.config.raycast_threads)
         return world
 
     def _generate_scene(self) -> None:

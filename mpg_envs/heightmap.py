@@ -375,10 +375,12 @@ class RaycastHeightmapper:
 
         self._origin, dirs = _ray_directions(self.workspace, self.source_height)
         self._num_rays = dirs.shape[0]
-        bounds = np.linspace(0, self._num_rays, self.num_threads + 1).round().astype(int)
-        self._chunks = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+        # Thread k takes image rows k, k + n, k + 2n, ...: clutter is often bunched in one
+        # part of the workspace, and interleaved rows share it evenly.
+        row_of_ray = np.arange(self._num_rays) // self.workspace.shape[1]
+        self._ray_ids = [np.flatnonzero(row_of_ray % self.num_threads == k) for k in range(self.num_threads)]
         # Writable contiguous copies, so the binding can pass them to C without copying.
-        self._vec = [dirs[a:b].reshape(-1).copy() for a, b in self._chunks]
+        self._vec = [dirs[ids].reshape(-1).copy() for ids in self._ray_ids]
         self._vec_z = dirs[:, 2].copy()
         self._scratch = [mujoco.MjData(model) for _ in range(self.num_threads - 1)]
         self._pool = ThreadPoolExecutor(self.num_threads - 1) if self.num_threads > 1 else None
@@ -405,7 +407,9 @@ class RaycastHeightmapper:
         cutoff = float(mujoco.mjMAXVAL)
 
         def run(k: int, d: mujoco.MjData) -> None:
-            a, b = self._chunks[k]
+            ids = self._ray_ids[k]
+            ids_geom = np.empty(ids.size, dtype=np.int32)
+            ids_dist = np.empty(ids.size, dtype=np.float64)
             mujoco.mj_multiRay(
                 self.model,
                 d,
@@ -414,12 +418,14 @@ class RaycastHeightmapper:
                 self.geomgroup,
                 1,
                 -1,
-                geom_id[a:b],
-                dist[a:b],
+                ids_geom,
+                ids_dist,
                 None,
-                b - a,
+                ids.size,
                 cutoff,
             )
+            geom_id[ids] = ids_geom
+            dist[ids] = ids_dist
 
         # Copy before any ray uses data's stack: mj_copyData refuses a busy stack.
         for scratch in self._scratch:

@@ -57,6 +57,8 @@ class OraclePolicy:
     def __init__(self, env: gym.Env, config: OracleConfig = OracleConfig()):
         self.env = env
         self.config = config
+        self._last: tuple[int, str, int] | None = None  # (motion count, primitive, rotation) of our last action
+        self._failed_rotations: set[int] = set()  # target grasp angles that failed this episode
 
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style: ``(action, state)`` for the env's current state (``obs`` unused)."""
@@ -68,6 +70,20 @@ class OraclePolicy:
         world, depth = env.world, env._obs["depth"]
         allowed = env.primitives
         target = env.target
+        self._remember_failures(env)
+        action = self._choose(env, world, depth, allowed, target)
+        primitive, rotation, _, _ = env.action_space.decode(action)
+        self._last = (env.num_motions, primitive, rotation)
+        return action
+
+    def _remember_failures(self, env) -> None:
+        if env.num_motions == 0:
+            self._failed_rotations = set()
+        elif self._last is not None and self._last[0] == env.num_motions - 1 and self._last[1] == "grasp":
+            # Our grasp did not end the episode, so it failed: try another angle next time.
+            self._failed_rotations.add(self._last[2] % (NUM_ROTATIONS // 2))
+
+    def _choose(self, env, world, depth, allowed, target) -> int:
         if target is None or env.spec_stage.mask_all_objects or not world.active[target]:
             return self._grasp_any(env, depth)
         if "move" in allowed:
@@ -105,8 +121,7 @@ class OraclePolicy:
 
     def _top_occluder(self, world, target: int) -> int | None:
         """The highest object overlapping the target's footprint and rising above it."""
-        t_xy = world.object_vertices(target)[:, :2]
-        hull = cv2.convexHull(t_xy.astype(np.float32))
+        hull = _hull_mm(world.object_vertices(target)[:, :2])
         t_top = world.object_top(target)
         best, best_top = None, t_top + 0.005
         for j in world.active_objects():
@@ -116,9 +131,8 @@ class OraclePolicy:
             top = float(v[:, 2].max())
             if top <= best_top:
                 continue
-            j_hull = cv2.convexHull(v[:, :2].astype(np.float32))
-            overlap, _ = cv2.intersectConvexConvex(hull, j_hull)
-            if overlap > 1e-6:
+            overlap, _ = cv2.intersectConvexConvex(hull, _hull_mm(v[:, :2]))
+            if overlap > 1.0:  # mm^2
                 best, best_top = j, top
         return best
 
@@ -160,6 +174,7 @@ class OraclePolicy:
         first_blocker = None
         # Try the short axis first, then the other angles from nearest to farthest.
         order = sorted(range(NUM_ROTATIONS // 2), key=lambda k: _angle_gap(k * math.pi / 8, short_dir))
+        order = [k for k in order if k not in self._failed_rotations] or order
         for k in order:
             theta = k * math.pi / 8
             d = np.array([math.cos(theta), math.sin(theta)])
@@ -180,7 +195,7 @@ class OraclePolicy:
             if first_blocker is None:
                 first_blocker = (k, blocked)
         if first_blocker is None:
-            return angle_to_rotation(short_dir), None
+            return order[0], None  # nothing fits the fingers: the best untried angle
         k, blocker = first_blocker
         if blocker == -1:
             blocker = self._nearest(world, target)
@@ -219,8 +234,11 @@ def _angle_gap(a: float, b: float) -> float:
     return min(d, math.pi - d)
 
 
+def _hull_mm(points_xy: np.ndarray) -> np.ndarray:
+    """Convex hull in millimetres: OpenCV's polygon intersection loses areas in m^2."""
+    return cv2.convexHull((1000.0 * np.asarray(points_xy)).astype(np.float32))
+
+
 def _polygon_hits(points: np.ndarray, corners: list[np.ndarray]) -> bool:
-    hull = cv2.convexHull(points.astype(np.float32))
-    quad = cv2.convexHull(np.array(corners, dtype=np.float32))
-    area, _ = cv2.intersectConvexConvex(hull, quad)
-    return area > 1e-6
+    area, _ = cv2.intersectConvexConvex(_hull_mm(points), _hull_mm(np.array(corners)))
+    return area > 1.0  # mm^2

@@ -1,0 +1,92 @@
+"""The registered env suite: reset/step times per env and the oracle's success.
+
+Per env id: the median reset time and the median step time (OraclePolicy actions, so the
+primitives do real work). Then the OraclePolicy on MPG-Occluded-v0 with 15 and with 30
+objects over ``--episodes`` seeded episodes: task success (target grasped within 10
+motions) and mean motions per episode. The issue asks for >= 80% success on 15 objects.
+The last output line is one JSON object.
+
+    python benchmarks/suite.py [--episodes 20] [--resets 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+
+import mpg_envs  # noqa: E402
+from mpg_envs.policies import OraclePolicy  # noqa: E402
+
+
+def time_env(env_id: str, resets: int) -> tuple[float, float]:
+    env = gym.make(env_id).unwrapped
+    oracle = OraclePolicy(env)
+    reset_s, step_s = [], []
+    for seed in range(resets):
+        start = time.perf_counter()
+        env.reset(seed=seed)
+        reset_s.append(time.perf_counter() - start)
+        for _ in range(3):
+            action = oracle.act()
+            start = time.perf_counter()
+            _, _, term, trunc, _ = env.step(action)
+            step_s.append(time.perf_counter() - start)
+            if term or trunc:
+                break
+    env.close()
+    return 1000 * statistics.median(reset_s), 1000 * statistics.median(step_s)
+
+
+def oracle_eval(num_objects: int, episodes: int) -> dict[str, float]:
+    env = gym.make("MPG-Occluded-v0", num_objects=num_objects).unwrapped
+    oracle = OraclePolicy(env)
+    successes, motions = 0, []
+    for ep in range(episodes):
+        env.reset(seed=10_000 + ep)
+        while True:
+            _, _, term, trunc, info = env.step(oracle.act())
+            if term or trunc:
+                break
+        successes += info["is_success"]
+        motions.append(info["num_motions"])
+        print(f"  {num_objects} objects, episode {ep:2d}: {'success' if info['is_success'] else 'failure'} in {info['num_motions']} motions", flush=True)
+    env.close()
+    return {"success": successes / episodes, "motions": float(np.mean(motions))}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=20)
+    parser.add_argument("--resets", type=int, default=5)
+    args = parser.parse_args()
+    reset_ms, step_ms = {}, {}
+    for env_id in mpg_envs.ENV_IDS:
+        reset_ms[env_id], step_ms[env_id] = time_env(env_id, args.resets)
+        print(f"{env_id:18s} reset {reset_ms[env_id]:7.1f} ms   step {step_ms[env_id]:7.1f} ms", flush=True)
+    oracle = {str(n): oracle_eval(n, args.episodes) for n in (15, 30)}
+    for n, m in oracle.items():
+        print(f"OraclePolicy, MPG-Occluded-v0, {n} objects: success {100 * m['success']:.0f}%, {m['motions']:.2f} motions")
+    print("oracle goal (>= 80% on 15 objects) " + ("met" if oracle["15"]["success"] >= 0.8 else "NOT met"))
+    print(
+        json.dumps(
+            {
+                "reset_ms": {k: round(v, 1) for k, v in reset_ms.items()},
+                "step_ms": {k: round(v, 1) for k, v in step_ms.items()},
+                "oracle": {k: {"success": v["success"], "motions": round(v["motions"], 2)} for k, v in oracle.items()},
+            }
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()
