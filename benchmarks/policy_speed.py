@@ -1,0 +1,239 @@
+"""Speed and memory of the MPGNet policy on 2 CPU threads.
+
+Measures, for the ``small`` and ``large`` variants:
+
+- ``decision_s``: median wall time of one full coordinated decision (``policy.predict``) on a
+  Stage-5-like observation in the worst case the workflow has: target not occluded and not
+  graspable, so the mask trunk, the grasp net and the push net all run (16 rotations each,
+  batched);
+- ``sequential_s``: the same work with the 16 rotations run one at a time (VPG's way);
+- ``train_step_s``: one training step, a batch of 4 on the grasp branch (chosen rotation only),
+  Huber loss, backward, Adam step;
+
+and the replay buffer's bytes per transition against SB3's ``DictReplayBuffer`` (real
+``nbytes`` of both after adding the same transitions).
+
+Observations come from ``MPG-Stage5-v0`` when it can be built, else from a synthetic scene.
+Usage: ``python benchmarks/policy_speed.py [--repeats N] [--variants small large]``.
+The last line of output is one JSON object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from typing import Any, Callable
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.buffers import DictReplayBuffer
+from torch.nn import functional as F
+
+from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics, region_max
+from mpg_agents.policy import MPGNetPolicy
+from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
+from mpg_envs.actions import PRIMITIVES, PixelActionSpace
+
+SIZE = 224
+
+
+def observation_space() -> spaces.Dict:
+    return spaces.Dict(
+        {
+            "color": spaces.Box(0, 255, (SIZE, SIZE, 3), np.uint8),
+            "depth": spaces.Box(0.0, 0.4, (SIZE, SIZE), np.float32),
+            "mask": spaces.Box(0, 1, (SIZE, SIZE), np.uint8),
+            "occluded": spaces.MultiBinary(1),
+        }
+    )
+
+
+def synthetic_scene(rng: np.random.Generator, blocks: int = 10) -> dict[str, np.ndarray]:
+    """Ten coloured blocks close together on a flat table; the first is the target."""
+    color = np.empty((SIZE, SIZE, 3), np.uint8)
+    color[:] = (120, 110, 100)
+    depth = np.zeros((SIZE, SIZE), np.float32)
+    mask = np.zeros((SIZE, SIZE), np.uint8)
+    for i in range(blocks):
+        h, w = rng.integers(12, 40, size=2)
+        r, c = rng.integers(60, 140, size=2)
+        color[r : r + h, c : c + w] = rng.integers(0, 255, 3, dtype=np.uint8)
+        depth[r : r + h, c : c + w] = np.float32(rng.uniform(0.02, 0.08)) + np.linspace(0, 0.004, w, dtype=np.float32)
+        if i == 0:
+            mask[r : r + h, c : c + w] = 1
+    return {"color": color, "depth": depth, "mask": mask, "occluded": np.zeros(1, np.int8)}
+
+
+def stage5_stream(steps: int, seed: int = 0) -> tuple[list[tuple[dict, dict, int, float, bool]], str]:
+    """``steps`` transitions (obs, next_obs, action, reward, done) from Stage 5, or synthetic ones."""
+    try:
+        import gymnasium as gym
+
+        import mpg_envs  # noqa: F401  (registers the ids)
+
+        env = gym.make("MPG-Stage5-v0")
+        obs, _ = env.reset(seed=seed)
+        out = []
+        for _ in range(steps):
+            action = int(env.action_space.sample())
+            nxt, reward, term, trunc, _ = env.step(action)
+            out.append((obs, nxt, action, float(reward), bool(term)))
+            obs = env.reset()[0] if term or trunc else nxt
+        env.close()
+        return out, "MPG-Stage5-v0"
+    except Exception as exc:  # noqa: BLE001 - fall back to synthetic scenes, say so
+        print(f"(MPG-Stage5-v0 unavailable: {exc!r}; using synthetic scenes)")
+        rng = np.random.default_rng(seed)
+        scenes = [synthetic_scene(rng) for _ in range(steps + 1)]
+        return [(scenes[i], scenes[i + 1], 0, 0.0, False) for i in range(steps)], "synthetic"
+
+
+def median_times(fns: list[Callable[[], Any]], repeats: int, warmup: int = 1) -> list[float]:
+    """Median wall time of each function, running them in turn ``repeats`` times."""
+    for fn in fns:
+        for _ in range(warmup):
+            fn()
+    times: list[list[float]] = [[] for _ in fns]
+    for _ in range(repeats):
+        for fn, bucket in zip(fns, times, strict=True):
+            start = time.perf_counter()
+            fn()
+            bucket.append(time.perf_counter() - start)
+    return [statistics.median(t) for t in times]
+
+
+def sequential_decision(net: MPGNet, obs: dict[str, np.ndarray], q_star: float) -> tuple[str, int]:
+    """The workflow's worst case with one rotation per forward pass (mask features shared)."""
+    grasp, push = [], []
+    region = None
+    for k in range(net.config.num_rotations):
+        enc = net.encode(obs, rotations=torch.tensor([k]))
+        region = enc.region
+        grasp.append(net.branch_q(enc, "grasp"))
+        push.append(net.branch_q(enc, "push"))
+    q_grasp = torch.stack(grasp, dim=1)
+    score = float(region_max(q_grasp, region)[0])
+    q = q_grasp if score >= q_star else torch.stack(push, dim=1)
+    return ("grasp" if score >= q_star else "push"), int(q.flatten().argmax())
+
+
+def bench_variant(variant: str, obs: dict[str, np.ndarray], repeats: int) -> dict[str, float]:
+    torch.manual_seed(0)
+    space = PixelActionSpace(PRIMITIVES)
+    # Q*_g = +inf: never graspable, so every decision runs mask + grasp + push (the worst case).
+    policy = MPGNetPolicy(observation_space(), space, lambda _: 1e-4, variant=variant, q_star=float("inf"))
+    # Trained-like BN statistics: an untrained net in eval mode decays activations into
+    # denormal floats, which is not what a trained policy costs.
+    recompute_batch_norm_statistics(
+        policy.q_net, policy.q_net.q_maps, {k: torch.as_tensor(v)[None] for k, v in obs.items()}
+    )
+    policy.set_training_mode(False)
+    assert policy.decide(obs).primitive == "push"
+    net = policy.q_net.mpgnet
+
+    def batched() -> None:
+        policy.predict(obs, deterministic=True)
+
+    def sequential() -> None:
+        with torch.inference_mode():
+            sequential_decision(net, obs, float("inf"))
+
+    # Interleaved so a load spike from other processes hits both paths alike.
+    decision, seq = median_times([batched, sequential], repeats)
+
+    # One training step: batch of 4 on the grasp branch.
+    batch = {k: torch.as_tensor(np.stack([obs[k]] * 4)) for k in obs}
+    actions = torch.tensor([space.encode("grasp", k, 100, 110) for k in (0, 3, 7, 12)])
+    targets = torch.ones(4, 1)
+
+    def train_step() -> None:
+        policy.set_training_mode(True)
+        q = policy.q_net.q_values_at(batch, actions)
+        loss = F.smooth_l1_loss(q, targets)
+        policy.optimizer.zero_grad()
+        loss.backward()
+        policy.optimizer.step()
+
+    (train,) = median_times([train_step], max(3, repeats // 2))
+    policy.set_training_mode(False)
+    return {"decision_s": decision, "sequential_s": seq, "train_step_s": train}
+
+
+def replay_bytes(stream: list[tuple[dict, dict, int, float, bool]]) -> tuple[float, float]:
+    """Bytes per transition of our buffer and of SB3's DictReplayBuffer for the same stream."""
+    n = len(stream)
+    space = PixelActionSpace(PRIMITIVES)
+    ours = PrioritizedHeightmapReplayBuffer(n, observation_space(), space, device="cpu")
+    sb3 = DictReplayBuffer(n, observation_space(), space, device="cpu")
+    for obs, nxt, action, reward, done in stream:
+        args = (
+            {k: np.asarray(v)[None] for k, v in obs.items()},
+            {k: np.asarray(v)[None] for k, v in nxt.items()},
+            np.array([action]),
+            np.array([reward], np.float32),
+            np.array([done]),
+            [{}],
+        )
+        ours.add(*args)
+        sb3.add(*args)
+    sb3_total = sum(
+        a.nbytes
+        for a in (
+            *sb3.observations.values(),
+            *sb3.next_observations.values(),
+            sb3.actions,
+            sb3.rewards,
+            sb3.dones,
+            sb3.timeouts,
+        )
+    )
+    return ours.nbytes() / n, sb3_total / n
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=7, help="timed runs per measurement (median)")
+    parser.add_argument("--variants", nargs="+", default=["small", "large"], choices=["small", "large"])
+    parser.add_argument("--replay-steps", type=int, default=40)
+    args = parser.parse_args()
+    torch.set_num_threads(2)
+    torch.set_flush_denormal(True)  # belt and braces: denormals cost 10-100x per operation on x86
+
+    stream, source = stage5_stream(args.replay_steps)
+    obs = dict(stream[0][0])
+    obs["occluded"] = np.zeros(1, np.int8)  # not occluded: the grasp/push path
+
+    load_before = os.getloadavg()[0]
+    results = {
+        v: bench_variant(v, obs, args.repeats if v == "small" else max(3, args.repeats // 2)) for v in args.variants
+    }
+    ours, theirs = replay_bytes(stream)
+
+    print(f"MPGNet policy speed, torch {torch.__version__}, 2 threads, observations: {source}")
+    print(f"{'variant':<8} {'decision (s)':>13} {'sequential (s)':>15} {'speed-up':>9} {'train step (s)':>15}")
+    for v, r in results.items():
+        print(
+            f"{v:<8} {r['decision_s']:>13.3f} {r['sequential_s']:>15.3f} "
+            f"{r['sequential_s'] / r['decision_s']:>8.1f}x {r['train_step_s']:>15.3f}"
+        )
+    print(
+        f"1-min load average {load_before:.2f} before, {os.getloadavg()[0]:.2f} after "
+        "(above ~0.5 other processes share the 2 cores and the times are inflated)"
+    )
+    print(f"replay bytes/transition: ours {ours:,.0f}  SB3 DictReplayBuffer {theirs:,.0f}  ratio {ours / theirs:.4f}")
+    summary = {
+        "decision_s": {v: round(r["decision_s"], 4) for v, r in results.items()},
+        "sequential_s": {v: round(r["sequential_s"], 4) for v, r in results.items()},
+        "train_step_s": {v: round(r["train_step_s"], 4) for v, r in results.items()},
+        "replay_bytes": round(ours, 1),
+        "sb3_replay_bytes": round(theirs, 1),
+    }
+    print(json.dumps(summary))
+
+
+if __name__ == "__main__":
+    main()

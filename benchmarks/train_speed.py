@@ -1,0 +1,72 @@
+"""Seconds per training iteration on Stage 5 with the small network, on 2 cores.
+
+One iteration = decide (the coordinated greedy decision, or exploration) + act (the
+primitive and the new observation, inside ``env.step``) + store the transition + one
+learning step (double-DQN target on a prioritised batch, backward, Adam). The first
+``--warmup`` iterations (PyTorch picks its kernels then) are not counted. Goal (issue 5):
+under 1 s per iteration on 2 cores; VPG needed about 5 s per iteration on a GPU.
+The last output line is one JSON object.
+
+    python benchmarks/train_speed.py [--iterations 30] [--warmup 5] [--batch-size 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+import time
+
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from mpg_agents.learner import Learner, TrainConfig  # noqa: E402
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--iterations", type=int, default=30)
+    parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--batch-size", type=int, default=2)
+    parser.add_argument("--variant", default="small")
+    args = parser.parse_args()
+    cfg = TrainConfig(env_id="MPG-Stage5-v0", steps=10**9, variant=args.variant, batch_size=args.batch_size, torch_threads=2)
+    with tempfile.TemporaryDirectory() as out:
+        learner = Learner(cfg, out, log=lambda s: None)
+        env = learner.env
+        parts: dict[str, list[float]] = {"decide_s": [], "env_step_s": [], "replay_s": [], "learn_s": [], "iteration_s": []}
+        obs, _ = env.reset(seed=0)
+        for k in range(args.warmup + args.iterations):
+            t0 = time.perf_counter()
+            action, primitive, how, q = learner.act(obs)
+            t1 = time.perf_counter()
+            next_obs, reward, terminated, truncated, info = env.step(action)
+            t2 = time.perf_counter()
+            learner.replay.add(
+                {k_: v[None] for k_, v in obs.items()}, {k_: v[None] for k_, v in next_obs.items()},
+                np.array([[action]]), np.array([reward], np.float32), np.array([terminated], np.float32), [{}],
+            )
+            t3 = time.perf_counter()
+            learner.learn()
+            learner.counters.iteration += 1
+            t4 = time.perf_counter()
+            obs = env.reset(seed=k + 1)[0] if terminated or truncated else next_obs
+            if k >= args.warmup:
+                for name, value in zip(parts, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t4 - t0)):
+                    parts[name].append(value)
+    med = {k: statistics.median(v) for k, v in parts.items()}
+    print(f"Stage 5, {args.variant} network, batch {args.batch_size}, {torch.get_num_threads()} threads, {args.iterations} iterations")
+    for name, value in med.items():
+        print(f"  {name:12s} {value:.3f} s (median)")
+    print("goal (< 1 s per iteration) " + ("met" if med["iteration_s"] < 1.0 else "NOT met"))
+    print(json.dumps({"iteration_s": round(med["iteration_s"], 4), "parts": {k: round(v, 4) for k, v in med.items() if k != "iteration_s"}}))
+
+
+if __name__ == "__main__":
+    main()

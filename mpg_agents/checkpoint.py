@@ -1,0 +1,135 @@
+"""Resumable training state on disk, without pickle.
+
+A run directory holds ``weights.safetensors`` (the online MPGNet, usable on its own) and a
+``state/`` folder: the target network (safetensors), the optimiser (tensors in safetensors,
+its scalar settings in JSON), the replay buffer (``replay.npz``: each distinct compressed
+observation once, transitions as indices into them), the random generators and the
+counters (JSON). Everything is written to a temporary folder first and swapped in whole,
+so a run killed while saving still has its previous state.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+
+from mpg_agents.replay import Frame, PrioritizedHeightmapReplayBuffer
+
+STATE_FORMAT = "mpg-train-state-v1"
+
+
+def save_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
+    """Write the buffer's transitions, priorities and compressed frames to ``path`` (npz)."""
+    n = buffer.size()
+    frames: dict[int, int] = {}
+    blobs: list[Frame] = []
+
+    def index(frame: Frame) -> int:
+        if id(frame) not in frames:
+            frames[id(frame)] = len(blobs)
+            blobs.append(frame)
+        return frames[id(frame)]
+
+    obs_idx = np.array([[index(f) for f in row] for row in buffer.obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
+    next_idx = np.array([[index(f) for f in row] for row in buffer.next_obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
+    arrays: dict[str, np.ndarray] = {
+        "obs_idx": obs_idx,
+        "next_idx": next_idx,
+        "actions": buffer.actions[:n],
+        "rewards": buffer.rewards[:n],
+        "dones": buffer.dones[:n],
+        "timeouts": buffer.timeouts[:n],
+        "priorities": buffer.priorities[:n],
+        "meta": np.array([buffer.pos, int(buffer.full), n], dtype=np.int64),
+        "max_priority": np.array(buffer.max_priority),
+    }
+    keys = sorted(buffer.codecs)
+    for k, frame in enumerate(blobs):
+        for key in keys:
+            kind, blob = frame.planes[key]
+            arrays[f"f{k}/{key}/{kind}"] = np.frombuffer(blob, dtype=np.uint8)
+    np.savez(path, **arrays)
+
+
+def load_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
+    """Restore a :func:`save_replay` file into an empty buffer of the same spaces."""
+    with np.load(path, allow_pickle=False) as data:
+        pos, full, n = (int(v) for v in data["meta"])
+        planes: dict[int, dict[str, tuple[str, bytes]]] = {}
+        for name in data.files:
+            if name.startswith("f") and "/" in name:
+                k, key, kind = name.split("/")
+                planes.setdefault(int(k[1:]), {})[key] = (kind, data[name].tobytes())
+        frames = [Frame(planes[k]) for k in range(len(planes))]
+        if n > buffer.buffer_size:
+            raise ValueError(f"saved replay holds {n} transitions, more than the buffer's capacity {buffer.buffer_size}")
+        for i in range(n):
+            for e in range(buffer.n_envs):
+                buffer.obs_frames[i, e] = frames[int(data["obs_idx"][i, e])]
+                buffer.next_obs_frames[i, e] = frames[int(data["next_idx"][i, e])]
+        buffer.actions[:n] = data["actions"]
+        buffer.rewards[:n] = data["rewards"]
+        buffer.dones[:n] = data["dones"]
+        buffer.timeouts[:n] = data["timeouts"]
+        buffer.priorities[:n] = data["priorities"]
+        buffer.max_priority = float(data["max_priority"])
+    buffer.pos, buffer.full = pos, bool(full)
+    # The next add starts a fresh episode: nothing to share with the last stored frame.
+    buffer._last_next = [None] * buffer.n_envs
+
+
+def save_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
+    state = optimizer.state_dict()
+    tensors = {}
+    scalars: dict[str, Any] = {"param_groups": state["param_groups"], "state": {}}
+    for pid, pstate in state["state"].items():
+        scalars["state"][str(pid)] = {}
+        for name, value in pstate.items():
+            if isinstance(value, torch.Tensor):
+                tensors[f"{pid}/{name}"] = value.detach().cpu().contiguous()
+            else:
+                scalars["state"][str(pid)][name] = value
+    save_file(tensors, str(folder / "optimizer.safetensors"))
+    (folder / "optimizer.json").write_text(json.dumps(scalars))
+
+
+def load_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
+    tensors = load_file(str(folder / "optimizer.safetensors"))
+    scalars = json.loads((folder / "optimizer.json").read_text())
+    state: dict[int, dict[str, Any]] = {int(pid): dict(values) for pid, values in scalars["state"].items()}
+    for name, value in tensors.items():
+        pid, key = name.split("/", 1)
+        state.setdefault(int(pid), {})[key] = value
+    optimizer.load_state_dict({"state": state, "param_groups": scalars["param_groups"]})
+
+
+def write_state(run_dir: Path, writer) -> None:
+    """Call ``writer(tmp_folder)`` and swap the result in as ``run_dir/state`` atomically."""
+    tmp = run_dir / "state.tmp"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    writer(tmp)
+    (tmp / "FORMAT").write_text(STATE_FORMAT)
+    final = run_dir / "state"
+    old = run_dir / "state.old"
+    if final.exists():
+        final.rename(old)
+    tmp.rename(final)
+    if old.exists():
+        shutil.rmtree(old)
+
+
+def state_folder(run_dir: Path) -> Path | None:
+    """The run's saved state folder, or ``None`` when there is nothing to resume."""
+    for name in ("state", "state.old"):  # state.old survives a kill between the two renames
+        folder = run_dir / name
+        if (folder / "FORMAT").is_file() and (folder / "FORMAT").read_text() == STATE_FORMAT:
+            return folder
+    return None

@@ -1,0 +1,199 @@
+"""Command lines: ``mpg-train``, ``mpg-eval`` and ``mpg-plot``.
+
+Bad input (an unknown env id, a missing checkpoint, a checkpoint of another architecture, an
+unreadable config file) ends the command with exit status 2 and one clear line on stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Sequence
+
+if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+class UsageError(Exception):
+    """Bad command-line input: reported on one line, exit status 2."""
+
+
+def _fail(exc: BaseException) -> int:
+    print(f"error: {exc}", file=sys.stderr)
+    return 2
+
+
+def _read_config(path: str | None) -> dict[str, Any]:
+    if path is None:
+        return {}
+    p = Path(path)
+    if not p.is_file():
+        raise UsageError(f"config file {path!r} does not exist")
+    try:
+        if p.suffix == ".toml":
+            return tomllib.loads(p.read_text())
+        return json.loads(p.read_text())
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise UsageError(f"config file {path!r} is not valid {p.suffix[1:] or 'JSON'}: {exc}") from exc
+
+
+def _check_env_id(env_id: str) -> None:
+    import gymnasium as gym
+
+    import mpg_envs
+
+    if env_id not in gym.registry:
+        raise UsageError(f"unknown env id {env_id!r}; valid: {', '.join(mpg_envs.ENV_IDS)}")
+
+
+def _check_checkpoint(path: str | None) -> None:
+    if path is None:
+        return
+    if not Path(path).is_file():
+        raise UsageError(f"checkpoint {path!r} does not exist")
+    from mpg_agents.mpgnet import read_checkpoint_header
+
+    try:
+        read_checkpoint_header(path)
+    except Exception as exc:  # safetensors raises its own types for foreign files
+        raise UsageError(f"{path!r} is not an MPGNet safetensors checkpoint: {exc}") from exc
+
+
+# ---------------------------------------------------------------------------- train
+def train_main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="mpg-train", description="Train MPGNet: one stage (--env) or the five-stage pipeline (--pipeline).")
+    what = parser.add_mutually_exclusive_group(required=True)
+    what.add_argument("--env", help="one stage, e.g. MPG-Stage4-v0")
+    what.add_argument("--pipeline", action="store_true", help="run Stages I-V in order (with Q*_g calibration after II)")
+    parser.add_argument("--init", help="start from this MPGNet checkpoint (safetensors)")
+    parser.add_argument("--steps", type=int, help="iterations (one stage), or iterations of every stage (pipeline)")
+    parser.add_argument("--out", default="runs/mpg", help="run directory (resumes if it holds a saved state)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--config", help="JSON or TOML file of training settings (TrainConfig fields; pipeline: also stage_steps, stages, ...)")
+    parser.add_argument("--variant", choices=("small", "large"), help="MobileNetV3 trunks (default small)")
+    parser.add_argument("--num-objects", type=int)
+    parser.add_argument("--q-star", type=float, help="the grasp threshold Q*_g (default: from --init or calibrated)")
+    parser.add_argument("--discriminator", help="fixed grasp-net checkpoint scoring states (Stages III-V)")
+    parser.add_argument("--stages", help="pipeline: which stages, e.g. 1,2")
+    parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: start at Stage V from scratch")
+    parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")
+    args = parser.parse_args(argv)
+    try:
+        from mpg_agents.learner import Learner, TrainConfig
+
+        settings = _read_config(args.config)
+        pipeline_keys = {"stage_steps", "stages", "multistage", "alternating", "stage3_objects", "alternate_every"}
+        pipe_settings = {k: settings.pop(k) for k in list(settings) if k in pipeline_keys}
+        base = TrainConfig.from_dict(settings)
+        overrides: dict[str, Any] = {"seed": args.seed}
+        for key, value in (("variant", args.variant), ("num_objects", args.num_objects), ("q_star", args.q_star), ("discriminator", args.discriminator)):
+            if value is not None:
+                overrides[key] = value
+        base = replace(base, **overrides)
+        _check_checkpoint(args.init)
+        _check_checkpoint(args.discriminator)
+        if args.pipeline:
+            from mpg_agents.pipeline import PipelineConfig, run_pipeline
+
+            pcfg = PipelineConfig(base=base, **{k: (tuple(v) if isinstance(v, list) else v) for k, v in pipe_settings.items()})
+            if args.stages:
+                try:
+                    pcfg.stages = tuple(f"Stage{int(s)}" for s in args.stages.split(","))
+                except ValueError as exc:
+                    raise UsageError(f"--stages takes stage numbers like 1,2; got {args.stages!r}") from exc
+                bad = [s for s in pcfg.stages if s not in pcfg.stage_steps]
+                if bad:
+                    raise UsageError(f"unknown stages {bad}; valid 1..5")
+            if args.steps is not None:
+                pcfg.stage_steps = {k: args.steps for k in pcfg.stage_steps}
+            pcfg.multistage = pcfg.multistage and not args.no_multistage
+            pcfg.alternating = pcfg.alternating and not args.no_alternating
+            summary = run_pipeline(pcfg, args.out, init=args.init)
+            print(json.dumps(summary, indent=1))
+            return 0
+        _check_env_id(args.env)
+        cfg = replace(base, env_id=args.env, **({"steps": args.steps} if args.steps is not None else {}))
+        learner = Learner(cfg, args.out, init=args.init)
+        summary = learner.run()
+        print(json.dumps({k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in summary.items()}))
+        return 0
+    except (UsageError, FileNotFoundError) as exc:
+        return _fail(exc)
+    except ValueError as exc:  # another architecture, a bad setting
+        return _fail(exc)
+    except KeyboardInterrupt:
+        print("interrupted: state saved, run the same command to resume", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        from mpg_agents.learner import StopRequested
+
+        if isinstance(exc, StopRequested):
+            print("stopped: state saved, run the same command to resume", file=sys.stderr)
+            return 143
+        raise
+
+
+# ----------------------------------------------------------------------------- eval
+def eval_main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="mpg-eval", description="Evaluate a policy with the paper's metrics (task success within 10 motions, motions).")
+    parser.add_argument("--policy", required=True, help="a checkpoint (.safetensors), or oracle | random | grasp-only | shipped")
+    parser.add_argument("--env", default="MPG-Occluded-v0")
+    parser.add_argument("--num-objects", type=int)
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", help="write the metrics here (default: eval-<policy>-<env>-<n>.json)")
+    parser.add_argument("--coordination", choices=("workflow", "max_q"), help="network policies: override the coordination")
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    try:
+        import gymnasium as gym
+
+        from mpg_agents.baselines import BUILTIN, make_policy
+        from mpg_agents.evaluate import evaluate
+
+        _check_env_id(args.env)
+        if args.policy not in BUILTIN:
+            _check_checkpoint(args.policy)
+        if args.episodes < 1:
+            raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
+        kwargs = {"num_objects": args.num_objects} if args.num_objects is not None else {}
+        env = gym.make(args.env, **kwargs)
+        extra = {"coordination": args.coordination} if args.coordination else {}
+        policy = make_policy(args.policy, env, seed=args.seed, **extra)
+        result = evaluate(policy, env, args.episodes, args.seed, progress=not args.quiet)
+        env.close()
+    except (UsageError, FileNotFoundError, ValueError) as exc:
+        return _fail(exc)
+    print(result.table())
+    name = Path(args.policy).stem if args.policy not in BUILTIN else args.policy
+    path = Path(args.json or f"eval-{name}-{args.env}-{result.num_objects}.json")
+    path.write_text(json.dumps(result.to_dict(), indent=1, sort_keys=True))
+    print(f"metrics written to {path}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- plot
+def plot_main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="mpg-plot", description="Learning curves of a run (or pipeline) directory to PNG.")
+    parser.add_argument("run", help="a run directory (holding progress.csv) or a pipeline directory (Stage*/progress.csv)")
+    parser.add_argument("--out", help="PNG path (default: RUN/curves.png)")
+    parser.add_argument("--window", type=int, default=200, help="iterations per grasp-success point (paper: 200)")
+    args = parser.parse_args(argv)
+    try:
+        from mpg_agents.plotting import plot_run
+
+        out = plot_run(args.run, args.out, args.window)
+    except (FileNotFoundError, ValueError) as exc:
+        return _fail(exc)
+    print(f"learning curves written to {out}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(train_main())

@@ -1,0 +1,498 @@
+"""Stable-Baselines3 DQN policy around MPGNet, with the paper's move/push/grasp coordination.
+
+``stable_baselines3.DQN(MPGNetPolicy, env)`` works on every MPG env: the Q-network returns
+the flat Q vector in the env's action order (C order over primitive, rotation, row, col,
+primitives in the env's allowed subset of ``move, push, grasp``).
+
+Coordination (``predict`` and the greedy action SB3's DQN takes while collecting):
+
+- ``"workflow"`` (paper, Section III-C): target occluded -> move; else grasp when the best
+  grasp Q inside the target region is at least Q*_g; else push. Only the branches the
+  decision needs are computed (mask trunk + move; or mask trunk + grasp, + push when the
+  target is not graspable). Until Q*_g is calibrated (NaN) the grasp/push choice falls back
+  to the larger of the best grasp Q and the best push Q; the occlusion rule still applies
+  because it needs no threshold. Primitives the env does not allow are skipped.
+- ``"max_q"``: the action with the largest Q over all allowed primitives (the paper's
+  "without alternating training" ablation).
+
+Move and grasp actions are chosen inside the rough target mask (the target's bounding
+rectangle): outside it their Q is 0 by construction, which must not win over a negative Q
+inside it.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import Any, Mapping, NamedTuple, Sequence
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
+from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
+from torch import Tensor, nn
+
+from mpg_agents.mpgnet import (
+    ROUGH_MASKED,
+    EncodedObs,
+    MPGNet,
+    MPGNetConfig,
+    flat_q,
+    load_mpgnet_weights,
+    read_checkpoint_header,
+    region_max,
+    save_mpgnet,
+)
+from mpg_envs.actions import PRIMITIVES, check_primitives, encode_action
+
+COORDINATIONS: tuple[str, ...] = ("workflow", "max_q")
+"""Ways to pick the primitive: the paper's workflow, or the plain max over the Q maps."""
+
+PAPER_OPTIMIZER_KWARGS: dict[str, Any] = {"weight_decay": 2.0**-5, "betas": (0.9, 0.99)}
+"""Adam settings of the paper (the learning rate, 1e-4, comes from the algorithm)."""
+
+
+def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | None = None) -> tuple[str, ...]:
+    """The primitives an action space indexes, in canonical order.
+
+    Read from ``action_space.primitives`` (``mpg_envs.actions.PixelActionSpace``), else from the
+    ``primitives`` argument, else inferred from the size: 3 -> all, 2 -> push and grasp; a
+    one-primitive space is ambiguous and raises.
+    """
+    if not isinstance(action_space, spaces.Discrete):
+        raise TypeError(f"MPGNet needs a Discrete pixel action space, got {action_space}")
+    declared = getattr(action_space, "primitives", None)
+    if declared is not None:
+        found = check_primitives(declared)
+        if primitives is not None and tuple(primitives) != found:
+            raise ValueError(f"primitives={tuple(primitives)} contradicts the action space's primitives {found}")
+        return found
+    if primitives is not None:
+        return check_primitives(primitives)
+    per = 16 * 224 * 224
+    n = int(action_space.n)
+    if n % per:
+        raise ValueError(f"action space Discrete({n}) is not P * 16 * 224 * 224 pixel actions")
+    count = n // per
+    if count == 3:
+        return PRIMITIVES
+    if count == 2:
+        return ("push", "grasp")
+    raise ValueError(
+        f"cannot tell which primitive a {count}-primitive action space Discrete({n}) uses; "
+        f"pass primitives=(...) in policy_kwargs, one of {PRIMITIVES}"
+    )
+
+
+class Decision(NamedTuple):
+    """One coordinated decision: the flat action and what it was made from."""
+
+    action: int
+    primitive: str
+    rotation: int
+    row: int
+    col: int
+    q_value: float
+    grasp_score: float  # best grasp Q in the target region, NaN when the grasp net was not run
+    q_maps: dict[str, Tensor]  # the (R, H, W) maps computed for this decision
+
+
+class MPGQNetwork(QNetwork):
+    """SB3 Q-network whose forward pass is MPGNet's flat Q vector.
+
+    Bypasses ``QNetwork.__init__`` (it would build an MLP with one output per action, i.e.
+    millions) and ``preprocess_obs``: MPGNet normalises raw uint8 colour, metric depth and the
+    0/1 mask itself, so SB3 must not divide by 255 or one-hot anything.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        action_space: spaces.Discrete,
+        net_config: MPGNetConfig,
+        action_primitives: Sequence[str],
+        coordination: str = "workflow",
+        q_star: float = float("nan"),
+    ) -> None:
+        BasePolicy.__init__(self, observation_space, action_space, features_extractor=None, normalize_images=False)
+        _check_observation_space(observation_space, net_config.heightmap_size)
+        self.action_primitives = check_primitives(action_primitives)
+        not_built = [p for p in self.action_primitives if p not in net_config.primitives]
+        if not_built:
+            raise ValueError(f"the network lacks branches {not_built} the action space needs {self.action_primitives}")
+        r, s = net_config.num_rotations, net_config.heightmap_size
+        expected = len(self.action_primitives) * r * s * s
+        if int(action_space.n) != expected:
+            raise ValueError(
+                f"action space Discrete({action_space.n}) does not match primitives {self.action_primitives} "
+                f"x {r} rotations x {s} x {s} = {expected}"
+            )
+        if coordination not in COORDINATIONS:
+            raise ValueError(f"coordination must be one of {COORDINATIONS}, got {coordination!r}")
+        self.coordination = coordination
+        self.net_config = net_config
+        self.mpgnet = MPGNet(net_config)
+        # float64 so a calibrated value such as 1.85 round-trips exactly through saves.
+        self.register_buffer("q_star", torch.tensor(float(q_star), dtype=torch.float64))
+
+    # ------------------------------------------------------------ Q values
+    def forward(self, obs: PyTorchObs) -> Tensor:
+        """Flat Q ``(B, P * R * H * W)`` in the env's action order."""
+        return flat_q(self.mpgnet(obs, self.action_primitives), self.action_primitives)
+
+    def q_maps(self, obs: PyTorchObs) -> dict[str, Tensor]:
+        """``{primitive: (B, R, H, W)}`` for the env's primitives."""
+        return self.mpgnet(obs, self.action_primitives)
+
+    def split_actions(self, actions: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """Flat actions ``(B,)``/``(B, 1)`` -> primitive index, rotation, row, col tensors."""
+        a = torch.as_tensor(actions).long().reshape(-1)
+        s, r = self.net_config.heightmap_size, self.net_config.num_rotations
+        n = int(self.action_space.n)
+        if (a < 0).any() or (a >= n).any():
+            raise ValueError(f"actions must lie in 0..{n - 1}, got {a.tolist()}")
+        col = a % s
+        row = (a // s) % s
+        rot = (a // (s * s)) % r
+        prim = a // (s * s * r)
+        return prim, rot, row, col
+
+    def q_values_at(self, obs: PyTorchObs, actions: Tensor) -> Tensor:
+        """Q of the chosen actions ``(B, 1)``, computing only each sample's chosen rotation.
+
+        The training path: gradients reach only the chosen (primitive, rotation) forward
+        pass, and batch norm statistics come from those inputs alone.
+        """
+        prim, rot, row, col = self.split_actions(actions)
+        q = self.mpgnet.chosen_q(obs, self.action_primitives, prim, rot)
+        b = torch.arange(q.shape[0], device=q.device)
+        return q[b, row.to(q.device), col.to(q.device)].unsqueeze(1)
+
+    def masked_flat_q(self, maps: Mapping[str, Tensor], region: Tensor) -> Tensor:
+        """Flat Q for choosing actions: move/grasp set to -inf outside the target region."""
+        parts = []
+        for p in self.action_primitives:
+            q = maps[p]
+            if self.net_config.rough_mask and p in ROUGH_MASKED:
+                q = q.masked_fill(~region[:, None], float("-inf"))
+            parts.append(q)
+        return torch.stack(parts, dim=1).flatten(1)
+
+    def greedy_actions(self, obs: PyTorchObs) -> Tensor:
+        """Max-Q actions ``(B,)`` over all allowed primitives (region-restricted for move/grasp)."""
+        enc = self.mpgnet.encode(obs)
+        maps = self.mpgnet.maps_from(enc, self.action_primitives)
+        return self.masked_flat_q(maps, enc.region).argmax(dim=1)
+
+    # ---------------------------------------------------------- decisions
+    def decide(self, obs: PyTorchObs) -> list[Decision]:
+        """Coordinated decisions for a batch (one :class:`Decision` per sample)."""
+        batch = _batch_size(obs)
+        decisions = []
+        for i in range(batch):
+            single = {k: v[i : i + 1] for k, v in obs.items()}
+            decisions.append(self._decide_one(self.mpgnet.encode(single)))
+        return decisions
+
+    def _decide_one(self, enc: EncodedObs) -> Decision:
+        allowed = self.action_primitives
+        q_star = float(self.q_star)
+        occluded = bool(enc.occluded[0]) if enc.occluded is not None else False
+        maps: dict[str, Tensor] = {}
+
+        def run(p: str) -> Tensor:
+            if p not in maps:
+                maps[p] = self.mpgnet.maps_from(enc, (p,))[p][0]
+            return maps[p]
+
+        if self.coordination == "max_q" or len(allowed) == 1:
+            candidates = list(allowed)
+        elif "move" in allowed and occluded:
+            candidates = ["move"]
+        elif "grasp" in allowed and "push" in allowed:
+            score = float(region_max(run("grasp")[None], enc.region)[0])
+            if math.isnan(q_star):
+                candidates = ["grasp", "push"]  # uncalibrated: larger of best grasp and best push
+            else:
+                candidates = ["grasp"] if score >= q_star else ["push"]
+        else:
+            # Not occluded and only one of grasp/push allowed (e.g. a move+grasp env).
+            candidates = [p for p in allowed if p != "move"] or ["move"]
+
+        best: tuple[float, str, int, int, int] | None = None
+        for p in candidates:
+            q = run(p)
+            if self.net_config.rough_mask and p in ROUGH_MASKED:
+                q = q.masked_fill(~enc.region[0][None], float("-inf"))
+            flat = int(q.flatten().argmax())
+            value = float(q.flatten()[flat])
+            rot, rest = divmod(flat, q.shape[1] * q.shape[2])
+            row, col = divmod(rest, q.shape[2])
+            if best is None or value > best[0]:
+                best = (value, p, rot, row, col)
+        assert best is not None
+        value, p, rot, row, col = best
+        grasp_score = float(region_max(maps["grasp"][None], enc.region)[0]) if "grasp" in maps else float("nan")
+        action = encode_action(allowed, p, rot, row, col, size=self.net_config.heightmap_size)
+        return Decision(action, p, rot, row, col, value, grasp_score, maps)
+
+    def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> Tensor:
+        # Q-greedy either way: SB3's DQN does its epsilon-greedy exploration outside the policy.
+        with torch.inference_mode():
+            decisions = self.decide(observation)
+        device = next(iter(observation.values())).device
+        return torch.tensor([d.action for d in decisions], dtype=torch.long, device=device)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = BasePolicy._get_constructor_parameters(self)
+        data.update(
+            net_config=self.net_config,
+            action_primitives=self.action_primitives,
+            coordination=self.coordination,
+            q_star=float(self.q_star),
+        )
+        return data
+
+
+class MPGNetPolicy(DQNPolicy):
+    """SB3 DQN policy (online and target MPGNet) with coordination and safetensors weights.
+
+    Args:
+        observation_space: the MPG Dict space (``color``, ``depth``, ``mask``, ``occluded``);
+            ``color`` may be channels-first (SB3 transposes image spaces).
+        action_space: the env's pixel action space.
+        lr_schedule: learning-rate schedule (from the algorithm).
+        variant: ``"small"`` (CPU-friendly, default) or ``"large"`` (paper).
+        primitives: the action space's primitives when it does not carry ``.primitives``.
+        branches: the nets to build (default: the action primitives); a superset keeps e.g.
+            the grasp net as Stage III's discriminator next to the move net.
+        coordination: ``"workflow"`` (paper) or ``"max_q"`` (ablation).
+        q_star: the calibrated grasp threshold Q*_g; NaN until calibrated.
+        net_config: ``MPGNetConfig`` or its dict overriding the variant's defaults.
+        imagenet_weights: optional torchvision MobileNetV3 checkpoint to initialise every trunk.
+        normalize_images: must stay ``False``: MPGNet normalises its inputs itself.
+        optimizer_class, optimizer_kwargs: default Adam with the paper's weight decay 2^-5 and
+            betas (0.9, 0.99).
+    """
+
+    q_net: MPGQNetwork
+    q_net_target: MPGQNetwork
+
+    def __init__(
+        self,
+        observation_space: spaces.Dict,
+        action_space: spaces.Discrete,
+        lr_schedule: Schedule,
+        variant: str = "small",
+        primitives: Sequence[str] | None = None,
+        branches: Sequence[str] | None = None,
+        coordination: str = "workflow",
+        q_star: float = float("nan"),
+        net_config: MPGNetConfig | Mapping[str, Any] | None = None,
+        imagenet_weights: str | None = None,
+        normalize_images: bool = False,
+        optimizer_class: type[torch.optim.Optimizer] = torch.optim.Adam,
+        optimizer_kwargs: dict[str, Any] | None = None,
+        net_arch: list[int] | None = None,
+        activation_fn: type[nn.Module] = nn.ReLU,
+        **unused: Any,
+    ) -> None:
+        if normalize_images:
+            raise ValueError(
+                "MPGNetPolicy needs normalize_images=False: MPGNet normalises colour (/255, ImageNet "
+                "mean/std), depth and mask itself, and SB3's /255 would apply twice"
+            )
+        if unused:
+            raise TypeError(f"MPGNetPolicy got unexpected keyword arguments {sorted(unused)}")
+        self.action_primitives = resolve_primitives(action_space, primitives)
+        if coordination not in COORDINATIONS:
+            raise ValueError(f"coordination must be one of {COORDINATIONS}, got {coordination!r}")
+        built = check_primitives(branches) if branches is not None else self.action_primitives
+        if isinstance(net_config, MPGNetConfig):
+            cfg = MPGNetConfig.from_dict({**net_config.to_dict(), "primitives": list(built)})
+        else:
+            overrides = dict(net_config or {})
+            overrides["primitives"] = tuple(built)
+            if overrides.pop("variant", variant) != variant:
+                raise ValueError(f"net_config variant {net_config['variant']!r} contradicts variant={variant!r}")
+            cfg = MPGNetConfig.for_variant(variant, **overrides)
+        self.net_config = cfg
+        self.variant = cfg.variant
+        self.branches = built
+        self.coordination = coordination
+        self._initial_q_star = float(q_star)
+        self.imagenet_weights = imagenet_weights
+        if optimizer_kwargs is None:
+            optimizer_kwargs = dict(PAPER_OPTIMIZER_KWARGS)
+        super().__init__(
+            observation_space,
+            action_space,
+            lr_schedule,
+            net_arch=net_arch,
+            activation_fn=activation_fn,
+            normalize_images=False,
+            optimizer_class=optimizer_class,
+            optimizer_kwargs=optimizer_kwargs,
+        )
+
+    def _build(self, lr_schedule: Schedule) -> None:
+        self.q_net = self.make_q_net()
+        if self.imagenet_weights:
+            self.q_net.mpgnet.load_imagenet(self.imagenet_weights)
+        self.q_net_target = self.make_q_net()
+        self.q_net_target.load_state_dict(self.q_net.state_dict())
+        self.q_net_target.set_training_mode(False)
+        self.optimizer = self.optimizer_class(  # type: ignore[call-arg]
+            self.q_net.parameters(), lr=lr_schedule(1), **self.optimizer_kwargs
+        )
+
+    def make_q_net(self) -> MPGQNetwork:
+        return MPGQNetwork(
+            self.observation_space,  # type: ignore[arg-type]
+            self.action_space,  # type: ignore[arg-type]
+            self.net_config,
+            self.action_primitives,
+            self.coordination,
+            self._initial_q_star,
+        ).to(self.device)
+
+    def _get_constructor_parameters(self) -> dict[str, Any]:
+        data = super()._get_constructor_parameters()
+        for key in ("features_extractor_class", "features_extractor_kwargs"):
+            data.pop(key, None)
+        data.update(
+            variant=self.variant,
+            primitives=self.action_primitives,
+            branches=self.branches,
+            coordination=self.coordination,
+            q_star=self.q_star,
+            net_config=self.net_config.to_dict(),
+        )
+        return data
+
+    # ------------------------------------------------------------ Q*_g
+    @property
+    def q_star(self) -> float:
+        """The calibrated grasp threshold Q*_g (NaN until :meth:`set_q_star`)."""
+        return float(self.q_net.q_star)
+
+    def set_q_star(self, value: float) -> None:
+        """Store a calibrated Q*_g (saved with the weights and with ``DQN.save``)."""
+        value = float(value)
+        for net in (self.q_net, self.q_net_target):
+            net.q_star.fill_(value)
+
+    def set_coordination(self, coordination: str) -> None:
+        """Switch between ``"workflow"`` and ``"max_q"``."""
+        if coordination not in COORDINATIONS:
+            raise ValueError(f"coordination must be one of {COORDINATIONS}, got {coordination!r}")
+        self.coordination = coordination
+        self.q_net.coordination = coordination
+        self.q_net_target.coordination = coordination
+
+    # ------------------------------------------------------- convenience
+    def decide(self, observation: Mapping[str, Any]) -> Decision:
+        """The coordinated decision for one raw env observation, with the Q maps it used."""
+        self.set_training_mode(False)
+        obs_tensor, vectorized = self.obs_to_tensor(dict(observation))
+        if vectorized and _batch_size(obs_tensor) != 1:
+            raise ValueError("decide() takes one observation; use predict() for a batch")
+        with torch.inference_mode():
+            return self.q_net.decide(obs_tensor)[0]
+
+    def grasp_scorer(self) -> "GraspScorer":
+        """A ``callable(obs) -> float`` for the envs' ``grasp_scorer`` (uses the online grasp net)."""
+        return GraspScorer(self.q_net.mpgnet)
+
+    # ----------------------------------------------------- safetensors
+    def save_weights(self, path: str | Path) -> None:
+        """Write the online network to ``path`` (safetensors + JSON header with Q*_g)."""
+        save_mpgnet(self.q_net.mpgnet, path, q_star=self.q_star, extra={"coordination": self.coordination})
+
+    def load_weights(self, path: str | Path, strict_branches: bool = True) -> dict[str, Any]:
+        """Load a :meth:`save_weights` file into the online and target networks.
+
+        Q*_g is taken from the file when it has one. Never unpickles anything.
+
+        Raises:
+            ValueError: the file holds another architecture (names the mismatch).
+        """
+        header = load_mpgnet_weights(self.q_net.mpgnet, path, strict_branches=strict_branches)
+        self.q_net_target.mpgnet.load_state_dict(self.q_net.mpgnet.state_dict())
+        if header.get("q_star") is not None:
+            self.set_q_star(header["q_star"])
+        return header
+
+    @classmethod
+    def from_weights(
+        cls,
+        path: str | Path,
+        observation_space: spaces.Dict,
+        action_space: spaces.Discrete,
+        **kwargs: Any,
+    ) -> "MPGNetPolicy":
+        """A policy built with the checkpoint's own configuration (variant, head, trunk depth)."""
+        header = read_checkpoint_header(path)
+        cfg = dict(header["config"])
+        variant = cfg.pop("variant")
+        cfg.pop("primitives", None)
+        kwargs.setdefault("branches", None)
+        policy = cls(observation_space, action_space, lambda _: 1e-4, variant=variant, net_config=cfg, **kwargs)
+        policy.load_weights(path, strict_branches=True)
+        return policy
+
+
+class GraspScorer:
+    """``callable(obs) -> float``: the best grasp Q inside the target region (for the envs).
+
+    Runs the grasp branch in eval mode without gradients and restores the network's mode.
+    """
+
+    def __init__(self, net: MPGNet) -> None:
+        if "grasp" not in net.primitives:
+            raise ValueError(f"the grasp scorer needs a grasp branch; this MPGNet has {net.primitives}")
+        self.net = net
+
+    @classmethod
+    def from_weights(cls, path: str | Path) -> "GraspScorer":
+        """A scorer from a saved MPGNet (e.g. the Stage II grasp net)."""
+        from mpg_agents.mpgnet import load_mpgnet
+
+        net, _ = load_mpgnet(path, primitives=("grasp",))
+        return cls(net)
+
+    def __call__(self, obs: Mapping[str, Any]) -> float:
+        was_training = self.net.training
+        self.net.eval()
+        try:
+            with torch.inference_mode():
+                return float(self.net.grasp_score(obs)[0])
+        finally:
+            self.net.train(was_training)
+
+
+def _batch_size(obs: Mapping[str, Tensor]) -> int:
+    return int(next(iter(obs.values())).shape[0])
+
+
+def _check_observation_space(space: spaces.Space, size: int) -> None:
+    """Fail early, naming the key, when an env's observation space is not MPG-shaped."""
+    if not isinstance(space, spaces.Dict):
+        raise TypeError(f"MPGNetPolicy needs a Dict observation space with color/depth/mask, got {space}")
+    shapes = {
+        "color": ((size, size, 3), (3, size, size)),
+        "depth": ((size, size),),
+        "mask": ((size, size),),
+    }
+    for key, allowed in shapes.items():
+        if key not in space.spaces:
+            raise ValueError(f"observation space lacks {key!r}; MPGNet needs keys {sorted(shapes)}")
+        if tuple(space.spaces[key].shape) not in allowed:
+            raise ValueError(
+                f"observation space {key!r} has shape {space.spaces[key].shape}; expected one of {allowed}"
+            )
+    if space.spaces["color"].dtype != np.uint8:
+        warnings.warn("colour observations are not uint8; MPGNet reads them on the 0..255 scale", stacklevel=3)

@@ -1,0 +1,232 @@
+"""MPGNet: shapes, rotation bookkeeping, rough mask, gradient isolation, checkpoints, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+from torch.nn import functional as F
+
+from mpg_agents.mpgnet import MPGNet, MPGNetConfig, load_mpgnet, load_mpgnet_weights, rotation_grids, save_mpgnet
+from mpg_agents.policy import MPGQNetwork
+from mpg_envs.actions import PixelActionSpace, encode_action
+
+from .scenes import observation_space, random_scene
+
+ENV_PRIMITIVES = {
+    "Stage1/Stage2": ("grasp",),
+    "Stage3": ("move",),
+    "Stage4": ("push", "grasp"),
+    "Stage5/Occluded": ("move", "push", "grasp"),
+}
+
+
+def test_config_padding_and_dict_roundtrip():
+    cfg = MPGNetConfig.small()
+    assert cfg.padded_size == 320  # ceil(224 * sqrt 2) = 317 -> 320
+    assert MPGNetConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match="unknown MPGNetConfig keys"):
+        MPGNetConfig.from_dict({"varient": "small"})
+    with pytest.raises(ValueError, match="primitives"):
+        MPGNetConfig(primitives=("grasp", "push"))
+
+
+@pytest.mark.parametrize("stage, primitives", list(ENV_PRIMITIVES.items()))
+def test_output_shapes_for_every_env(stage, primitives, scene):
+    torch.manual_seed(0)
+    net = MPGNet(MPGNetConfig.small(primitives=primitives)).eval()
+    assert tuple(net.branches) == primitives
+    with torch.inference_mode():
+        maps = net(scene)
+    assert set(maps) == set(primitives)
+    for q in maps.values():
+        assert q.shape == (1, 16, 224, 224)
+        assert torch.isfinite(q).all()
+    # The SB3 Q-network flattens them in the env's action order.
+    qnet = MPGQNetwork(observation_space(), PixelActionSpace(primitives), net.config, primitives)
+    qnet.mpgnet.load_state_dict(net.state_dict())
+    qnet.eval()
+    with torch.inference_mode():
+        flat = qnet({k: torch.as_tensor(v)[None] for k, v in scene.items()})
+    assert flat.shape == (1, len(primitives) * 16 * 224 * 224)
+    p, k, r, c = primitives[-1], 5, 100, 37
+    assert torch.allclose(flat[0, encode_action(primitives, p, k, r, c)], maps[p][0, k, r, c], atol=1e-5)
+
+
+def test_input_rotation_puts_action_direction_along_columns():
+    """Rotation k resamples the input so world direction theta_k lies along +column."""
+    cfg = MPGNetConfig.small()
+    grids = rotation_grids(16, 224, cfg.padded_size, "in")
+    centre = (cfg.padded_size - 1) / 2
+    for k in (0, 1, 3, 4, 6, 11):
+        theta = k * math.pi / 8
+        img = torch.zeros(1, 1, cfg.padded_size, cfg.padded_size)
+        # A dot 60 px from the centre in direction theta: col = x, row = y.
+        row, col = round(centre + 60 * math.sin(theta)), round(centre + 60 * math.cos(theta))
+        img[0, 0, row - 1 : row + 2, col - 1 : col + 2] = 1.0
+        out = F.grid_sample(img, grids[k : k + 1], align_corners=True)[0, 0]
+        r, c = divmod(int(out.argmax()), cfg.padded_size)
+        assert abs(r - centre) <= 2 and abs(c - (centre + 60)) <= 2, (k, r, c)
+
+
+def test_unrotation_inverts_rotation():
+    """'out' grids (stride 1) map every heightmap pixel back to where 'in' grids sent it."""
+    cfg = MPGNetConfig.small()
+    pad = (cfg.padded_size - 224) // 2
+    yy, xx = torch.meshgrid(torch.arange(224.0), torch.arange(224.0), indexing="ij")
+    img = (torch.sin(xx / 9.0) + torch.cos(yy / 13.0))[None, None]
+    padded = F.pad(img, (pad, pad, pad, pad))
+    g_in = rotation_grids(16, 224, cfg.padded_size, "in")
+    g_out = rotation_grids(16, 224, cfg.padded_size, "out", stride=1)
+    for k in range(16):
+        rotated = F.grid_sample(padded, g_in[k : k + 1], align_corners=True)
+        back = F.grid_sample(rotated, g_out[k : k + 1], align_corners=True)[0, 0]
+        err = (back - img[0, 0]).abs()[8:-8, 8:-8].max()
+        assert err < (1e-5 if k % 4 == 0 else 0.02), (k, float(err))
+
+
+def test_rotating_the_scene_by_90_degrees_shifts_rotations_by_4(small_net, scene):
+    """np.rot90 turns content by -90 degrees (from +x toward -y), so Q_k(rotated scene) equals
+    np.rot90 of Q_{k+4}(scene): a +90-degree action in the scene is a 0-degree one after."""
+    rotated = {k: np.ascontiguousarray(np.rot90(v, 1, axes=(0, 1))) if v.ndim >= 2 else v for k, v in scene.items()}
+    with torch.inference_mode():
+        q = {p: m[0].numpy() for p, m in small_net(scene).items()}
+        qr = {p: m[0].numpy() for p, m in small_net(rotated).items()}
+    for p in q:
+        spread = q[p].max() - q[p].min()
+        assert spread > 1e-3, "Q maps are flat; the test would be vacuous"
+        for k in range(16):
+            expected = np.rot90(q[p][(k + 4) % 16], 1)
+            assert np.abs(qr[p][k] - expected)[16:-16, 16:-16].max() < 1e-4 * max(1.0, spread), (p, k)
+    # Not a symmetry of the maps themselves: k and k+4 differ in the unrotated frame.
+    assert np.abs(q["push"][0] - q["push"][4]).max() > 1e-4
+
+
+def test_rough_mask_zeroes_move_and_grasp_outside_rectangle(small_net, scene):
+    rows, cols = np.nonzero(scene["mask"])
+    inside = np.zeros((224, 224), bool)
+    inside[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1] = True
+    with torch.inference_mode():
+        maps = small_net(scene)
+    for p in ("move", "grasp"):
+        q = maps[p][0].numpy()
+        assert np.all(q[:, ~inside] == 0)
+        assert np.count_nonzero(q[:, inside]) > 0.9 * q[:, inside].size
+    assert np.count_nonzero(maps["push"][0].numpy()[:, ~inside]) > 0  # push is not restricted
+    # Empty mask: nothing to localise, Q is left unrestricted.
+    empty = dict(scene, mask=np.zeros_like(scene["mask"]))
+    with torch.inference_mode():
+        q = small_net(empty, ("grasp",))["grasp"][0].numpy()
+    assert np.count_nonzero(q) > 0.99 * q.size
+
+
+def test_loss_on_one_pixel_reaches_only_its_rotation(small_net, scene):
+    """Full 16-rotation pass (eval BN): the gradient of Q[k, r, c] flows through rotation k only."""
+    k, r, c = 5, 90, 120
+    enc = small_net.encode(scene)
+    enc.color.requires_grad_(True)
+    enc.depth.requires_grad_(True)
+    head_out = {}
+    branch = small_net.branches["push"]
+
+    def keep(module, inputs, output):
+        output.retain_grad()
+        head_out["q"] = output
+
+    handle = branch.head.register_forward_hook(keep)
+    try:
+        q = small_net.maps_from(enc, ("push",))["push"]
+        q[0, k, r, c].backward()
+    finally:
+        handle.remove()
+    coarse_grad = head_out["q"].grad  # (16, 1, h, w) gradient at the head's output
+    per_rotation = coarse_grad.abs().flatten(1).sum(1)
+    assert per_rotation[k] > 0
+    assert torch.all(per_rotation[torch.arange(16) != k] == 0)
+    for inp in (enc.color, enc.depth):
+        g = inp.grad.abs().flatten(1).sum(1)
+        assert g[k] > 0 and torch.all(g[torch.arange(16) != k] == 0)
+
+
+def test_training_path_matches_full_pass_and_isolates_the_chosen_rotation(small_net, rng):
+    """chosen_q runs only the chosen rotation per sample; in eval mode it equals the full maps."""
+    primitives = ("move", "push", "grasp")
+    batch = [random_scene(rng, occluded=False) for _ in range(3)]
+    obs = {k: np.stack([b[k] for b in batch]) for k in batch[0]}
+    prim = torch.tensor([1, 2, 0])
+    rot = torch.tensor([3, 12, 7])
+    with torch.inference_mode():
+        full = small_net(obs)
+        chosen = small_net.chosen_q(obs, primitives, prim, rot)
+    for i in range(3):
+        expected = full[primitives[int(prim[i])]][i, int(rot[i])]
+        assert torch.allclose(chosen[i], expected, rtol=1e-4, atol=1e-4)
+    # Train mode: each sample's loss has gradients only from its own branch.
+    small_net.train()
+    try:
+        small_net.zero_grad()
+        q = small_net.chosen_q(obs, primitives, torch.tensor([2, 2, 2]), rot)
+        inside = [np.argwhere(b["mask"])[0] for b in batch]  # grasp Q is 0 outside the target box
+        q[torch.arange(3), [int(p[0]) for p in inside], [int(p[1]) for p in inside]].sum().backward()
+        grads = {
+            p: sum(float(w.grad.abs().sum()) for w in b.parameters() if w.grad is not None)
+            for p, b in small_net.branches.items()
+        }
+        assert grads["grasp"] > 0 and grads["move"] == 0 and grads["push"] == 0
+    finally:
+        small_net.zero_grad()
+        small_net.eval()
+
+
+def test_bad_input_gives_clear_errors(small_net, scene):
+    with pytest.raises(ValueError, match="'color' has shape"):
+        small_net(dict(scene, color=scene["color"][:200]))
+    with pytest.raises(ValueError, match="'depth' has shape"):
+        small_net(dict(scene, depth=scene["depth"][None, None, None]))
+    with pytest.raises(KeyError, match="mask"):
+        small_net({"color": scene["color"], "depth": scene["depth"]})
+    with pytest.raises(ValueError, match="NaN"):
+        small_net(dict(scene, depth=np.full_like(scene["depth"], np.nan)))
+    with pytest.raises(ValueError, match="batch sizes differ"):
+        small_net(
+            {"color": scene["color"][None].repeat(2, 0), "depth": scene["depth"][None], "mask": scene["mask"][None]}
+        )
+    with pytest.raises(ValueError, match="no 'push' branch"):
+        MPGNet(MPGNetConfig.small(primitives=("grasp",)))(scene, ("push",))
+
+
+def test_channels_first_colour_is_accepted(small_net, scene):
+    chw = dict(scene, color=np.ascontiguousarray(scene["color"].transpose(2, 0, 1))[None])
+    with torch.inference_mode():
+        a = small_net(scene, ("grasp",))["grasp"]
+        b = small_net({k: (v if k == "color" else v[None]) for k, v in chw.items()}, ("grasp",))["grasp"]
+    assert torch.equal(a, b)
+
+
+def test_checkpoint_roundtrip_and_mismatch(tmp_path, small_net, scene):
+    path = tmp_path / "net.safetensors"
+    save_mpgnet(small_net, path, q_star=1.25)
+    net, header = load_mpgnet(path)
+    net.eval()
+    assert header["q_star"] == 1.25 and header["variant"] == "small"
+    with torch.inference_mode():
+        assert torch.equal(net(scene)["grasp"], small_net(scene)["grasp"])
+    # Another architecture: a clear error naming the difference.
+    with pytest.raises(ValueError, match="variant='small' but this network has variant='large'"):
+        load_mpgnet_weights(MPGNet(MPGNetConfig.large(primitives=("grasp",))), path)
+    with pytest.raises(ValueError, match="trunk_depth"):
+        load_mpgnet_weights(MPGNet(MPGNetConfig.small(trunk_depth=9, primitives=("grasp",))), path)
+    # A grasp-only file cannot fill a push branch unless asked to.
+    grasp_only = tmp_path / "grasp.safetensors"
+    save_mpgnet(MPGNet(MPGNetConfig.small(primitives=("grasp",))), grasp_only)
+    target = MPGNet(MPGNetConfig.small(primitives=("push", "grasp")))
+    with pytest.raises(ValueError, match=r"missing \['push'\]"):
+        load_mpgnet_weights(target, grasp_only)
+    load_mpgnet_weights(target, grasp_only, strict_branches=False)
+    # Not a safetensors file at all (e.g. a pickle): refused without unpickling.
+    bogus = tmp_path / "bogus.safetensors"
+    torch.save({"x": torch.zeros(1)}, bogus)
+    with pytest.raises(ValueError, match="not a safetensors file"):
+        load_mpgnet(bogus)

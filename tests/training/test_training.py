@@ -1,0 +1,129 @@
+"""The learner, the pipeline and the command lines, on tiny settings."""
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import pytest
+import torch
+
+from mpg_agents.cli import eval_main, plot_main, train_main
+from mpg_agents.learner import Learner, StopRequested, TrainConfig
+from mpg_agents.pipeline import PipelineConfig, run_pipeline
+
+# A shallow trunk keeps every test fast; the code paths are the full ones.
+TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
+
+
+@pytest.fixture(autouse=True)
+def _quiet_threads():
+    torch.set_num_threads(1)
+
+
+def test_tiny_pipeline_runs_stages_one_to_five(tmp_path):
+    cfg = PipelineConfig(
+        base=TrainConfig(**TINY),
+        stage_steps={f"Stage{i}": 2 for i in range(1, 6)},
+        stage3_objects=(2, 3),
+        alternate_every=1,
+    )
+    summary = run_pipeline(cfg, tmp_path, log=lambda s: None)
+    for i in range(1, 6):
+        stage = tmp_path / f"Stage{i}"
+        assert (stage / "weights.safetensors").is_file() and (stage / "done.json").is_file()
+        assert summary[f"Stage{i}"]["iteration"] == 2
+    assert summary["final_weights"].endswith("Stage5/weights.safetensors")
+    # A re-run skips finished stages.
+    again = run_pipeline(cfg, tmp_path, log=lambda s: None)
+    assert again["Stage5"] == summary["Stage5"]
+
+
+def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
+    cfg = TrainConfig(env_id="MPG-Stage2-v0", steps=5, **TINY)
+    learner = Learner(cfg, tmp_path, log=lambda s: None)
+    original = learner.iteration
+
+    def iteration_then_kill(obs):
+        out = original(obs)
+        if learner.counters.iteration == 3:
+            os.kill(os.getpid(), signal.SIGTERM)  # the real signal path
+        return out
+
+    learner.iteration = iteration_then_kill
+    with pytest.raises(StopRequested):
+        learner.run()
+    killed = (learner.counters.iteration, learner.counters.episode, learner.replay.size())
+    assert killed[0] == 3 and killed[2] == 3
+
+    resumed = Learner(cfg, tmp_path, log=lambda s: None)
+    assert (resumed.counters.iteration, resumed.counters.episode, resumed.replay.size()) == killed
+    assert resumed.replay.priorities[:3].tolist() == learner.replay.priorities[:3].tolist()
+    for a, b in zip(resumed.net.state_dict().values(), learner.net.state_dict().values()):
+        assert torch.equal(a, b)
+    resumed.run()
+    assert resumed.counters.iteration == 5 and resumed.replay.size() == 5
+    rows = (tmp_path / "progress.csv").read_text().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3", "4", "5"]
+
+
+def test_learning_steps_shrink_the_surprise_of_a_transition(tmp_path):
+    # One stored transition; repeated steps on it must shrink |Q - y| (its priority).
+    cfg = TrainConfig(env_id="MPG-Stage2-v0", steps=1, learning_rate=1e-3, weight_decay=0.0, **{**TINY, "target_update_every": 1000})
+    learner = Learner(cfg, tmp_path, log=lambda s: None)
+    learner.run()
+    assert learner.replay.size() == 1
+    errors = []
+    for _ in range(6):
+        learner.learn()
+        errors.append(float(learner.replay.priorities[0, 0]) - learner.replay.priority_eps)
+    assert errors[-1] < 0.5 * errors[0], errors
+
+
+def test_mpg_eval_oracle_gives_the_same_json_twice(tmp_path, capsys):
+    paths = [tmp_path / "a.json", tmp_path / "b.json"]
+    for p in paths:
+        code = eval_main(["--policy", "oracle", "--env", "MPG-Stage2-v0", "--episodes", "2", "--seed", "4", "--json", str(p), "--quiet"])
+        assert code == 0
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    data = json.loads(paths[0].read_text())
+    assert data["task_success_rate"] == 1.0 and data["episodes"] == 2
+    assert "task success rate" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--env", "MPG-Stage9-v0", "--steps", "1"], "unknown env id"),
+        (["--env", "MPG-Stage2-v0", "--init", "missing.safetensors"], "does not exist"),
+        (["--env", "MPG-Stage2-v0", "--config", "missing.json"], "does not exist"),
+    ],
+)
+def test_mpg_train_rejects_bad_input(tmp_path, capsys, argv, message):
+    assert train_main([*argv, "--out", str(tmp_path / "run")]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_checkpoint_of_another_architecture_is_refused(tmp_path, capsys):
+    from mpg_agents.mpgnet import MPGNet, MPGNetConfig, save_mpgnet
+
+    other = tmp_path / "other.safetensors"
+    save_mpgnet(MPGNet(MPGNetConfig.small(trunk_depth=3, primitives=("grasp",))), other)
+    config = tmp_path / "tiny.json"
+    config.write_text(json.dumps({k: v for k, v in TINY.items()}))
+    code = train_main(["--env", "MPG-Stage2-v0", "--steps", "1", "--init", str(other), "--config", str(config), "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert code == 2 and "trunk" in err.lower()
+    garbage = tmp_path / "garbage.safetensors"
+    garbage.write_bytes(b"not a checkpoint")
+    assert eval_main(["--policy", str(garbage), "--env", "MPG-Stage2-v0", "--episodes", "1"]) == 2
+    assert "not an MPGNet" in capsys.readouterr().err
+    assert eval_main(["--policy", "oracle", "--env", "Nope-v0"]) == 2
+
+
+def test_mpg_plot_draws_curves(tmp_path):
+    cfg = TrainConfig(env_id="MPG-Stage1-v0", steps=4, window=2, **TINY)
+    Learner(cfg, tmp_path, log=lambda s: None).run()
+    assert plot_main([str(tmp_path), "--window", "2"]) == 0
+    png = tmp_path / "curves.png"
+    assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
