@@ -29,6 +29,7 @@ import torch
 from torch.nn import functional as F
 
 import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.dqn import td_targets
 from mpg_agents.checkpoint import (
     load_optimizer,
     load_replay,
@@ -380,68 +381,42 @@ class Learner:
 
     # ------------------------------------------------------------ learning
     def learn(self) -> float:
-        """One gradient step on a prioritised batch; returns the loss."""
+        """One gradient step on a prioritised batch; returns the loss (NaN when nothing learnt)."""
         cfg = self.config
         if self.replay.size() == 0:
             return float("nan")
+        q_net = self.policy.q_net
         batch = self.replay.sample(min(cfg.batch_size, self.replay.size()))
-        obs = {k: v for k, v in batch.observations.items()}
-        next_obs = {k: v for k, v in batch.next_observations.items()}
         actions = batch.actions.reshape(-1).long()
-        size = self.net.config.heightmap_size
-        per_prim = NUM_ROTATIONS * size * size
-        prim_idx, rest = actions // per_prim, actions % per_prim
-        rot, pix = rest // (size * size), rest % (size * size)
-        row, col = pix // size, pix % size
+        targets = td_targets(q_net, self.policy.q_net_target, batch.next_observations, batch.rewards, batch.dones, cfg.gamma)
+        prim, rot, _, _ = q_net.split_actions(actions)
         active = set(self.active_branches())
-        keep = torch.tensor([self.primitives[int(p)] in active for p in prim_idx])
-        targets = self.td_targets(next_obs, batch.rewards.reshape(-1), batch.dones.reshape(-1))
-
-        self.net.train()
-        sel = torch.nonzero(keep).flatten()
+        sel = torch.tensor([i for i, p in enumerate(prim.tolist()) if self.primitives[p] in active], dtype=torch.long)
         if sel.numel() == 0:
-            # Every sampled transition belongs to a frozen branch: nothing to learn from them now.
-            return float("nan")
-        p_s, r_s, row_s, col_s, y_s = prim_idx[sel], rot[sel], row[sel], col[sel], targets[sel]
-        sub_obs = {k: v[sel] for k, v in obs.items()}
+            return float("nan")  # every sampled transition belongs to a frozen branch
+        obs = {k: v[sel] for k, v in batch.observations.items()}
+        acts, ys = actions[sel], targets[sel]
         if cfg.grasp_symmetry and "grasp" in self.primitives:
-            g = self.primitives.index("grasp")
-            sym = torch.nonzero(p_s == g).flatten()
+            # A parallel-jaw grasp at rotation r is the grasp at r + 8: train both.
+            sym = torch.nonzero(prim[sel] == self.primitives.index("grasp")).flatten()
             if sym.numel():
-                sub_obs = {k: torch.cat([v, v[sym]]) for k, v in sub_obs.items()}
-                p_s = torch.cat([p_s, p_s[sym]])
-                r_s = torch.cat([r_s, (r_s[sym] + NUM_ROTATIONS // 2) % NUM_ROTATIONS])
-                row_s, col_s, y_s = torch.cat([row_s, row_s[sym]]), torch.cat([col_s, col_s[sym]]), torch.cat([y_s, y_s[sym]])
-        q_maps = self.net.chosen_q(sub_obs, self.primitives, p_s, r_s)
-        q = q_maps[torch.arange(q_maps.shape[0]), row_s, col_s]
-        loss = F.smooth_l1_loss(q, y_s, reduction="mean")
+                size = self.net.config.heightmap_size
+                turned = acts[sym] + (torch.where(rot[sel][sym] < NUM_ROTATIONS // 2, 1, -1) * (NUM_ROTATIONS // 2) * size * size)
+                obs = {k: torch.cat([v, v[sym]]) for k, v in obs.items()}
+                acts, ys = torch.cat([acts, turned]), torch.cat([ys, ys[sym]])
+        q_net.set_training_mode(True)
+        q = q_net.q_values_at(obs, acts)
+        loss = F.smooth_l1_loss(q, ys)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
         self.counters.gradient_steps += 1
-        errors = np.zeros(len(actions))
-        errors[sel.numpy()] = (q[: len(sel)] - y_s[: len(sel)]).abs().detach().numpy()
-        self.replay.update_priorities(batch.indices, errors)
+        surprise = np.zeros(len(actions))
+        surprise[sel.numpy()] = (q[: len(sel)] - ys[: len(sel)]).abs().detach().reshape(-1).numpy()
+        self.replay.update_priorities(batch.indices, surprise)
         if self.counters.gradient_steps % cfg.target_update_every == 0:
             self.target.load_state_dict(self.net.state_dict())
         return float(loss.detach())
-
-    @torch.no_grad()
-    def td_targets(self, next_obs: dict[str, torch.Tensor], rewards: torch.Tensor, dones: torch.Tensor) -> torch.Tensor:
-        """Double DQN: the online net's coordinated choice at s', valued by the target net."""
-        values = torch.zeros_like(rewards)
-        live = torch.nonzero(dones < 0.5).flatten()
-        if live.numel():
-            self.net.eval()
-            decisions = self.policy.q_net.decide({k: v[live] for k, v in next_obs.items()})
-            p = torch.tensor([self.primitives.index(d.primitive) for d in decisions])
-            r = torch.tensor([d.rotation for d in decisions])
-            rows = torch.tensor([d.row for d in decisions])
-            cols = torch.tensor([d.col for d in decisions])
-            self.target.eval()
-            q_t = self.target.chosen_q({k: v[live] for k, v in next_obs.items()}, self.primitives, p, r)
-            values[live] = q_t[torch.arange(len(live)), rows, cols]
-        return rewards + self.config.gamma * (1.0 - dones) * values
 
     # ------------------------------------------------------------ logging
     def _record(self, primitive, how, reward, loss, info, t_decide, t_act, t_total) -> None:
