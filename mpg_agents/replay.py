@@ -290,47 +290,30 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
             self.max_priority = max(self.max_priority, float(priorities.max()))
 
     # ------------------------------------------------------------ memory
-    def nbytes(self) -> int:
-        """Bytes held: unique compressed frames plus the per-transition arrays."""
+    def _frame_bytes(self) -> int:
+        """Bytes of the distinct compressed frames the stored transitions reference."""
         seen: dict[int, int] = {}
         n = self.size()
         for frames in (self.obs_frames[:n], self.next_obs_frames[:n]):
             for frame in frames.reshape(-1):
                 if frame is not None:
                     seen[id(frame)] = frame.nbytes
-        arrays = (
-            self.actions,
-            self.rewards,
-            self.dones,
-            self.timeouts,
-            self.priorities,
-            self.obs_frames,
-            self.next_obs_frames,
-        )
-        return sum(seen.values()) + sum(a.nbytes for a in arrays)
+        return sum(seen.values())
+
+    def _slot_arrays(self) -> tuple[np.ndarray, ...]:
+        return (self.actions, self.rewards, self.dones, self.timeouts, self.priorities, self.obs_frames, self.next_obs_frames)
+
+    def nbytes(self) -> int:
+        """Bytes held: unique compressed frames plus the per-transition arrays."""
+        return self._frame_bytes() + sum(a.nbytes for a in self._slot_arrays())
 
     def bytes_per_transition(self) -> float:
         """:meth:`nbytes` divided by the stored transitions (the per-slot arrays are for the capacity)."""
         n = self.size() * self.n_envs
         if n == 0:
             raise ValueError("the buffer is empty")
-        seen: dict[int, int] = {}
-        for frames in (self.obs_frames[: self.size()], self.next_obs_frames[: self.size()]):
-            for frame in frames.reshape(-1):
-                seen[id(frame)] = frame.nbytes
-        per_slot = sum(
-            a.itemsize * int(np.prod(a.shape[2:]))
-            for a in (
-                self.actions,
-                self.rewards,
-                self.dones,
-                self.timeouts,
-                self.priorities,
-                self.obs_frames,
-                self.next_obs_frames,
-            )
-        )
-        return sum(seen.values()) / n + per_slot
+        per_slot = sum(a.itemsize * int(np.prod(a.shape[2:])) for a in self._slot_arrays())
+        return self._frame_bytes() / n + per_slot
 
 
 def _is_binary(space: spaces.Space) -> bool:
