@@ -274,19 +274,28 @@ def test_occlusion_and_change_detection_on_hand_made_maps():
 
 
 # --------------------------------------------------------------------------- robustness
-@pytest.mark.parametrize("env_id", ALL_IDS)
-def test_random_actions_keep_the_simulation_sane(env_id):
-    kwargs = {"num_objects": 8} if env_id == "MPG-Occluded-v0" else {}
+def _random_soak(env_id, actions, **kwargs):
     env = gym.make(env_id, **kwargs).unwrapped
     env.reset(seed=0)
     env.action_space.seed(0)
-    for step in range(40):
+    for step in range(actions):
         obs, r, term, trunc, info = env.step(env.action_space.sample())
         assert np.isfinite(env.world.data.qpos).all() and np.isfinite(obs["depth"]).all()
         assert env.world.objects_out_of_room().size == 0
         assert not env.world.warnings_raised(), env.world.warnings_raised()
         if term or trunc:
             env.reset(seed=step + 1)
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_random_actions_keep_the_simulation_sane(env_id):
+    _random_soak(env_id, 40, **({"num_objects": 8} if env_id == "MPG-Occluded-v0" else {}))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_200_random_actions_keep_the_simulation_sane(env_id):
+    _random_soak(env_id, 200)
 
 
 def test_vector_envs_run_with_two_workers():

