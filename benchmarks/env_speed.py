@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import statistics
 import sys
@@ -31,7 +30,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from mpg_envs.env import MPGEnv  # noqa: E402
-from mpg_envs.policies import OraclePolicy, footprint_rect, angle_to_rotation  # noqa: E402
+from mpg_envs.policies import footprint_rect, angle_to_rotation  # noqa: E402
 from mpg_envs.workspace import world_to_pixel  # noqa: E402
 
 

@@ -133,3 +133,16 @@ def state_folder(run_dir: Path) -> Path | None:
         if (folder / "FORMAT").is_file() and (folder / "FORMAT").read_text() == STATE_FORMAT:
             return folder
     return None
+
+
+def export_weights(src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True) -> Path:
+    """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
+    the shared mask trunk), floating tensors stored as float16 (loading casts them back)."""
+    from mpg_agents.mpgnet import load_mpgnet, save_mpgnet
+
+    net, header = load_mpgnet(src, primitives=primitives)
+    if half:
+        net = net.half()
+    q_star = header.get("q_star")
+    save_mpgnet(net, dst, q_star=float("nan") if q_star is None else float(q_star), extra={**header.get("extra", {}), "exported_from": str(src), "float16": half})
+    return Path(dst)

@@ -21,7 +21,7 @@ import signal
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
@@ -297,7 +297,7 @@ class Learner:
         return (self.trainable[turn],)
 
     def iteration(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        cfg, c = self.config, self.counters
+        c = self.counters
         start = time.perf_counter()
         action, primitive, how, q_value = self.act(obs)
         t_decide = time.perf_counter() - start

@@ -6,8 +6,7 @@ new heightmaps, check occlusion and change, score the stage's reward, decide ter
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -85,7 +85,7 @@ class World:
         workspace: Workspace = Workspace(),
         robot: RobotConfig = RobotConfig(),
         physics: PhysicsConfig = PhysicsConfig(),
-        extra_spec_hook=None,
+        extra_spec_hook: Callable[[mujoco.MjSpec], None] | None = None,
     ):
         self.workspace = workspace
         self.physics = physics

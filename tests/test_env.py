@@ -1,6 +1,5 @@
 """The registered env suite: API conformance, determinism, errors, scenes, rewards."""
 
-import math
 import warnings
 
 import cv2
