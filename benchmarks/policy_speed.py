@@ -28,28 +28,18 @@ import time
 from typing import Any, Callable
 
 import numpy as np
+
+from mpg_envs.env import observation_space
 import torch
-from gymnasium import spaces
 from stable_baselines3.common.buffers import DictReplayBuffer
 from torch.nn import functional as F
 
 from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics, region_max
 from mpg_agents.policy import MPGNetPolicy
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
 from mpg_envs.actions import PRIMITIVES, PixelActionSpace
 
 SIZE = 224
-
-
-def observation_space() -> spaces.Dict:
-    return spaces.Dict(
-        {
-            "color": spaces.Box(0, 255, (SIZE, SIZE, 3), np.uint8),
-            "depth": spaces.Box(0.0, 0.4, (SIZE, SIZE), np.float32),
-            "mask": spaces.Box(0, 1, (SIZE, SIZE), np.uint8),
-            "occluded": spaces.MultiBinary(1),
-        }
-    )
 
 
 def synthetic_scene(rng: np.random.Generator, blocks: int = 10) -> dict[str, np.ndarray]:
@@ -180,17 +170,7 @@ def replay_bytes(stream: list[tuple[dict, dict, int, float, bool]]) -> tuple[flo
         )
         ours.add(*args)
         sb3.add(*args)
-    sb3_total = sum(
-        a.nbytes
-        for a in (
-            *sb3.observations.values(),
-            *sb3.next_observations.values(),
-            sb3.actions,
-            sb3.rewards,
-            sb3.dones,
-            sb3.timeouts,
-        )
-    )
+    sb3_total = sb3_dict_buffer_nbytes(sb3)
     return ours.nbytes() / n, sb3_total / n
 
 

@@ -316,6 +316,12 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
         return self._frame_bytes() / n + per_slot
 
 
+def sb3_dict_buffer_nbytes(buffer: DictReplayBuffer) -> int:
+    """Bytes SB3's own ``DictReplayBuffer`` holds (its preallocated arrays), for comparisons."""
+    arrays = (*buffer.observations.values(), *buffer.next_observations.values(), buffer.actions, buffer.rewards, buffer.dones, buffer.timeouts)
+    return sum(a.nbytes for a in arrays)
+
+
 def _is_binary(space: spaces.Space) -> bool:
     """A uint8 Box with bounds 0..1 (the mask) or a MultiBinary space."""
     if isinstance(space, spaces.MultiBinary):

@@ -46,6 +46,20 @@ class EnvConfig:
     object_set_seed: int = 0
 
 
+def observation_space(workspace: Workspace = Workspace()) -> spaces.Dict:
+    """The observation space of every MPG env (ENV.md): colour, depth and mask heightmaps
+    and the occlusion flag."""
+    size = workspace.shape
+    return spaces.Dict(
+        {
+            "color": spaces.Box(0, 255, (*size, 3), np.uint8),
+            "depth": spaces.Box(0.0, workspace.z_max, size, np.float32),
+            "mask": spaces.Box(0, 1, size, np.uint8),
+            "occluded": spaces.MultiBinary(1),
+        }
+    )
+
+
 class MPGEnv(gym.Env):
     """Target-oriented grasping in clutter with pixel-wise move/push/grasp actions."""
 
@@ -93,14 +107,7 @@ class MPGEnv(gym.Env):
         self.primitives = stage_spec.primitives
         size = config.workspace.shape
         self.action_space = PixelActionSpace(self.primitives, size=size[0])
-        self.observation_space = spaces.Dict(
-            {
-                "color": spaces.Box(0, 255, (*size, 3), np.uint8),
-                "depth": spaces.Box(0.0, config.workspace.z_max, size, np.float32),
-                "mask": spaces.Box(0, 1, size, np.uint8),
-                "occluded": spaces.MultiBinary(1),
-            }
-        )
+        self.observation_space = observation_space(config.workspace)
         self._ik = ArmIK(config.robot)
         self._raycaster = None
         self._camera = None

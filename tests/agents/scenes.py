@@ -10,24 +10,13 @@ from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
+
+from mpg_envs.env import observation_space
 
 from mpg_envs.actions import PixelActionSpace, decode_action
 
 SIZE = 224
 TABLE_RGB = (120, 110, 100)
-
-
-def observation_space() -> spaces.Dict:
-    """The MPG observation space (ENV.md)."""
-    return spaces.Dict(
-        {
-            "color": spaces.Box(0, 255, (SIZE, SIZE, 3), np.uint8),
-            "depth": spaces.Box(0.0, 0.4, (SIZE, SIZE), np.float32),
-            "mask": spaces.Box(0, 1, (SIZE, SIZE), np.uint8),
-            "occluded": spaces.MultiBinary(1),
-        }
-    )
 
 
 def random_scene(rng: np.random.Generator, num_blocks: int = 6, occluded: bool | None = None) -> dict[str, np.ndarray]:

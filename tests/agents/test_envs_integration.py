@@ -6,6 +6,8 @@ import math
 
 import gymnasium as gym
 import numpy as np
+
+from mpg_agents.replay import sb3_dict_buffer_nbytes
 import pytest
 import torch
 
@@ -84,17 +86,7 @@ def test_replay_is_a_quarter_of_sb3_on_env_observations():
             obs = env.reset()[0] if term or trunc else nxt
         sb3 = DictReplayBuffer(32, env.observation_space, env.action_space, device="cpu")
         sb3_per = (
-            sum(
-                a.nbytes
-                for a in (
-                    *sb3.observations.values(),
-                    *sb3.next_observations.values(),
-                    sb3.actions,
-                    sb3.rewards,
-                    sb3.dones,
-                    sb3.timeouts,
-                )
-            )
+            sb3_dict_buffer_nbytes(sb3)
             / 32
         )
         assert buffer.bytes_per_transition() <= sb3_per / 4

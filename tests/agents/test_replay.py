@@ -8,7 +8,7 @@ import torch
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.type_aliases import DictReplayBufferSamples
 
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
 from mpg_envs.actions import PixelActionSpace
 
 from .scenes import observation_space, random_scene
@@ -71,17 +71,7 @@ def test_frames_are_shared_and_buffer_is_a_quarter_of_sb3(rng):
     unique = {id(f) for f in np.concatenate([buffer.obs_frames[:n, 0], buffer.next_obs_frames[:n, 0]])}
     assert len(unique) < 1.4 * n  # ~1 frame per transition plus one per episode start
     sb3 = DictReplayBuffer(64, observation_space(), PixelActionSpace(("grasp",)), device="cpu")
-    sb3_bytes = sum(
-        a.nbytes
-        for a in (
-            *sb3.observations.values(),
-            *sb3.next_observations.values(),
-            sb3.actions,
-            sb3.rewards,
-            sb3.dones,
-            sb3.timeouts,
-        )
-    )
+    sb3_bytes = sb3_dict_buffer_nbytes(sb3)
     ours = buffer.nbytes()
     assert ours <= sb3_bytes / 4, (ours, sb3_bytes)
     assert buffer.bytes_per_transition() <= sb3_bytes / 64 / 4
