@@ -26,6 +26,8 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402
+from mpg_agents.baselines import OracleBaseline  # noqa: E402
+from mpg_agents.evaluate import evaluate  # noqa: E402
 from mpg_envs.policies import OraclePolicy  # noqa: E402
 
 
@@ -68,20 +70,10 @@ def random_soak(env_id: str, actions: int) -> dict[str, int]:
 
 
 def oracle_eval(num_objects: int, episodes: int) -> dict[str, float]:
-    env = gym.make("MPG-Occluded-v0", num_objects=num_objects).unwrapped
-    oracle = OraclePolicy(env)
-    successes, motions = 0, []
-    for ep in range(episodes):
-        env.reset(seed=10_000 + ep)
-        while True:
-            _, _, term, trunc, info = env.step(oracle.act())
-            if term or trunc:
-                break
-        successes += info["is_success"]
-        motions.append(info["num_motions"])
-        print(f"  {num_objects} objects, episode {ep:2d}: {'success' if info['is_success'] else 'failure'} in {info['num_motions']} motions", flush=True)
+    env = gym.make("MPG-Occluded-v0", num_objects=num_objects)
+    result = evaluate(OracleBaseline(env), env, episodes, seed=10_000, progress=True)
     env.close()
-    return {"success": successes / episodes, "motions": float(np.mean(motions))}
+    return {"success": result.task_success_rate, "motions": result.average_motions}
 
 
 def main() -> None:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import sys
 import tomllib
@@ -85,7 +84,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.learner import Learner, TrainConfig
+        from mpg_agents.learner import Learner, TrainConfig, json_safe
 
         settings = _read_config(args.config)
         pipeline_keys = {"stage_steps", "stages", "multistage", "alternating", "stage3_objects", "alternate_every"}
@@ -121,7 +120,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         cfg = replace(base, env_id=args.env, **({"steps": args.steps} if args.steps is not None else {}))
         learner = Learner(cfg, args.out, init=args.init)
         summary = learner.run()
-        print(json.dumps({k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in summary.items()}))
+        print(json.dumps(json_safe(summary)))
         return 0
     except (UsageError, FileNotFoundError) as exc:
         return _fail(exc)

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
@@ -55,41 +54,33 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from mpg_agents.baselines import make_policy
+    from mpg_agents.evaluate import evaluate
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(args.env)
     policy = make_policy(args.policy, env)
     print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}")
-    successes, motions, grasps, grasp_hits = 0, [], 0, 0
-    start = time.perf_counter()
-    for ep in range(args.episodes):
-        obs, info = env.reset(seed=args.seed + ep)
-        if ep == 0:
+
+    def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
+        if episode == 0:
             cv2.imwrite(str(out / "scene.png"), cv2.cvtColor(scene_picture(env, obs), cv2.COLOR_RGB2BGR))
-            qmap = getattr(policy, "save_qmaps", None)
-            if qmap is not None:
-                qmap(out / "qmaps.png", obs)
-        while True:
-            action = policy.act(obs)
-            obs, reward, terminated, truncated, info = env.step(action)
-            print(
-                f"  episode {ep} motion {info['num_motions']}: {info['primitive']:5s} rot {info['rotation']:2d} "
-                f"at {info['pixel']} reward {reward:+.1f}"
-                + ("  grasped the target" if info["target_grasped"] else "  grasped another object" if info["grasp_success"] else "")
-            )
-            if info["primitive"] == "grasp":
-                grasps += 1
-                grasp_hits += info["target_grasped"]
-            if terminated or truncated:
-                break
-        successes += info["is_success"]
-        motions.append(info["num_motions"])
-    elapsed = time.perf_counter() - start
+            if hasattr(policy, "save_qmaps"):
+                policy.save_qmaps(out / "qmaps.png", obs)
+
+    def on_step(episode: int, reward: float, info: dict) -> None:
+        print(
+            f"  episode {episode} motion {info['num_motions']}: {info['primitive']:5s} rot {info['rotation']:2d} "
+            f"at {info['pixel']} reward {reward:+.1f}"
+            + ("  grasped the target" if info["target_grasped"] else "  grasped another object" if info["grasp_success"] else "")
+        )
+
+    result = evaluate(policy, env, args.episodes, args.seed, on_reset=on_reset, on_step=on_step)
+    grasps = "n/a" if result.grasp_success_rate is None else f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
     print(
-        f"task success {successes}/{args.episodes} ({100 * successes / args.episodes:.0f}%), "
-        f"mean motions {np.mean(motions):.2f}, target grasp success "
-        f"{grasp_hits}/{grasps}, {elapsed / max(1, sum(motions)):.2f} s per motion"
+        f"task success {round(result.task_success_rate * args.episodes)}/{args.episodes} "
+        f"({100 * result.task_success_rate:.0f}%), mean motions {result.average_motions:.2f}, "
+        f"target grasp success {grasps}, {result.seconds_per_motion:.2f} s per motion"
     )
     print(f"pictures in {out.resolve()}")
     env.close()

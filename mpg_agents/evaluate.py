@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
@@ -51,8 +51,20 @@ class EvalResult:
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
 
 
-def evaluate(policy, env: gym.Env, episodes: int, seed: int, progress: bool = False) -> EvalResult:
-    """Run ``policy`` (with ``act(obs)``) for ``episodes`` seeded episodes of ``env``."""
+def evaluate(
+    policy,
+    env: gym.Env,
+    episodes: int,
+    seed: int,
+    progress: bool = False,
+    on_reset: Callable[[int, dict], None] | None = None,
+    on_step: Callable[[int, float, dict], None] | None = None,
+) -> EvalResult:
+    """Run ``policy`` (with ``act(obs)``) for ``episodes`` seeded episodes of ``env``.
+
+    ``on_reset(episode, obs)`` and ``on_step(episode, reward, info)`` let a caller (the demo)
+    watch the episodes without keeping its own tally of the metrics.
+    """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
     successes, motions, success_motions = 0, [], []
@@ -60,8 +72,12 @@ def evaluate(policy, env: gym.Env, episodes: int, seed: int, progress: bool = Fa
     start = time.perf_counter()
     for k in range(episodes):
         obs, info = env.reset(seed=seed + k)
+        if on_reset is not None:
+            on_reset(k, obs)
         while True:
             obs, reward, terminated, truncated, info = env.step(policy.act(obs))
+            if on_step is not None:
+                on_step(k, reward, info)
             if info["primitive"] == "grasp":
                 grasps += 1
                 target_grasps += int(info["target_grasped"])

@@ -205,7 +205,7 @@ class Learner:
             self.replay._rng.bit_generator.state = rng["replay"]
         torch.set_rng_state(torch.tensor(rng["torch"], dtype=torch.uint8))
         self.counters = Counters(**json.loads((folder / "counters.json").read_text()))
-        q_star = json.loads((folder / "config.json").read_text()).get("q_star_now")
+        q_star = saved.get("q_star_now")
         if q_star is not None:
             self.policy.set_q_star(q_star)
         self.log(f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})")
@@ -225,7 +225,7 @@ class Learner:
             }
             (tmp / "rng.json").write_text(json.dumps(rng))
             (tmp / "counters.json").write_text(json.dumps(asdict(self.counters)))
-            (tmp / "config.json").write_text(json.dumps({**self.config.to_dict(), "q_star_now": _json_float(self.policy.q_star)}))
+            (tmp / "config.json").write_text(json.dumps(json_safe({**self.config.to_dict(), "q_star_now": self.policy.q_star})))
 
         write_state(self.out, writer)
         save_mpgnet(self.net, self.out / "weights.safetensors", q_star=self.policy.q_star, extra={"env_id": self.config.env_id})
@@ -454,5 +454,6 @@ CSV_COLUMNS = [
 ]
 
 
-def _json_float(value: float) -> float | None:
-    return None if math.isnan(value) else float(value)
+def json_safe(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with NaN floats (an uncalibrated Q*_g) as ``None``, which JSON can hold."""
+    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in data.items()}

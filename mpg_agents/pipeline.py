@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
-from mpg_agents.learner import Learner, TrainConfig
+from mpg_agents.learner import Learner, TrainConfig, json_safe
 
 
 @dataclass
@@ -88,7 +88,7 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
                 if not math.isnan(result["q_star"]):
                     learner.policy.set_q_star(result["q_star"])
                     learner.save_state()
-            result = _finite(result)
+            result = json_safe(result)
             done.write_text(json.dumps(result))
         summary[name] = result
         weights = str(stage_dir / "weights.safetensors")
@@ -97,9 +97,6 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
             discriminator = weights
     summary["q_star"] = None if math.isnan(q_star) else q_star
     summary["final_weights"] = weights
-    (out / "pipeline.json").write_text(json.dumps(_finite(summary), indent=1))
+    (out / "pipeline.json").write_text(json.dumps(json_safe(summary), indent=1))
     return summary
 
-
-def _finite(data: dict[str, Any]) -> dict[str, Any]:
-    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in data.items()}

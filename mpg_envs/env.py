@@ -159,7 +159,7 @@ class MPGEnv(gym.Env):
             gain = self._grasp_score(obs) - score_before
         outcome = StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain)
         reward = float(self.spec_stage.reward(outcome, self.config.reward))
-        objects_left = int(self.world.active.sum() - len(self.world.objects_outside_workspace()))
+        objects_left = self._objects_left()
         is_success = objects_left == 0 if self.spec_stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
         terminated = is_success or target_out or (self.spec_stage.end_on_move_success and move_success)
         truncated = not terminated and (
@@ -319,12 +319,16 @@ class MPGEnv(gym.Env):
             self.world.forward()
         return sim_warnings
 
+    def _objects_left(self) -> int:
+        """Objects still in the scene and inside the workspace."""
+        return int(self.world.active.sum() - len(self.world.objects_outside_workspace()))
+
     def _reset_info(self) -> dict[str, Any]:
         occluded = bool(self._obs["occluded"][0])
         return {
             "num_motions": 0,
             "occluded": occluded,
-            "objects_left": int(self.world.active.sum() - len(self.world.objects_outside_workspace())),
+            "objects_left": self._objects_left(),
             "target": self.target,
             "is_success": False,
         }
