@@ -335,17 +335,10 @@ class Learner:
         """``(action, primitive, how, q)``: how is "greedy", "explore" or "heuristic"."""
         c = self.counters
         env = self.env.unwrapped
-        decision = self.policy.decide(obs)
+        # Stage IV: five pushes, then the grasp.
+        forced = "grasp" if env.spec_stage.end_after_grasp and c.pushes_in_episode >= 5 and "grasp" in self.primitives else None
+        decision = self.policy.decide(obs, forced)
         primitive = decision.primitive
-        if env.spec_stage.end_after_grasp and c.pushes_in_episode >= 5 and "grasp" in self.primitives:
-            primitive = "grasp"  # Stage IV: five pushes, then the grasp
-            maps = decision.q_maps.get("grasp")
-            if maps is None:
-                maps = self.net.maps_from(self.net.encode(obs), ("grasp",))["grasp"][0]
-            q = maps.masked_fill(~self.net.target_region(torch.as_tensor(obs["mask"])[None])[0][None], float("-inf"))
-            flat = int(q.flatten().argmax())
-            rot, rest = divmod(flat, q.shape[1] * q.shape[2])
-            decision = decision._replace(primitive="grasp", rotation=rot, row=rest // q.shape[2], col=rest % q.shape[2], q_value=float(q.flatten()[flat]))
         if primitive == "grasp" and self.config.heuristic_after_failed_grasps and c.failed_grasps_in_a_row >= self.config.heuristic_after_failed_grasps and obs["mask"].any():
             rot, row, col = heuristic_grasp(obs)
             return encode_action(self.primitives, "grasp", rot, row, col), "grasp", "heuristic", float("nan")

@@ -188,16 +188,17 @@ class MPGQNetwork(QNetwork):
         return self.masked_flat_q(maps, enc.region).argmax(dim=1)
 
     # ---------------------------------------------------------- decisions
-    def decide(self, obs: PyTorchObs) -> list[Decision]:
-        """Coordinated decisions for a batch (one :class:`Decision` per sample)."""
+    def decide(self, obs: PyTorchObs, primitive: str | None = None) -> list[Decision]:
+        """Coordinated decisions for a batch (one :class:`Decision` per sample); ``primitive``
+        overrides the coordination's choice of primitive (e.g. Stage IV's final grasp)."""
         batch = _batch_size(obs)
         decisions = []
         for i in range(batch):
             single = {k: v[i : i + 1] for k, v in obs.items()}
-            decisions.append(self._decide_one(self.mpgnet.encode(single)))
+            decisions.append(self._decide_one(self.mpgnet.encode(single), primitive))
         return decisions
 
-    def _decide_one(self, enc: EncodedObs) -> Decision:
+    def _decide_one(self, enc: EncodedObs, primitive: str | None = None) -> Decision:
         allowed = self.action_primitives
         q_star = float(self.q_star)
         occluded = bool(enc.occluded[0]) if enc.occluded is not None else False
@@ -208,7 +209,11 @@ class MPGQNetwork(QNetwork):
                 maps[p] = self.mpgnet.maps_from(enc, (p,))[p][0]
             return maps[p]
 
-        if self.coordination == "max_q" or len(allowed) == 1:
+        if primitive is not None:
+            if primitive not in allowed:
+                raise ValueError(f"primitive {primitive!r} is not allowed here; allowed: {allowed}")
+            candidates = [primitive]
+        elif self.coordination == "max_q" or len(allowed) == 1:
             candidates = list(allowed)
         elif "move" in allowed and occluded:
             candidates = ["move"]
@@ -394,14 +399,14 @@ class MPGNetPolicy(DQNPolicy):
         self.q_net_target.coordination = coordination
 
     # ------------------------------------------------------- convenience
-    def decide(self, observation: Mapping[str, Any]) -> Decision:
+    def decide(self, observation: Mapping[str, Any], primitive: str | None = None) -> Decision:
         """The coordinated decision for one raw env observation, with the Q maps it used."""
         self.set_training_mode(False)
         obs_tensor, vectorized = self.obs_to_tensor(dict(observation))
         if vectorized and _batch_size(obs_tensor) != 1:
             raise ValueError("decide() takes one observation; use predict() for a batch")
         with torch.inference_mode():
-            return self.q_net.decide(obs_tensor)[0]
+            return self.q_net.decide(obs_tensor, primitive)[0]
 
     def grasp_scorer(self) -> "GraspScorer":
         """A ``callable(obs) -> float`` for the envs' ``grasp_scorer`` (uses the online grasp net)."""

@@ -126,3 +126,15 @@ def test_mpg_plot_draws_curves(tmp_path):
     assert plot_main([str(tmp_path), "--window", "2"]) == 0
     png = tmp_path / "curves.png"
     assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_stage4_grasps_after_five_pushes(tmp_path):
+    cfg = TrainConfig(env_id="MPG-Stage4-v0", steps=1, epsilon_start=0.0, epsilon_end=0.0, **TINY)
+    learner = Learner(cfg, tmp_path, log=lambda s: None)
+    obs = learner._reset_episode()
+    learner.counters.pushes_in_episode = 5
+    action, primitive, how, _ = learner.act(obs)
+    assert primitive == "grasp" and how == "greedy"
+    assert learner.env.unwrapped.action_space.decode(action).primitive == "grasp"
+    with pytest.raises(ValueError, match="not allowed"):
+        learner.policy.decide(obs, "move")
