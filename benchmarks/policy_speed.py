@@ -6,7 +6,11 @@ Measures, for the ``small`` and ``large`` variants:
   Stage-5-like observation in the worst case the workflow has: target not occluded and not
   graspable, so the mask trunk, the grasp net and the push net all run (16 rotations each,
   batched);
-- ``sequential_s``: the same work with the 16 rotations run one at a time (VPG's way);
+- ``sequential_s``: the same work with the 16 rotations run one at a time (VPG's way: the
+  observation normalised once, then per rotation resample, mask trunk, both branches);
+- ``speedup``: median over rounds of sequential / batched (the two run in turn each round);
+- ``conv_s`` / ``sequential_conv_s``: CPU time spent inside the trunks' convolutions per
+  decision on each path (torch profiler), to tell trunk compute from resampling and overhead;
 - ``train_step_s``: one training step, a batch of 4 on the grasp branch (chosen rotation only),
   Huber loss, backward, Adam step;
 
@@ -82,27 +86,54 @@ def stage5_stream(steps: int, seed: int = 0) -> tuple[list[tuple[dict, dict, int
         return [(scenes[i], scenes[i + 1], 0, 0.0, False) for i in range(steps)], "synthetic"
 
 
-def median_times(fns: list[Callable[[], Any]], repeats: int, warmup: int = 1) -> list[float]:
-    """Median wall time of each function, running them in turn ``repeats`` times."""
+def interleaved_times(fns: list[Callable[[], Any]], repeats: int, warmup: int = 1) -> list[list[float]]:
+    """Wall times of each function over ``repeats`` rounds, the functions run in turn each round.
+
+    The order alternates between rounds: whichever runs second finds the weights warm in the
+    CPU caches, which would otherwise favour one function throughout.
+    """
     for fn in fns:
         for _ in range(warmup):
             fn()
     times: list[list[float]] = [[] for _ in fns]
-    for _ in range(repeats):
-        for fn, bucket in zip(fns, times, strict=True):
+    for round_ in range(repeats):
+        order = list(range(len(fns)))
+        for i in order if round_ % 2 == 0 else order[::-1]:
             start = time.perf_counter()
+            fns[i]()
+            times[i].append(time.perf_counter() - start)
+    return times
+
+
+def median_times(fns: list[Callable[[], Any]], repeats: int, warmup: int = 1) -> list[float]:
+    """Median wall time of each function, running them in turn ``repeats`` times."""
+    return [statistics.median(t) for t in interleaved_times(fns, repeats, warmup)]
+
+
+def convolution_seconds(fn: Callable[[], Any], runs: int = 3) -> float:
+    """CPU seconds per call spent inside oneDNN convolutions (torch profiler, self time).
+
+    With 2 threads this is close to wall time; it shows how much of a path is trunk compute
+    and how much resampling and per-call overhead.
+    """
+    from torch.profiler import ProfilerActivity, profile
+
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        for _ in range(runs):
             fn()
-            bucket.append(time.perf_counter() - start)
-    return [statistics.median(t) for t in times]
+    total = sum(e.self_cpu_time_total for e in prof.key_averages() if "convolution" in e.key)
+    return total / runs / 1e6
 
 
 def sequential_decision(net: MPGNet, obs: dict[str, np.ndarray], q_star: float) -> tuple[str, int]:
-    """The workflow's worst case with one rotation per forward pass (mask features shared)."""
+    """The workflow's worst case with one rotation per forward pass, VPG's way: the observation
+    is normalised once, then each rotation is resampled and run through the mask trunk and both
+    branches on its own."""
     grasp, push = [], []
-    region = None
+    prepared = net.prepare(obs)
+    region = prepared.region
     for k in range(net.config.num_rotations):
-        enc = net.encode(obs, rotations=torch.tensor([k]))
-        region = enc.region
+        enc = net.encode(prepared, rotations=torch.tensor([k]))
         grasp.append(net.branch_q(enc, "grasp"))
         push.append(net.branch_q(enc, "push"))
     q_grasp = torch.stack(grasp, dim=1)
@@ -132,8 +163,12 @@ def bench_variant(variant: str, obs: dict[str, np.ndarray], repeats: int) -> dic
         with torch.inference_mode():
             sequential_decision(net, obs, float("inf"))
 
-    # Interleaved so a load spike from other processes hits both paths alike.
-    decision, seq = median_times([batched, sequential], repeats)
+    # Interleaved so a load spike from other processes hits both paths alike; the speed-up is
+    # the median of the per-round ratios, which a spike spanning one round cannot skew.
+    batched_t, seq_t = interleaved_times([batched, sequential], repeats)
+    decision, seq = statistics.median(batched_t), statistics.median(seq_t)
+    speedup = statistics.median(s / b for b, s in zip(batched_t, seq_t, strict=True))
+    conv_batched, conv_seq = convolution_seconds(batched), convolution_seconds(sequential)
 
     # One training step: batch of 4 on the grasp branch.
     batch = {k: torch.as_tensor(np.stack([obs[k]] * 4)) for k in obs}
@@ -150,7 +185,14 @@ def bench_variant(variant: str, obs: dict[str, np.ndarray], repeats: int) -> dic
 
     (train,) = median_times([train_step], max(3, repeats // 2))
     policy.set_training_mode(False)
-    return {"decision_s": decision, "sequential_s": seq, "train_step_s": train}
+    return {
+        "decision_s": decision,
+        "sequential_s": seq,
+        "speedup": speedup,
+        "conv_s": conv_batched,
+        "sequential_conv_s": conv_seq,
+        "train_step_s": train,
+    }
 
 
 def replay_bytes(stream: list[tuple[dict, dict, int, float, bool]]) -> tuple[float, float]:
@@ -194,12 +236,16 @@ def main() -> None:
     ours, theirs = replay_bytes(stream)
 
     print(f"MPGNet policy speed, torch {torch.__version__}, 2 threads, observations: {source}")
-    print(f"{'variant':<8} {'decision (s)':>13} {'sequential (s)':>15} {'speed-up':>9} {'train step (s)':>15}")
+    print(
+        f"{'variant':<8} {'decision (s)':>13} {'sequential (s)':>15} {'speed-up':>9} "
+        f"{'conv batched/seq (s)':>21} {'train step (s)':>15}"
+    )
     for v, r in results.items():
         print(
-            f"{v:<8} {r['decision_s']:>13.3f} {r['sequential_s']:>15.3f} "
-            f"{r['sequential_s'] / r['decision_s']:>8.1f}x {r['train_step_s']:>15.3f}"
+            f"{v:<8} {r['decision_s']:>13.3f} {r['sequential_s']:>15.3f} {r['speedup']:>8.2f}x "
+            f"{r['conv_s']:>10.3f}/{r['sequential_conv_s']:<10.3f} {r['train_step_s']:>15.3f}"
         )
+    print("(speed-up: median of per-round ratios; conv: CPU time inside convolutions per decision)")
     print(
         f"1-min load average {load_before:.2f} before, {os.getloadavg()[0]:.2f} after "
         "(above ~0.5 other processes share the 2 cores and the times are inflated)"
@@ -208,6 +254,9 @@ def main() -> None:
     summary = {
         "decision_s": {v: round(r["decision_s"], 4) for v, r in results.items()},
         "sequential_s": {v: round(r["sequential_s"], 4) for v, r in results.items()},
+        "speedup": {v: round(r["speedup"], 2) for v, r in results.items()},
+        "conv_s": {v: round(r["conv_s"], 4) for v, r in results.items()},
+        "sequential_conv_s": {v: round(r["sequential_conv_s"], 4) for v, r in results.items()},
         "train_step_s": {v: round(r["train_step_s"], 4) for v, r in results.items()},
         "replay_bytes": round(ours, 1),
         "sb3_replay_bytes": round(theirs, 1),

@@ -14,8 +14,9 @@ into the heightmap frame. Consequence used by the tests: rotating the scene by +
 maps the Q map of rotation ``k - 4`` to rotation ``k`` (rotated by the same 90 degrees).
 
 Padding: before rotating, the 224 x 224 heightmaps are padded to ``ceil(224 * sqrt(2))``
-rounded up to a multiple of 32 (= 320) so no corner is cut off. Colour is padded with the
-ImageNet mean (0 after normalisation), depth with the table height (0 m), the mask with 0.
+rounded up to a multiple of 32 (= 320) so no corner is cut off. Every plane is padded with 0
+after normalisation: the ImageNet mean colour, depth ``depth_mean`` (1 cm, near the table),
+mask 0. Colour, depth and mask are stacked into one 5-channel tensor and rotated together.
 
 Upsampling and un-rotation are one ``grid_sample`` from the coarse Q map: for every output
 pixel we compute where it lies in the rotated, padded frame and interpolate the coarse map
@@ -56,10 +57,16 @@ ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
 # the whole trunk.
 SMALL_TRUNK_DEPTH: int | None = 4
 
-# Inference micro-batch of the large trunks (see MPGNetConfig.trunk_batch).
-LARGE_TRUNK_BATCH = 4
+# Settings of how the network runs, not of what it computes: a checkpoint's values of these
+# are not imposed on the machine that loads it (see MPGNetConfig.from_checkpoint).
+EXECUTION_FIELDS: tuple[str, ...] = ("channels_last", "trunk_batch")
 
 CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"
+
+# The input planes, stacked on channels and rotated together; each trunk's stem reads its own
+# channels from the stack (mobilenet.window_weight), so no plane is copied out of it.
+PLANES: dict[str, int] = {"color": 0, "depth": 3, "mask": 4}
+NUM_PLANE_CHANNELS = 5
 
 
 @dataclass
@@ -83,12 +90,13 @@ class MPGNetConfig:
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
             either way).
-        trunk_batch: most rotated images per trunk call at inference; ``None`` = all at
-            once. The rotations still form one batch (one rotation, one BN statistics set in
-            training); this only splits the inference convolutions so their activations stay
-            in the CPU caches. :meth:`large` uses 4: a 16-image batch of MobileNetV3-large at
-            320 x 320 has ~100 MB per expanded layer, well past a 32 MB L3, and 4-image
-            micro-batches run ~1.7x faster on 2 cores; small's activations fit, so it uses 16.
+        trunk_batch: most rotated images per trunk convolution at inference; ``None`` = all
+            16 at once. The rotations still form one batch (resampled together, one set of BN
+            statistics in training); this only splits the inference convolutions so their
+            activations stay in the CPU caches: a 16-image batch at 320 x 320 has ~100 MB per
+            expanded layer of MobileNetV3-large (26 MB for the small stem), past a 32 MB L3,
+            and 4-image micro-batches were the fastest on 2 cores for both variants
+            (``benchmarks/policy_speed.py``). Not part of the architecture.
     """
 
     variant: str = "large"
@@ -105,7 +113,7 @@ class MPGNetConfig:
     rough_mask: bool = True
     bn_momentum: float = DEFAULT_BN_MOMENTUM
     channels_last: bool = True
-    trunk_batch: int | None = None
+    trunk_batch: int | None = 4
 
     def __post_init__(self) -> None:
         self.primitives = check_primitives(self.primitives)
@@ -136,7 +144,6 @@ class MPGNetConfig:
     @classmethod
     def large(cls, **overrides: Any) -> "MPGNetConfig":
         """The paper's variant: full MobileNetV3-large trunks."""
-        overrides.setdefault("trunk_batch", LARGE_TRUNK_BATCH)
         return cls(variant="large", **overrides)
 
     @classmethod
@@ -157,6 +164,15 @@ class MPGNetConfig:
         """JSON-serialisable form (tuples become lists)."""
         data = asdict(self)
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
+
+    @classmethod
+    def from_checkpoint(cls, data: Mapping[str, Any], **overrides: Any) -> "MPGNetConfig":
+        """A checkpoint's architecture (its header's ``config``) with this variant's execution
+        settings (:data:`EXECUTION_FIELDS`), then ``overrides``."""
+        if "variant" not in data:
+            raise ValueError("checkpoint config has no 'variant'")
+        architecture = {k: v for k, v in data.items() if k not in EXECUTION_FIELDS}
+        return cls.from_dict({**cls.for_variant(data["variant"]).to_dict(), **architecture, **overrides})
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "MPGNetConfig":
@@ -203,11 +219,22 @@ class PrimitiveNet(nn.Module):
         channels = self.color_trunk.out_channels + self.depth_trunk.out_channels + mask_channels
         self.head = QHead(channels, config.head_channels)
 
-    def forward(self, color: Tensor, depth: Tensor, mask_features: Tensor) -> Tensor:
-        """Coarse Q map ``(N, 1, h, w)`` from rotated, padded inputs and mask-trunk features."""
-        color_f = run_in_batches(self.color_trunk, color, None if self.training else self.trunk_batch)
-        depth_f = run_in_batches(self.depth_trunk, depth, None if self.training else self.trunk_batch)
+    def forward(self, planes: Tensor, mask_features: Tensor) -> Tensor:
+        """Coarse Q map ``(N, 1, h, w)`` from rotated, padded input planes (:data:`PLANES`) and
+        mask-trunk features."""
+        size = None if self.training else self.trunk_batch
+        color_f = run_in_batches(self.color_trunk, planes, size, first_channel=PLANES["color"])
+        depth_f = run_in_batches(self.depth_trunk, planes, size, first_channel=PLANES["depth"])
         return self.head(torch.cat([color_f, depth_f, mask_features], dim=1))
+
+
+@dataclass
+class PreparedObs:
+    """A batch normalised and stacked into input planes, before rotation (:meth:`MPGNet.prepare`)."""
+
+    planes: Tensor  # (B, 5, H, W): colour, depth, mask as in PLANES
+    region: Tensor  # (B, H, W) bool: the rough target mask (bounding rectangle)
+    occluded: Tensor | None = field(default=None)  # (B,) bool when the observation had it
 
 
 @dataclass
@@ -218,8 +245,7 @@ class EncodedObs:
     without re-running the mask trunk.
     """
 
-    color: Tensor  # (N, 3, S, S), N = B * R rotated copies
-    depth: Tensor  # (N, 1, S, S)
+    planes: Tensor  # (N, 5, S, S), N = B * R rotated copies; channels as in PLANES
     mask_features: Tensor  # (N, C, h, w)
     rotations: Tensor  # (N,) rotation index of each copy
     batch_size: int
@@ -342,13 +368,40 @@ class MPGNet(nn.Module):
             ).to(device=device, dtype=dtype)
         return self._grid_cache[key]
 
-    def _rotate(self, x: Tensor, sample_idx: Tensor, rotations: Tensor) -> Tensor:
-        """Pad ``x (B, C, H, W)`` and resample copy ``n`` of sample ``sample_idx[n]`` at ``rotations[n]``."""
+    def _padded(self, x: Tensor) -> Tensor:
         pad = (self.config.padded_size - self.config.heightmap_size) // 2
-        padded = F.pad(x, (pad, pad, pad, pad))
+        return F.pad(x, (pad, pad, pad, pad))
+
+    def _memory_format(self) -> torch.memory_format:
+        return torch.channels_last if self.config.channels_last else torch.contiguous_format
+
+    def _rotate(self, x: Tensor, rotations: Tensor) -> Tensor:
+        """Pad ``x (B, C, H, W)`` and resample sample ``b`` at rotation ``rotations[b]``."""
         grid = self._grid("in", 0, x.device, x.dtype)[rotations]
-        out = F.grid_sample(padded[sample_idx], grid, mode="bilinear", padding_mode="zeros", align_corners=True)
-        return out.contiguous(memory_format=torch.channels_last) if self.config.channels_last else out
+        out = F.grid_sample(self._padded(x), grid, mode="bilinear", padding_mode="zeros", align_corners=True)
+        return out.contiguous(memory_format=self._memory_format())
+
+    def _rotate_all(self, x: Tensor) -> Tensor:
+        """Pad ``x (B, C, H, W)`` and resample every sample at every rotation: ``(B * R, C, S, S)``.
+
+        Rotation ``k + R/4`` is rotation ``k`` turned by exactly 90 degrees about the padded
+        frame's centre, which maps pixel centres onto pixel centres; so only the first quarter
+        is interpolated and the rest are exact ``rot90`` copies (4x less resampling, identical
+        values).
+        """
+        r, s = self.config.num_rotations, self.config.padded_size
+        b, c = x.shape[:2]
+        grids = self._grid("in", 0, x.device, x.dtype)
+        quarter = r // 4 if r % 4 == 0 else r
+        out = torch.empty((b * r, c, s, s), device=x.device, dtype=x.dtype, memory_format=self._memory_format())
+        blocks = out.view(b, r // quarter, quarter, c, s, s)
+        padded = self._padded(x)
+        for i in range(b):
+            source = padded[i : i + 1].expand(quarter, -1, -1, -1)
+            base = F.grid_sample(source, grids[:quarter], mode="bilinear", padding_mode="zeros", align_corners=True)
+            for turns in range(r // quarter):
+                blocks[i, turns].copy_(torch.rot90(base, turns, dims=(2, 3)) if turns else base)
+        return out
 
     def _unrotate(self, coarse: Tensor, rotations: Tensor) -> Tensor:
         """Upsample + un-rotate + crop coarse maps ``(N, 1, h, w)`` to ``(N, H, W)`` in one resampling."""
@@ -380,34 +433,40 @@ class MPGNet(nn.Module):
         return span(rows, ar_h, h)[:, :, None] & span(cols, ar_w, w)[:, None, :]
 
     # ---------------------------------------------------------------- forward
-    def encode(self, obs: Mapping[str, Any], rotations: Tensor | None = None) -> EncodedObs:
-        """Normalise, pad and rotate a batch and run the shared mask trunk once.
+    def prepare(self, obs: Mapping[str, Any]) -> PreparedObs:
+        """Normalise a raw batch and stack it into input planes (done once per observation)."""
+        color, depth, mask, binary, occluded = self.normalize(obs)
+        return PreparedObs(torch.cat([color, depth, mask], dim=1), self.target_region(binary), occluded)
+
+    def encode(self, obs: Mapping[str, Any] | PreparedObs, rotations: Tensor | None = None) -> EncodedObs:
+        """Pad and rotate a batch and run the shared mask trunk once.
 
         Args:
-            obs: raw observation dict (see class docstring).
+            obs: raw observation dict (see class docstring), or a :class:`PreparedObs` to rotate
+                one observation several times without normalising it again.
             rotations: ``None`` for all ``num_rotations`` per sample (sample-major order), or one
                 rotation index per sample ``(B,)`` (the training path: only the chosen rotation).
         """
-        color, depth, mask, binary, occluded = self.normalize(obs)
-        b = color.shape[0]
+        prep = obs if isinstance(obs, PreparedObs) else self.prepare(obs)
+        b = prep.planes.shape[0]
         r = self.config.num_rotations
+        device = prep.planes.device
         if rotations is None:
-            sample_idx = torch.arange(b, device=color.device).repeat_interleave(r)
-            rot = torch.arange(r, device=color.device).repeat(b)
+            rot = torch.arange(r, device=device).repeat(b)
+            planes = self._rotate_all(prep.planes)
         else:
-            rot = torch.as_tensor(rotations, device=color.device).long().reshape(-1)
+            rot = torch.as_tensor(rotations, device=device).long().reshape(-1)
             if rot.numel() != b or (rot < 0).any() or (rot >= r).any():
                 raise ValueError(f"rotations must be {b} indices in 0..{r - 1}, got {rotations}")
-            sample_idx = torch.arange(b, device=color.device)
-        masks = self._rotate(mask, sample_idx, rot)
+            planes = self._rotate(prep.planes, rot)
+        size = None if self.training else self.config.trunk_batch
         return EncodedObs(
-            color=self._rotate(color, sample_idx, rot),
-            depth=self._rotate(depth, sample_idx, rot),
-            mask_features=run_in_batches(self.mask_trunk, masks, None if self.training else self.config.trunk_batch),
+            planes=planes,
+            mask_features=run_in_batches(self.mask_trunk, planes, size, first_channel=PLANES["mask"]),
             rotations=rot,
             batch_size=b,
-            region=self.target_region(binary),
-            occluded=occluded,
+            region=prep.region,
+            occluded=prep.occluded,
         )
 
     def branch_q(self, enc: EncodedObs, primitive: str, subset: Tensor | None = None) -> Tensor:
@@ -417,10 +476,10 @@ class MPGNet(nn.Module):
         """
         if primitive not in self.branches:
             raise ValueError(f"this MPGNet has no {primitive!r} branch; it has {self.primitives}")
-        color, depth, feats, rot = enc.color, enc.depth, enc.mask_features, enc.rotations
+        planes, feats, rot = enc.planes, enc.mask_features, enc.rotations
         if subset is not None:
-            color, depth, feats, rot = color[subset], depth[subset], feats[subset], rot[subset]
-        q = self._unrotate(self.branches[primitive](color, depth, feats), rot)
+            planes, feats, rot = planes[subset], feats[subset], rot[subset]
+        q = self._unrotate(self.branches[primitive](planes, feats), rot)
         if self.config.rough_mask and primitive in ROUGH_MASKED:
             q = q * enc.region[_sample_of(enc, subset)]
         return q
@@ -458,7 +517,7 @@ class MPGNet(nn.Module):
                 f"action_primitive must be {enc.batch_size} indices into {tuple(primitives)}, got {prim.tolist()}"
             )
         size = self.config.heightmap_size
-        out = enc.color.new_zeros((enc.batch_size, size, size))
+        out = enc.planes.new_zeros((enc.batch_size, size, size))
         for i, name in enumerate(primitives):
             subset = torch.nonzero(prim == i).flatten()
             if subset.numel():
@@ -488,11 +547,11 @@ def flat_q(maps: Mapping[str, Tensor], primitives: Sequence[str]) -> Tensor:
     return torch.stack([maps[p] for p in primitives], dim=1).flatten(1)
 
 
-def run_in_batches(module: nn.Module, x: Tensor, size: int | None) -> Tensor:
-    """``module(x)`` computed ``size`` samples at a time (all at once for ``None``)."""
+def run_in_batches(module: nn.Module, x: Tensor, size: int | None, **kwargs: Any) -> Tensor:
+    """``module(x, **kwargs)`` computed ``size`` samples at a time (all at once for ``None``)."""
     if size is None or x.shape[0] <= size:
-        return module(x)
-    return torch.cat([module(part) for part in x.split(size)], dim=0)
+        return module(x, **kwargs)
+    return torch.cat([module(part, **kwargs) for part in x.split(size)], dim=0)
 
 
 def recompute_batch_norm_statistics(net: nn.Module, forward: Any, *args: Any) -> None:
@@ -679,7 +738,7 @@ def load_mpgnet(path: str | Path, primitives: Sequence[str] | None = None) -> tu
         primitives: branches to keep (default: all the file has).
     """
     header = read_checkpoint_header(path)
-    cfg = MPGNetConfig.from_dict(header["config"])
+    cfg = MPGNetConfig.from_checkpoint(header["config"])
     if primitives is not None:
         cfg.primitives = check_primitives(primitives)
     net = MPGNet(cfg)

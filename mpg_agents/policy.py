@@ -441,11 +441,9 @@ class MPGNetPolicy(DQNPolicy):
     ) -> "MPGNetPolicy":
         """A policy built with the checkpoint's own configuration (variant, head, trunk depth)."""
         header = read_checkpoint_header(path)
-        cfg = dict(header["config"])
-        variant = cfg.pop("variant")
-        cfg.pop("primitives", None)
+        cfg = MPGNetConfig.from_checkpoint(header["config"])
         kwargs.setdefault("branches", None)
-        policy = cls(observation_space, action_space, lambda _: 1e-4, variant=variant, net_config=cfg, **kwargs)
+        policy = cls(observation_space, action_space, lambda _: 1e-4, variant=cfg.variant, net_config=cfg, **kwargs)
         policy.load_weights(path, strict_branches=True)
         return policy
 

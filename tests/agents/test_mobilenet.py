@@ -8,7 +8,14 @@ import pytest
 import torch
 from safetensors.torch import save_file
 
-from mpg_agents.mobilenet import MobileNetV3Features, full_depth, load_torchvision_features, make_divisible
+from torch import nn
+
+from mpg_agents.mobilenet import (
+    MobileNetV3Features,
+    full_depth,
+    load_torchvision_features,
+    make_divisible,
+)
 
 # Known entries of torchvision's mobilenet_v3_{large,small}().features state dicts.
 LARGE_KEYS = {
@@ -57,6 +64,85 @@ def test_forward_shapes_and_cut_trunk():
         MobileNetV3Features("small", depth=full_depth("small") + 1)
     with pytest.raises(ValueError, match="variant"):
         MobileNetV3Features("medium")
+
+
+def reference_eval(trunk: MobileNetV3Features, x: torch.Tensor) -> torch.Tensor:
+    """``trunk`` in eval mode computed as torchvision does (conv, then BN on running
+    statistics), by an independent copy, so no folded weights are shared."""
+    ref = MobileNetV3Features(trunk.variant, trunk.in_channels, trunk.depth)
+    ref.load_state_dict(trunk.state_dict())
+    ref.train()  # unfolded conv -> BN -> activation ...
+    for module in ref.modules():
+        if isinstance(module, nn.BatchNorm2d):
+            module.eval()  # ... with BN on its running statistics
+    return ref(x)
+
+
+def train_a_little(trunk: MobileNetV3Features) -> None:
+    """Move weights and BN statistics away from their initial values."""
+    opt = torch.optim.SGD(trunk.parameters(), lr=0.1)
+    for module in trunk.modules():
+        if isinstance(module, nn.BatchNorm2d):
+            module.momentum = None  # cumulative averages: realistic statistics after two passes
+    trunk.train()
+    for _ in range(2):
+        opt.zero_grad()
+        trunk(torch.randn(4, trunk.in_channels, 32, 32)).square().mean().backward()
+        opt.step()
+    trunk.eval()
+
+
+def test_stem_reads_a_channel_window_of_a_stacked_input():
+    """A depth trunk reading plane 3 of a 5-plane stack equals it on that plane alone."""
+    trunk = MobileNetV3Features("small", in_channels=1, depth=4)
+    train_a_little(trunk)
+    stack = torch.randn(2, 5, 48, 48)
+    with torch.no_grad():
+        alone = trunk(stack[:, 3:4])
+        torch.testing.assert_close(trunk(stack, first_channel=3), alone, rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(alone, reference_eval(trunk, stack[:, 3:4]), rtol=1e-4, atol=1e-5)
+    trunk.train()  # training path (BN on batch statistics): the same equality
+    torch.testing.assert_close(trunk(stack, first_channel=3), trunk(stack[:, 3:4]), rtol=1e-4, atol=1e-5)
+    for bad in (-1, 5):
+        with pytest.raises(ValueError, match="channels"):
+            trunk(stack, first_channel=bad)
+
+
+def test_folded_batch_norm_follows_every_change_of_the_weights():
+    """Eval mode folds BN into the convolutions: it equals conv -> BN on running statistics
+    after every kind of change (optimiser steps in eval mode as in SB3's polyak update of a
+    target net, train-mode passes that only move BN statistics, load_state_dict)."""
+    trunk = MobileNetV3Features("small", in_channels=3, depth=4)
+    train_a_little(trunk)
+    x = torch.randn(2, 3, 48, 48)
+
+    def check(mode=torch.no_grad) -> None:
+        with mode():
+            expected = reference_eval(trunk, x)
+            scale = float(expected.abs().max())
+            assert scale > 1e-2  # activations of a realistic size, so a stale fold would show
+            torch.testing.assert_close(trunk(x), expected, rtol=1e-4, atol=1e-5 * scale)
+
+    check()
+    check(torch.inference_mode)
+    with torch.no_grad():
+        for p in trunk.parameters():
+            p.mul_(1.5).add_(0.05)  # in place, still in eval mode
+    check()
+    train_a_little(trunk)
+    check()
+    trunk.train()
+    with torch.no_grad():
+        trunk(3.0 * torch.randn(4, 3, 48, 48))  # new BN statistics only, no weight update
+    trunk.eval()
+    check()
+    other = MobileNetV3Features("small", in_channels=3, depth=4)
+    train_a_little(other)
+    trunk.load_state_dict(other.state_dict())
+    check()
+    # With autograd on, eval-mode gradients reach the convolution weights through the fold.
+    trunk(x).sum().backward()
+    assert trunk.features[0][0].weight.grad is not None and trunk.features[0][0].weight.grad.abs().sum() > 0
 
 
 def test_make_divisible():

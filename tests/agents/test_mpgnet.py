@@ -9,7 +9,15 @@ import pytest
 import torch
 from torch.nn import functional as F
 
-from mpg_agents.mpgnet import MPGNet, MPGNetConfig, load_mpgnet, load_mpgnet_weights, rotation_grids, save_mpgnet
+from mpg_agents.mpgnet import (
+    PLANES,
+    MPGNet,
+    MPGNetConfig,
+    load_mpgnet,
+    load_mpgnet_weights,
+    rotation_grids,
+    save_mpgnet,
+)
 from mpg_agents.policy import MPGQNetwork
 from mpg_envs.actions import PixelActionSpace, encode_action
 
@@ -53,6 +61,36 @@ def test_output_shapes_for_every_env(stage, primitives, scene):
     assert flat.shape == (1, len(primitives) * 16 * 224 * 224)
     p, k, r, c = primitives[-1], 5, 100, 37
     assert torch.allclose(flat[0, encode_action(primitives, p, k, r, c)], maps[p][0, k, r, c], atol=1e-5)
+
+
+def test_all_rotation_encoding_equals_one_rotation_at_a_time(small_net, rng):
+    """The 16-rotation batch resamples a quarter of the rotations and turns them by exact 90
+    degrees: every rotated plane and every mask feature equals the one-rotation path's."""
+    batch = [random_scene(rng, occluded=False) for _ in range(2)]
+    obs = {k: np.stack([b[k] for b in batch]) for k in batch[0]}
+    with torch.inference_mode():
+        prepared = small_net.prepare(obs)
+        full = small_net.encode(prepared)
+        assert full.planes.shape == (32, 5, 320, 320)
+        assert full.rotations.tolist() == list(range(16)) * 2
+        for b in range(2):
+            for k in range(16):
+                single = {key: v[b : b + 1] for key, v in obs.items()}
+                one = small_net.encode(single, rotations=torch.tensor([k]))
+                torch.testing.assert_close(full.planes[16 * b + k], one.planes[0], rtol=0, atol=1e-6)
+                torch.testing.assert_close(full.mask_features[16 * b + k], one.mask_features[0], rtol=1e-4, atol=1e-5)
+
+
+def test_checkpoint_architecture_loads_with_this_machines_execution_settings():
+    """channels_last and trunk_batch say how to run, not what to compute: a file's values of
+    them do not override the variant's defaults; its architecture fields do."""
+    saved = MPGNetConfig.small(trunk_batch=None, channels_last=False, head_channels=32).to_dict()
+    cfg = MPGNetConfig.from_checkpoint(saved)
+    assert (cfg.trunk_batch, cfg.channels_last) == (MPGNetConfig.small().trunk_batch, True)
+    assert (cfg.variant, cfg.head_channels, cfg.trunk_depth) == ("small", 32, MPGNetConfig.small().trunk_depth)
+    assert MPGNetConfig.from_checkpoint(saved, trunk_batch=2).trunk_batch == 2
+    with pytest.raises(ValueError, match="variant"):
+        MPGNetConfig.from_checkpoint({"head_channels": 32})
 
 
 def test_input_rotation_puts_action_direction_along_columns():
@@ -126,8 +164,7 @@ def test_loss_on_one_pixel_reaches_only_its_rotation(small_net, scene):
     """Full 16-rotation pass (eval BN): the gradient of Q[k, r, c] flows through rotation k only."""
     k, r, c = 5, 90, 120
     enc = small_net.encode(scene)
-    enc.color.requires_grad_(True)
-    enc.depth.requires_grad_(True)
+    enc.planes.requires_grad_(True)
     head_out = {}
     branch = small_net.branches["push"]
 
@@ -145,9 +182,11 @@ def test_loss_on_one_pixel_reaches_only_its_rotation(small_net, scene):
     per_rotation = coarse_grad.abs().flatten(1).sum(1)
     assert per_rotation[k] > 0
     assert torch.all(per_rotation[torch.arange(16) != k] == 0)
-    for inp in (enc.color, enc.depth):
-        g = inp.grad.abs().flatten(1).sum(1)
-        assert g[k] > 0 and torch.all(g[torch.arange(16) != k] == 0)
+    for name, channel in PLANES.items():
+        if name == "mask":
+            continue  # the mask trunk's features are shared; only colour and depth feed one branch
+        g = enc.planes.grad[:, channel].abs().flatten(1).sum(1)
+        assert g[k] > 0 and torch.all(g[torch.arange(16) != k] == 0), name
 
 
 def test_training_path_matches_full_pass_and_isolates_the_chosen_rotation(small_net, rng):
