@@ -64,9 +64,8 @@ EXECUTION_FIELDS: tuple[str, ...] = ("channels_last", "trunk_batch")
 CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"
 
 # The input planes, stacked on channels and rotated together; each trunk's stem reads its own
-# channels from the stack (mobilenet.window_weight), so no plane is copied out of it.
+# channels from the stack (mobilenet.window_weight), so no plane is copied out of it (5 channels).
 PLANES: dict[str, int] = {"color": 0, "depth": 3, "mask": 4}
-NUM_PLANE_CHANNELS = 5
 
 
 @dataclass
