@@ -285,12 +285,9 @@ class MobileNetV3Features(nn.Module):
         """Features of ``x (N, C, H, W)``; the stem reads ``in_channels`` planes of ``x`` from
         ``first_channel`` on (``C`` may be larger: e.g. a depth trunk reading plane 3 of a
         stacked colour/depth/mask input)."""
-        if x.dim() != 4 or not 0 <= first_channel <= x.shape[1] - self.in_channels:
-            raise ValueError(
-                f"input of shape {tuple(x.shape)} has no {self.in_channels} channels from channel {first_channel}; "
-                f"expected (N, C, H, W) with C >= first_channel + {self.in_channels}"
-            )
-        stem, *rest = self.features
+        if x.dim() != 4:
+            raise ValueError(f"input must be (N, C, H, W), got shape {tuple(x.shape)}")
+        stem, *rest = self.features  # the stem checks the channel window (window_weight)
         x = stem(x, first_channel)
         for layer in rest:
             x = layer(x)

@@ -74,8 +74,8 @@ def test_all_rotation_encoding_equals_one_rotation_at_a_time(small_net, rng):
         assert full.planes.shape == (32, 5, 320, 320)
         assert full.rotations.tolist() == list(range(16)) * 2
         for b in range(2):
+            single = small_net.prepare({key: v[b : b + 1] for key, v in obs.items()})
             for k in range(16):
-                single = {key: v[b : b + 1] for key, v in obs.items()}
                 one = small_net.encode(single, rotations=torch.tensor([k]))
                 torch.testing.assert_close(full.planes[16 * b + k], one.planes[0], rtol=0, atol=1e-6)
                 torch.testing.assert_close(full.mask_features[16 * b + k], one.mask_features[0], rtol=1e-4, atol=1e-5)
