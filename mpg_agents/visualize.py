@@ -25,12 +25,17 @@ def _as_numpy(x: Any) -> np.ndarray:
     return np.asarray(x)
 
 
+def _unbatched(arr: np.ndarray, ndim: int, what: str) -> np.ndarray:
+    """``arr`` without a leading batch of one (``ndim`` + 1 dimensions); a larger batch is an error."""
+    if arr.ndim == ndim + 1:
+        if arr.shape[0] != 1:
+            raise ValueError(f"save_qmap_png draws one observation; got {what} of shape {arr.shape}")
+        arr = arr[0]
+    return arr
+
+
 def _color_hwc(color: Any) -> np.ndarray:
-    img = _as_numpy(color)
-    if img.ndim == 4:
-        if img.shape[0] != 1:
-            raise ValueError(f"save_qmap_png draws one observation; got a colour batch of {img.shape[0]}")
-        img = img[0]
+    img = _unbatched(_as_numpy(color), 3, "a colour batch")
     if img.ndim == 3 and img.shape[0] == 3 and img.shape[-1] != 3:
         img = img.transpose(1, 2, 0)
     if img.ndim != 3 or img.shape[-1] != 3:
@@ -39,11 +44,7 @@ def _color_hwc(color: Any) -> np.ndarray:
 
 
 def _best_map(q: Any) -> np.ndarray:
-    arr = _as_numpy(q)
-    if arr.ndim == 4:
-        if arr.shape[0] != 1:
-            raise ValueError(f"Q maps must be for one observation, got shape {arr.shape}")
-        arr = arr[0]
+    arr = _unbatched(_as_numpy(q), 3, "Q maps for a batch")
     if arr.ndim != 3:
         raise ValueError(f"a primitive's Q maps must be (R, H, W), got shape {arr.shape}")
     return arr.max(axis=0)
