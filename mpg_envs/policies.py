@@ -11,12 +11,33 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
 
 import cv2
 import gymnasium as gym
 import numpy as np
 
 from mpg_envs.workspace import NUM_ROTATIONS, Workspace, world_to_pixel
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What every policy in the suite is: a name, a per-episode reset and ``act(obs) -> action``.
+
+    ``act`` returns a flat action index of the env's action space (see
+    :class:`mpg_envs.actions.MPGActionSpace`). Privileged policies (the oracle) may also read
+    the env they were built with; learned ones read ``obs`` alone.
+    """
+
+    name: str
+
+    def reset(self) -> None:
+        """Forget per-episode memory; called at the start of every episode."""
+        ...
+
+    def act(self, obs: Any) -> int:
+        """The flat action index to take for observation ``obs``."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -52,7 +73,9 @@ def angle_to_rotation(theta: float, symmetric: bool = True) -> int:
 
 
 class OraclePolicy:
-    """The scripted reference policy for any MPG env; ``act(env)`` or ``predict(obs)``."""
+    """The scripted reference policy for any MPG env (a :class:`Policy`); also SB3's ``predict``."""
+
+    name = "oracle"
 
     def __init__(self, env: gym.Env, config: OracleConfig = OracleConfig()):
         self.env = env
@@ -62,10 +85,15 @@ class OraclePolicy:
 
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style: ``(action, state)`` for the env's current state (``obs`` unused)."""
-        return self.act(), state
+        return self.act(obs), state
 
-    def act(self) -> int:
-        """The flat action index the oracle chooses now."""
+    def reset(self) -> None:
+        """Forget the failed actions remembered in the last episode."""
+        self._last = None
+        self._failed_rotations = set()
+
+    def act(self, obs: Any = None) -> int:
+        """The flat action index the oracle chooses now (it reads the env's state; ``obs`` is unused)."""
         env = self.env.unwrapped
         world, depth = env.world, env._obs["depth"]
         allowed = env.primitives
