@@ -1,0 +1,79 @@
+"""MuJoCo bodies for objects: an :class:`~mpg_envs.assets.ObjectAsset` as a free body of an ``MjSpec``."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import mujoco
+
+from mpg_envs.assets import ObjectAsset
+
+TORSIONAL_FRICTION = 0.005
+"""Torsional friction (used by condim 4 contacts)."""
+
+ROLLING_FRICTION = 0.0001
+"""Rolling friction (only used if a contact has condim 6)."""
+
+OBJECT_CONDIM = 4
+"""Contact dimensionality of object geoms: sliding plus torsional friction, so an object
+pinched by the pads does not spin about the pinch axis; rolling friction (6) is not needed."""
+
+OBJECT_GEOM_GROUP = 1
+"""Geom group of object geoms: the heightmap ray casts see groups 0 and 1 only."""
+
+
+def add_object_body(
+    spec: mujoco.MjSpec,
+    parent: mujoco.MjsBody,
+    asset: ObjectAsset,
+    name: str,
+    pos: Sequence[float] = (0.0, 0.0, 0.0),
+    quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+) -> mujoco.MjsBody:
+    """Add ``asset`` to ``spec`` as a free body named ``name``, child of ``parent``.
+
+    Creates one mesh asset per convex part, named ``f"{name}/part{i}"``; a body ``name`` at
+    ``pos``/``quat`` (relative to ``parent``) with a free joint ``f"{name}/joint"``; and one
+    mesh geom ``f"{name}/geom{i}"`` per part: group :data:`OBJECT_GEOM_GROUP`,
+    contype/conaffinity 1, condim :data:`OBJECT_CONDIM`, friction
+    ``(asset.friction, 0.005, 0.0001)``, the asset's rgba, and mass ``asset.mass`` split across
+    parts by volume. Meshes use MuJoCo's convex inertia (exact for convex parts, and robust
+    for thin ones), so the body's mass is exactly ``asset.mass`` and its centre of mass is the
+    body origin. Solver parameters are left at the model's defaults.
+
+    Raises:
+        ValueError: empty ``name``, or a mesh/body of that name already exists in ``spec``.
+    """
+    if not name:
+        raise ValueError("object body name must be non-empty")
+    if spec.body(name) is not None:
+        raise ValueError(f"the spec already has a body named {name!r}")
+    volumes = asset.part_volumes
+    masses = asset.mass * volumes / volumes.sum()
+    body = parent.add_body(name=name, pos=[float(x) for x in pos], quat=[float(x) for x in quat])
+    body.add_freejoint(name=f"{name}/joint")
+    for i, ((vertices, faces), part_mass) in enumerate(zip(asset.parts, masses)):
+        mesh_name = f"{name}/part{i}"
+        if spec.mesh(mesh_name) is not None:
+            raise ValueError(f"the spec already has a mesh named {mesh_name!r}")
+        mesh = spec.add_mesh(
+            name=mesh_name,
+            uservert=vertices.ravel().tolist(),
+            userface=faces.ravel().tolist(),
+        )
+        mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
+        body.add_geom(
+            name=f"{name}/geom{i}",
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=mesh_name,
+            group=OBJECT_GEOM_GROUP,
+            contype=1,
+            conaffinity=1,
+            condim=OBJECT_CONDIM,
+            friction=[asset.friction, TORSIONAL_FRICTION, ROLLING_FRICTION],
+            rgba=list(asset.rgba),
+            mass=float(part_mass),
+        )
+    return body
+
+
