@@ -50,6 +50,10 @@ class RandomBaseline:
         self.name = "random"
         self._space = gym.spaces.Discrete(int(env.action_space.n), seed=seed)
 
+    def seed(self, seed: int) -> None:
+        """Restart the action stream; evaluation calls it with each episode's seed."""
+        self._space.seed(seed)
+
     def act(self, obs: Mapping[str, np.ndarray]) -> int:
         return int(self._space.sample())
 
