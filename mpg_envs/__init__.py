@@ -5,7 +5,11 @@ Importing the package registers the six Gymnasium ids (``MPG-Stage1-v0`` ...
 imports it on demand.
 """
 
-import gymnasium as gym
+from mpg_envs.render import choose_gl_backend
+
+choose_gl_backend()  # before anything imports mujoco: EGL (or OSMesa) on headless Linux
+
+import gymnasium as gym  # noqa: E402
 
 from mpg_envs.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
 from mpg_envs.stages import STAGES, StageSpec

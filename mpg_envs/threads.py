@@ -1,0 +1,124 @@
+"""How many compute threads a process should use: the cores actually free, not all of them.
+
+Users run evaluations, vector envs and trainings side by side. A process that starts as many
+busy threads as the machine has cores, while other processes use them too, gets its threads
+descheduled in the middle of parallel regions; the others then wait (or spin) at the barrier
+and a decision costs several times its fair share (issue 12: 4x on 2 shared cores). Three
+measures keep the slowdown close to fair sharing:
+
+- :func:`choose_threads`: threads from the cores this process may use (its CPU affinity)
+  minus the 1-minute load, at least one; ``MPG_NUM_THREADS`` or an argument overrides it;
+- :func:`use_passive_openmp_wait`: OpenMP threads sleep when idle instead of spinning
+  (``OMP_WAIT_POLICY=PASSIVE``; read once, when torch loads OpenMP);
+- :func:`worker_init`: one thread in each worker process (vector envs, evaluation workers),
+  which get their parallelism from the number of processes.
+
+Nothing here imports torch: :func:`set_torch_threads` imports it when called.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from typing import Mapping
+
+THREADS_ENV = "MPG_NUM_THREADS"
+"""Environment variable that fixes the thread count (a positive integer)."""
+
+
+def choose_threads(cores: int, load: float, max_threads: int | None = None) -> int:
+    """Threads for ``cores`` usable cores while the machine's 1-minute load is ``load``.
+
+    The free cores are ``cores - load``, rounded to the nearest integer (half up); the result
+    is at least 1 and at most ``cores`` (and ``max_threads`` when given).
+
+    >>> choose_threads(2, 0.1), choose_threads(2, 1.2), choose_threads(2, 7.0), choose_threads(16, 3.0)
+    (2, 1, 1, 13)
+    """
+    if cores < 1:
+        raise ValueError(f"cores must be >= 1, got {cores!r}")
+    if not math.isfinite(load) or load < 0:
+        raise ValueError(f"load must be a finite number >= 0, got {load!r}")
+    if max_threads is not None and max_threads < 1:
+        raise ValueError(f"max_threads must be >= 1 or None, got {max_threads!r}")
+    free = math.floor(cores - load + 0.5)
+    upper = cores if max_threads is None else min(cores, max_threads)
+    return max(1, min(upper, free))
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity on Linux, else the CPU count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS, Windows
+        return os.cpu_count() or 1
+
+
+def load_average() -> float:
+    """The machine's 1-minute load average (0 where the platform has none)."""
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 0.0
+
+
+def requested_threads(environ: Mapping[str, str] | None = None) -> int | None:
+    """The thread count fixed by ``MPG_NUM_THREADS``, or ``None`` when it is unset or empty."""
+    value = (os.environ if environ is None else environ).get(THREADS_ENV, "").strip()
+    if not value:
+        return None
+    try:
+        n = int(value)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"{THREADS_ENV} must be a positive integer (or unset for automatic), got {value!r}")
+    return n
+
+
+def num_threads(requested: int | None = None) -> int:
+    """The thread count to use: ``requested``, else ``MPG_NUM_THREADS``, else the free cores."""
+    if requested is not None:
+        if isinstance(requested, bool) or not isinstance(requested, int) or requested < 1:
+            raise ValueError(f"num_threads must be a positive integer or None (automatic), got {requested!r}")
+        return requested
+    fixed = requested_threads()
+    if fixed is not None:
+        return fixed
+    return choose_threads(available_cores(), load_average())
+
+
+def set_torch_threads(requested: int | None = None) -> int:
+    """Set torch's intra-op threads to :func:`num_threads` (``requested``) and return the count."""
+    import torch
+
+    n = num_threads(requested)
+    if torch.get_num_threads() != n:
+        torch.set_num_threads(n)
+    return n
+
+
+def use_passive_openmp_wait() -> None:
+    """Make idle OpenMP threads sleep rather than spin, unless the user chose a policy.
+
+    OpenMP reads ``OMP_WAIT_POLICY`` when its runtime starts (when torch is imported), so this
+    must run before that; afterwards it changes nothing for this process (its children inherit
+    it).
+    """
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def worker_init(*_: object) -> None:
+    """One compute thread in this worker process (a vector env's or an evaluation worker).
+
+    Usable as ``initializer=`` of ``multiprocessing``/``concurrent.futures`` pools (it ignores
+    arguments). Sets ``OMP_NUM_THREADS=1`` and ``MPG_NUM_THREADS=1`` for anything started
+    later in the process, and torch's threads to 1 if torch is already imported.
+    """
+    os.environ["OMP_NUM_THREADS"] = "1"
+    os.environ[THREADS_ENV] = "1"
+    use_passive_openmp_wait()
+    torch = sys.modules.get("torch")
+    if torch is not None and torch.get_num_threads() != 1:
+        torch.set_num_threads(1)
