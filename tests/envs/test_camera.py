@@ -18,7 +18,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-import mpg_envs.camera as camera_module  # noqa: E402
+import mpg_envs.render as render_module  # noqa: E402
 from mpg_envs.camera import (  # noqa: E402
     CameraConfig,
     CameraHeightmapper,
@@ -227,7 +227,7 @@ def test_gl_failure_names_the_fix(monkeypatch):
         raise mujoco.FatalError("gladLoadGL error")
 
     monkeypatch.setattr(mujoco, "Renderer", no_gl)
-    monkeypatch.setattr(camera_module, "_gl_failure", None)  # as in a fresh process
+    monkeypatch.setattr(render_module, "_gl_failure", None)  # as in a fresh process
     with pytest.raises(RuntimeError) as info:
         CameraHeightmapper(model, CameraConfig())
     message = str(info.value)
