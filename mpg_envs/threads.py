@@ -7,7 +7,9 @@ and a decision costs several times its fair share (issue 12: 4x on 2 shared core
 measures keep the slowdown close to fair sharing:
 
 - :func:`choose_threads`: threads from the cores this process may use (its CPU affinity)
-  minus the 1-minute load, at least one; ``MPG_NUM_THREADS`` or an argument overrides it;
+  minus the load (:func:`load_average`), at least one; an argument, ``MPG_NUM_THREADS`` or
+  ``OMP_NUM_THREADS`` overrides it. Entry points (the CLIs, the demo) call
+  :func:`set_torch_threads` once at start;
 - :func:`use_passive_openmp_wait`: OpenMP threads sleep when idle instead of spinning
   (``OMP_WAIT_POLICY=PASSIVE``; read once, when torch loads OpenMP);
 - :func:`worker_init`: one thread in each worker process (vector envs, evaluation workers),
@@ -21,6 +23,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import time
 from typing import Mapping
 
 THREADS_ENV = "MPG_NUM_THREADS"
@@ -55,12 +58,32 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
+def runnable_now(samples: int = 3, interval_s: float = 0.005) -> float | None:
+    """Other threads runnable right now machine-wide (``/proc/loadavg``), the least of a few
+    samples so a momentary burst does not count; ``None`` where ``/proc`` is absent."""
+    least = None
+    for i in range(samples):
+        try:
+            with open("/proc/loadavg") as fh:
+                running = int(fh.read().split()[3].split("/")[0])
+        except (OSError, ValueError, IndexError):
+            return None
+        others = max(0, running - 1)  # this thread, reading, is one of them
+        least = others if least is None else min(least, others)
+        if i + 1 < samples:
+            time.sleep(interval_s)
+    return float(least)
+
+
 def load_average() -> float:
-    """The machine's 1-minute load average (0 where the platform has none)."""
+    """The load other work puts on the machine: the 1-minute load average, or the threads
+    runnable right now when more (the average lags a minute behind a new busy process)."""
     try:
-        return os.getloadavg()[0]
+        minute = os.getloadavg()[0]
     except (AttributeError, OSError):
-        return 0.0
+        minute = 0.0
+    now = runnable_now()
+    return minute if now is None else max(minute, now)
 
 
 def requested_threads(environ: Mapping[str, str] | None = None) -> int | None:
@@ -78,7 +101,8 @@ def requested_threads(environ: Mapping[str, str] | None = None) -> int | None:
 
 
 def num_threads(requested: int | None = None) -> int:
-    """The thread count to use: ``requested``, else ``MPG_NUM_THREADS``, else the free cores."""
+    """The thread count to use: ``requested``, else ``MPG_NUM_THREADS``, else an explicit
+    ``OMP_NUM_THREADS`` (a worker's or the user's), else the free cores (:func:`choose_threads`)."""
     if requested is not None:
         if isinstance(requested, bool) or not isinstance(requested, int) or requested < 1:
             raise ValueError(f"num_threads must be a positive integer or None (automatic), got {requested!r}")
@@ -86,6 +110,9 @@ def num_threads(requested: int | None = None) -> int:
     fixed = requested_threads()
     if fixed is not None:
         return fixed
+    omp = os.environ.get("OMP_NUM_THREADS", "").strip()
+    if omp.isdigit() and int(omp) >= 1:
+        return int(omp)
     return choose_threads(available_cores(), load_average())
 
 
