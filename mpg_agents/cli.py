@@ -145,35 +145,35 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--env", default="MPG-Occluded-v0")
     parser.add_argument("--num-objects", type=int)
     parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--json", help="write the metrics here (default: eval-<policy>-<env>-<n>.json)")
+    parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
+    parser.add_argument("--json", help="also write the metrics and every episode's record to this JSON file")
     parser.add_argument("--coordination", choices=("workflow", "max_q"), help="network policies: override the coordination")
-    parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--workers", type=int, default=1, help="worker processes on Ray (1: in this process); same results for any number")
+    parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
+    parser.add_argument("--quiet", action="store_true", help="no line per episode")
     args = parser.parse_args(argv)
     try:
-        import gymnasium as gym
-
-        from mpg_agents.baselines import BUILTIN, make_policy
-        from mpg_agents.evaluate import evaluate
+        from mpg_agents.baselines import BUILTIN
+        from mpg_agents.parallel import EvalJob, evaluate_parallel
 
         _check_env_id(args.env)
         if args.policy not in BUILTIN:
             _check_checkpoint(args.policy)
         if args.episodes < 1:
             raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
-        kwargs = {"num_objects": args.num_objects} if args.num_objects is not None else {}
-        env = gym.make(args.env, **kwargs)
-        extra = {"coordination": args.coordination} if args.coordination else {}
-        policy = make_policy(args.policy, env, seed=args.seed, **extra)
-        result = evaluate(policy, env, args.episodes, args.seed, progress=not args.quiet)
-        env.close()
+        if args.workers < 1:
+            raise UsageError(f"--workers must be >= 1, got {args.workers}")
+        extra = (("coordination", args.coordination),) if args.coordination else ()
+        job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)
+        on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
+        result = evaluate_parallel(job, args.workers, args.ray_address, on_record=on_record)
     except (UsageError, FileNotFoundError, ValueError) as exc:
         return _fail(exc)
     print(result.table())
-    name = Path(args.policy).stem if args.policy not in BUILTIN else args.policy
-    path = Path(args.json or f"eval-{name}-{args.env}-{result.num_objects}.json")
-    path.write_text(json.dumps(result.to_dict(), indent=1, sort_keys=True))
-    print(f"metrics written to {path}")
+    if args.json:
+        path = Path(args.json)
+        path.write_text(json.dumps(result.to_dict(), indent=1, sort_keys=True))
+        print(f"metrics written to {path.resolve()}")
     return 0
 
 
