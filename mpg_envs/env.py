@@ -61,7 +61,22 @@ def observation_space(workspace: Workspace = Workspace()) -> spaces.Dict:
 
 
 class MPGEnv(gym.Env):
-    """Target-oriented grasping in clutter with pixel-wise move/push/grasp actions."""
+    """Target-oriented grasping in clutter with pixel-wise move/push/grasp actions.
+
+    Public attributes (read-only for callers; the agents package relies on them):
+
+    Attributes:
+        stage: the :class:`~mpg_envs.stages.StageSpec` this env runs (its ``name``,
+            ``env_id``, ``primitives``, ``end_after_grasp``, ``mask_all_objects``, ...).
+        num_objects: objects dropped at every reset (the stage's default unless given).
+        primitives: the primitive names this env accepts, in action-code order.
+        max_motions: the motion cap; an episode is truncated when it is reached.
+        num_motions: motions taken so far in the current episode.
+        target: index of the target object in the world (``None`` in Stage 1, where every
+            object is a target).
+        world: the :class:`~mpg_envs.world.World` of the current episode (``None`` before
+            the first reset).
+    """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
 
@@ -77,10 +92,10 @@ class MPGEnv(gym.Env):
         config: EnvConfig = EnvConfig(),
         camera_config: Any = None,
     ):
-        self.spec_stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
-        if not isinstance(self.spec_stage, StageSpec):
+        self.stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
+        if not isinstance(self.stage, StageSpec):
             raise ValueError(f"unknown stage {stage!r}; valid: {sorted(STAGES)}")
-        stage_spec = self.spec_stage
+        stage_spec = self.stage
         self.num_objects = stage_spec.num_objects if num_objects is None else num_objects
         if not isinstance(self.num_objects, (int, np.integer)) or not stage_spec.min_objects <= self.num_objects <= 60:
             raise ValueError(f"num_objects must be an integer in {stage_spec.min_objects}..60 for {stage_spec.name}, got {num_objects!r}")
@@ -158,12 +173,12 @@ class MPGEnv(gym.Env):
         if score_before is not None:
             gain = self._grasp_score(obs) - score_before
         outcome = StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain)
-        reward = float(self.spec_stage.reward(outcome, self.config.reward))
+        reward = float(self.stage.reward(outcome, self.config.reward))
         objects_left = self._objects_left()
-        is_success = objects_left == 0 if self.spec_stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
-        terminated = is_success or target_out or (self.spec_stage.end_on_move_success and move_success)
+        is_success = objects_left == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
+        terminated = is_success or target_out or (self.stage.end_on_move_success and move_success)
         truncated = not terminated and (
-            self.num_motions >= self.max_motions or (self.spec_stage.end_after_grasp and primitive == "grasp")
+            self.num_motions >= self.max_motions or (self.stage.end_after_grasp and primitive == "grasp")
         )
         info = {
             "primitive": primitive,
@@ -239,7 +254,7 @@ class MPGEnv(gym.Env):
 
     def _generate_scene(self) -> None:
         rng = self.np_random
-        stage = self.spec_stage
+        stage = self.stage
         scene_fn = SCENES[stage.scene]
         for attempt in range(self.config.scene_tries):
             picks = rng.integers(len(self.object_set), size=self.num_objects)
@@ -267,14 +282,14 @@ class MPGEnv(gym.Env):
             hm = self._camera.heightmaps(world.data, self.np_random)
         else:
             hm = self._raycaster(world.data)
-        if self.spec_stage.mask_all_objects or self.target is None:
+        if self.stage.mask_all_objects or self.target is None:
             ids = [world.object_geom_ids[i] for i in world.active_objects()]
         else:
             ids = [world.object_geom_ids[self.target]] if world.active[self.target] else []
         geoms = np.concatenate(ids) if ids else np.zeros(0, dtype=int)
         mask = footprint_mask(ws, world.model, world.data, geoms) if geoms.size else np.zeros(ws.shape, np.uint8)
         occluded = False
-        if self.target is not None and not self.spec_stage.mask_all_objects and world.active[self.target]:
+        if self.target is not None and not self.stage.mask_all_objects and world.active[self.target]:
             occluded = is_occluded(hm.depth, mask, world.object_top(self.target), self.config.occlusion)
         return {
             "color": hm.color,
@@ -292,7 +307,7 @@ class MPGEnv(gym.Env):
         return self._score[1]
 
     def _target_grasped(self, result: PrimitiveResult) -> bool:
-        if self.spec_stage.mask_all_objects:
+        if self.stage.mask_all_objects:
             return bool(result.grasp_success)
         return bool(result.grasp_success and result.grasped_object == self.target)
 

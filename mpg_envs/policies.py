@@ -1,10 +1,18 @@
-"""Scripted reference policies.
+"""What a policy is, and the scripted reference policy.
 
-``OraclePolicy`` reads the simulator's state (object poses and shapes, which object is the
-target), never pixels alone. It proves the suite is solvable and is the upper baseline of
-evaluations: move the topmost object lying on the target; when the target is boxed in,
-push the neighbour that blocks the fingers away; otherwise grasp the target across its
-short axis.
+:class:`Policy` is the one interface every policy of the suite follows (the oracle here, the
+baselines and network policies of ``mpg_agents``): a name, ``reset()`` at each episode's
+start and ``act(obs) -> flat action``.
+
+:class:`OraclePolicy` reads the simulator's state (object poses and shapes, which object is
+the target, which object each heightmap pixel shows), never pixels alone. It proves the suite
+is solvable and is the upper baseline of evaluations. Each step it re-plans from the current
+state: move the objects lying on the target, topmost first; grasp the target across its
+short axis at an angle where both open fingers come down on free space; when no angle is
+free, push the neighbour that blocks the fingers away along the closing direction. It
+remembers every action it took with the heightmap it took it on and never repeats one whose
+surroundings did not change (:class:`ActionMemory`), so a failed action is never retried
+unchanged.
 """
 
 from __future__ import annotations
@@ -13,11 +21,22 @@ import math
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
-import cv2
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.workspace import NUM_ROTATIONS, Workspace, world_to_pixel
+from mpg_envs.grasp_geometry import (
+    GRASP_ROTATIONS,
+    angle_gap,
+    angle_to_rotation,
+    extent_along,
+    finger_region,
+    footprint_rect,
+    polygon_mask,
+    region_max,
+)
+from mpg_envs.workspace import NUM_ROTATIONS, world_to_pixel
+
+__all__ = ["ActionMemory", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect"]
 
 
 @runtime_checkable
@@ -25,7 +44,7 @@ class Policy(Protocol):
     """What every policy in the suite is: a name, a per-episode reset and ``act(obs) -> action``.
 
     ``act`` returns a flat action index of the env's action space (see
-    :class:`mpg_envs.actions.MPGActionSpace`). Privileged policies (the oracle) may also read
+    :class:`mpg_envs.actions.PixelActionSpace`). Privileged policies (the oracle) may also read
     the env they were built with; learned ones read ``obs`` alone.
     """
 
@@ -42,34 +61,76 @@ class Policy(Protocol):
 
 @dataclass(frozen=True)
 class OracleConfig:
-    """Geometry the oracle uses to judge grasps (metres)."""
+    """Geometry the oracle plans with (metres); the finger sizes are the 2F-85's."""
 
     max_grasp_width: float = 0.075  # wider than this across the fingers: not graspable
-    finger_thickness: float = 0.025  # room each finger needs beside the object
-    finger_width: float = 0.024  # pad width, along the jaw
-    finger_margin: float = 0.006  # gap between the object's side and the finger
-    finger_clearance: float = 0.01  # a finger spot is free if nothing there is higher than the grasp height + this
+    finger_open_reach: float = 0.052  # an open finger's outer face, from the grasp centre
+    finger_half_width: float = 0.013  # half a pad's width across the jaw, with a margin
+    finger_margin: float = 0.004  # the swept strip starts this far off the object's side
+    pad_below_tcp: float = 0.005  # the pads' lower edge lies this far below the TCP
+    finger_clearance: float = 0.004  # a strip is free if nothing in it rises above the pads' lower edge + this
+    grasp_tolerance: float = 0.02  # a grasp this little blocked is tried before any push (the pads push small things aside)
     push_start_gap: float = 0.012  # a push starts this far outside the target's edge
+    occluder_tolerance: float = 0.01  # as the env's occlusion test: higher than the target's top by this
+    repeat_pixels: int = 4  # an action this close to a tried one (same primitive and angle) ...
+    repeat_window: int = 30  # ... on a heightmap unchanged within this many pixels around it ...
+    repeat_height_change: float = 0.005  # ... (no pixel moved by more than this) repeats it
 
 
-def footprint_rect(points_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Minimum-area rectangle of 2-D points: centre, (long, short) sizes, short-axis angle.
+class ActionMemory:
+    """The actions taken in an episode, each with the depth heightmap it was taken on.
 
-    The angle (radians, in [0, pi)) is the direction of the rectangle's short side, i.e.
-    the direction the fingers should close along.
+    An action *repeats* a remembered one when it has the same primitive and angle (grasp and
+    move angles modulo 180 degrees), its pixel lies within ``repeat_pixels`` of it, and the
+    heightmap around that pixel has not changed since: doing it again would meet the same
+    scene that made it fail.
     """
-    (cx, cy), (w, h), angle = cv2.minAreaRect(points_xy.astype(np.float32))
-    a = math.radians(angle)
-    # OpenCV's width runs along ``angle``; the short side is the one to close across.
-    short_dir = a if w <= h else a + math.pi / 2
-    return np.array([cx, cy]), np.array([max(w, h), min(w, h)]), short_dir % math.pi
+
+    def __init__(self, config: OracleConfig = OracleConfig()):
+        self.config = config
+        self._tried: list[tuple[str, int, int, int, np.ndarray]] = []
+
+    def __len__(self) -> int:
+        return len(self._tried)
+
+    def clear(self) -> None:
+        self._tried = []
+
+    def record(self, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray) -> None:
+        self._tried.append((primitive, self._angle(primitive, rotation), int(row), int(col), np.array(depth, copy=True)))
+
+    def repeats(self, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray) -> bool:
+        c = self.config
+        angle = self._angle(primitive, rotation)
+        for p, k, r, col0, before in self._tried:
+            if p != primitive or k != angle or abs(r - row) > c.repeat_pixels or abs(col0 - col) > c.repeat_pixels:
+                continue
+            w = c.repeat_window
+            window = (slice(max(0, row - w), row + w + 1), slice(max(0, col - w), col + w + 1))
+            if float(np.abs(depth[window] - before[window]).max(initial=0.0)) <= c.repeat_height_change:
+                return True
+        return False
+
+    @staticmethod
+    def _angle(primitive: str, rotation: int) -> int:
+        return int(rotation) % GRASP_ROTATIONS if primitive in ("grasp", "move") else int(rotation)
 
 
-def angle_to_rotation(theta: float, symmetric: bool = True) -> int:
-    """Nearest rotation index to ``theta`` (radians); grasp angles are taken mod 180 deg."""
-    step = 2 * math.pi / NUM_ROTATIONS
-    k = int(round(theta / step)) % NUM_ROTATIONS
-    return k % (NUM_ROTATIONS // 2) if symmetric else k
+@dataclass(frozen=True)
+class GraspPlan:
+    """One grasp of one object: angle index (0..7), pixel, and how badly the fingers collide."""
+
+    obj: int
+    rotation: int
+    row: int
+    col: int
+    blocked: float  # metres the highest thing under the open fingers rises above their lower edge (<= 0: free)
+    blockers: tuple[tuple[int, int], ...]  # (side, object) pairs in the fingers' way
+    angle_off: float  # radians from the object's short axis
+
+    @property
+    def free(self) -> bool:
+        return self.blocked <= 0.0
 
 
 class OraclePolicy:
@@ -80,193 +141,168 @@ class OraclePolicy:
     def __init__(self, env: gym.Env, config: OracleConfig = OracleConfig()):
         self.env = env
         self.config = config
-        self._last: tuple[int, str, int] | None = None  # (motion count, primitive, rotation) of our last action
-        self._failed_rotations: set[int] = set()  # target grasp angles that failed this episode
+        self.memory = ActionMemory(config)
+        self.last_plan: dict[str, Any] | None = None  # what the last act() decided and why
+        self._episode_motions = -1
+        self._ids_model = None
+        self._ids_caster = None
 
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
-        """SB3-style: ``(action, state)`` for the env's current state (``obs`` unused)."""
+        """SB3-style: ``(action, state)`` for the env's current state."""
         return self.act(obs), state
 
     def reset(self) -> None:
-        """Forget the failed actions remembered in the last episode."""
-        self._last = None
-        self._failed_rotations = set()
+        """Forget the actions tried in the last episode."""
+        self.memory.clear()
+        self.last_plan = None
 
     def act(self, obs: Any = None) -> int:
         """The flat action index the oracle chooses now (it reads the env's state; ``obs`` is unused)."""
         env = self.env.unwrapped
-        world, depth = env.world, env._obs["depth"]
-        allowed = env.primitives
-        target = env.target
-        self._remember_failures(env)
-        action = self._choose(env, world, depth, allowed, target)
-        primitive, rotation, _, _ = env.action_space.decode(action)
-        self._last = (env.num_motions, primitive, rotation)
-        return action
-
-    def _remember_failures(self, env) -> None:
-        if env.num_motions == 0:
-            self._failed_rotations = set()
-        elif self._last is not None and self._last[0] == env.num_motions - 1 and self._last[1] == "grasp":
-            # Our grasp did not end the episode, so it failed: try another angle next time.
-            self._failed_rotations.add(self._last[2] % (NUM_ROTATIONS // 2))
-
-    def _choose(self, env, world, depth, allowed, target) -> int:
-        if target is None or env.spec_stage.mask_all_objects or not world.active[target]:
-            return self._grasp_any(env, depth)
-        if "move" in allowed:
-            occluder = self._top_occluder(world, target)
-            if occluder is not None and ("grasp" not in allowed or env._obs["occluded"][0]):
-                return self._grasp_object(env, occluder, depth, primitive="move")
-        rotation, blocker = self._best_grasp(env, target, depth)
-        if blocker is None or "push" not in allowed or "grasp" not in allowed:
-            if "grasp" in allowed:
-                return self._encode(env, "grasp", rotation, *self._pixel(world, target))
-            # Stage III with nothing on top: move the nearest neighbour away from the target.
-            neighbour = blocker if blocker is not None else self._nearest(world, target)
-            return self._grasp_object(env, neighbour if neighbour is not None else target, depth, primitive="move")
-        return self._push_away(env, target, blocker)
-
-    # ------------------------------------------------------------ pieces
-    def _grasp_any(self, env, depth) -> int:
-        world = env.world
-        inside = set(world.active_objects().tolist()) - set(world.objects_outside_workspace().tolist())
-        candidates = sorted(inside, key=lambda i: -world.object_top(i))
-        if not candidates:
-            candidates = world.active_objects().tolist() or [0]
-        return self._grasp_object(env, candidates[0], depth, primitive="grasp")
-
-    def _grasp_object(self, env, i: int, depth, primitive: str) -> int:
-        world = env.world
-        _, _, short_dir = footprint_rect(world.object_vertices(i)[:, :2])
-        return self._encode(env, primitive, angle_to_rotation(short_dir), *self._pixel(world, i))
-
-    def _pixel(self, world, i: int) -> tuple[int, int]:
-        centre, _, _ = footprint_rect(world.object_vertices(i)[:, :2])
-        rows, cols = world.workspace.shape
-        r, c = world_to_pixel(world.workspace, centre[0], centre[1])
-        return int(np.clip(r, 0, rows - 1)), int(np.clip(c, 0, cols - 1))
-
-    def _top_occluder(self, world, target: int) -> int | None:
-        """The highest object overlapping the target's footprint and rising above it."""
-        hull = _hull_mm(world.object_vertices(target)[:, :2])
-        t_top = world.object_top(target)
-        best, best_top = None, t_top + 0.005
-        for j in world.active_objects():
-            if j == target:
-                continue
-            v = world.object_vertices(j)
-            top = float(v[:, 2].max())
-            if top <= best_top:
-                continue
-            overlap, _ = cv2.intersectConvexConvex(hull, _hull_mm(v[:, :2]))
-            if overlap > 1.0:  # mm^2
-                best, best_top = j, top
-        return best
-
-    def _finger_spots(self, centre, width: float, theta: float) -> list[np.ndarray]:
-        c = self.config
-        d = np.array([math.cos(theta), math.sin(theta)])
-        offset = width / 2 + c.finger_margin + c.finger_thickness / 2
-        return [centre + s * offset * d for s in (-1.0, 1.0)]
-
-    def _spot_height(self, world, depth, spot: np.ndarray, theta: float) -> tuple[float, int | None]:
-        """Highest scene point under one finger (and which object is there)."""
-        c = self.config
-        d = np.array([math.cos(theta), math.sin(theta)])
-        n = np.array([-d[1], d[0]])
-        corners = [spot + a * d * c.finger_thickness / 2 + b * n * c.finger_width / 2 for a in (-1, 1) for b in (-1, 1)]
-        ws: Workspace = world.workspace
-        pix = np.array([world_to_pixel(ws, x, y)[::-1] for x, y in corners], dtype=np.int32)  # (col, row)
-        region = np.zeros(depth.shape, np.uint8)
-        cv2.fillConvexPoly(region, cv2.convexHull(pix), 1)
-        inside = region > 0
-        if not inside.any():
-            return 0.0, None
-        height = float(depth[inside].max())
-        owner = None
-        best = 0.0
-        for j in world.active_objects():
-            v = world.object_vertices(j)
-            near = np.linalg.norm(v[:, :2].mean(axis=0) - spot)
-            if near < 0.08 and float(v[:, 2].max()) > best and _polygon_hits(v[:, :2], corners):
-                best, owner = float(v[:, 2].max()), int(j)
-        return height, owner
-
-    def _best_grasp(self, env, target: int, depth) -> tuple[int, int | None]:
-        """Grasp rotation for the target, and the object blocking the fingers (or None)."""
-        world, c = env.world, self.config
-        verts = world.object_vertices(target)
-        centre, _, short_dir = footprint_rect(verts[:, :2])
-        z_grasp = max(float(verts[:, 2].max()) - env.config.primitives.grasp_depth, env.config.primitives.grasp_min_height)
-        first_blocker = None
-        # Try the short axis first, then the other angles from nearest to farthest.
-        order = sorted(range(NUM_ROTATIONS // 2), key=lambda k: _angle_gap(k * math.pi / 8, short_dir))
-        order = [k for k in order if k not in self._failed_rotations] or order
-        for k in order:
-            theta = k * math.pi / 8
-            d = np.array([math.cos(theta), math.sin(theta)])
-            proj = (verts[:, :2] - centre) @ d
-            width = float(proj.max() - proj.min())
-            if width > c.max_grasp_width:
-                continue
-            blocked = None
-            for spot in self._finger_spots(centre + d * (proj.max() + proj.min()) / 2, width, theta):
-                h, owner = self._spot_height(world, depth, spot, theta)
-                if h > z_grasp + c.finger_clearance:
-                    blocked = owner if owner is not None and owner != target else blocked
-                    if blocked is None:
-                        blocked = -1
-                    break
-            if blocked is None:
-                return k, None
-            if first_blocker is None:
-                first_blocker = (k, blocked)
-        if first_blocker is None:
-            return order[0], None  # nothing fits the fingers: the best untried angle
-        k, blocker = first_blocker
-        if blocker == -1:
-            blocker = self._nearest(world, target)
-        return k, blocker
-
-    def _nearest(self, world, target: int) -> int | None:
-        t = world.object_position(target)[:2]
-        others = [j for j in world.active_objects() if j != target]
-        if not others:
-            return None
-        return int(min(others, key=lambda j: np.linalg.norm(world.object_position(j)[:2] - t)))
-
-    def _push_away(self, env, target: int, blocker: int) -> int:
-        """Push ``blocker`` straight away from the target, starting in the gap between them."""
-        world, c = env.world, self.config
-        t_verts = world.object_vertices(target)[:, :2]
-        t_centre = t_verts.mean(axis=0)
-        d = world.object_position(blocker)[:2] - t_centre
-        d = d / (np.linalg.norm(d) + 1e-9)
-        reach = float(((t_verts - t_centre) @ d).max())
-        start = t_centre + d * (reach + c.push_start_gap)
-        theta = math.atan2(d[1], d[0]) % (2 * math.pi)
-        rotation = int(round(theta / (2 * math.pi / NUM_ROTATIONS))) % NUM_ROTATIONS
-        rows, cols = world.workspace.shape
-        r, col = world_to_pixel(world.workspace, start[0], start[1])
-        return self._encode(env, "push", rotation, int(np.clip(r, 0, rows - 1)), int(np.clip(col, 0, cols - 1)))
-
-    @staticmethod
-    def _encode(env, primitive: str, rotation: int, row: int, col: int) -> int:
+        if env.num_motions == 0 and self._episode_motions != 0:
+            self.reset()  # a new episode even if the caller did not say so
+        self._episode_motions = env.num_motions
+        depth = env._obs["depth"]
+        primitive, rotation, row, col, plan = self._choose(env, depth)
+        self.memory.record(primitive, rotation, row, col, depth)
+        self.last_plan = plan
         return env.action_space.encode(primitive, rotation, row, col)
 
+    # ------------------------------------------------------------ planning
+    def _choose(self, env, depth: np.ndarray):
+        world, allowed, target = env.world, env.primitives, env.target
+        ids = self._object_ids(world)
+        if target is None or env.stage.mask_all_objects or not world.active[target]:
+            inside = set(world.active_objects().tolist()) - set(world.objects_outside_workspace().tolist())
+            for i in sorted(inside, key=lambda i: -world.object_top(i)):
+                step = self._first_new("grasp", self._grasp_plans(env, i, depth, ids), depth)
+                if step:
+                    return (*step, {"kind": "grasp_any"})
+            return self._last_resort(env, depth, "grasp")
+        occluded = bool(env._obs["occluded"][0])
+        if "move" in allowed and (occluded or "grasp" not in allowed):
+            movers = self._occluders(env, target, depth, ids)
+            if not movers and "grasp" not in allowed:  # Stage III, nothing on top: clear the nearest
+                movers = self._neighbours(world, target)
+            for j in movers:
+                step = self._first_new("move", self._grasp_plans(env, j, depth, ids, require_fit=False), depth)
+                if step:
+                    return (*step, {"kind": "move_occluder", "object": j})
+        plans = self._grasp_plans(env, target, depth, ids) if "grasp" in allowed else []
+        good = [p for p in plans if p.blocked <= self.config.grasp_tolerance]
+        step = self._first_new("grasp", good, depth)
+        if step:
+            return (*step, {"kind": "grasp_free" if good[0].free else "grasp_tolerated", "blocked": round(good[0].blocked, 4)})
+        if "push" in allowed:
+            for side, start, rotation in self._push_options(env, target, plans or self._grasp_plans(env, target, depth, ids)):
+                r, c = self._clip_pixel(world, start)
+                if not self.memory.repeats("push", rotation, r, c, depth):
+                    return "push", rotation, r, c, {"kind": "push", "no_free_grasp": True}
+        step = self._first_new("grasp", plans, depth)
+        if step:
+            return (*step, {"kind": "grasp_blocked", "no_free_grasp": True})
+        return self._last_resort(env, depth, "grasp" if "grasp" in allowed else allowed[0])
 
-def _angle_gap(a: float, b: float) -> float:
-    """Distance between two grasp angles modulo pi."""
-    d = (a - b) % math.pi
-    return min(d, math.pi - d)
+    def _first_new(self, primitive: str, plans: list[GraspPlan], depth: np.ndarray):
+        """The first plan (with small pixel shifts) that does not repeat a tried action."""
+        for p in plans:
+            for dr, dc in ((0, 0), (3, 0), (0, 3), (-3, 0), (0, -3)):
+                r = int(np.clip(p.row + dr, 0, depth.shape[0] - 1))
+                c = int(np.clip(p.col + dc, 0, depth.shape[1] - 1))
+                if not self.memory.repeats(primitive, p.rotation, r, c, depth):
+                    return primitive, p.rotation, r, c
+        return None
 
+    def _last_resort(self, env, depth: np.ndarray, primitive: str):
+        """Nothing new left to try at the planned spots: the first untried angle at the target."""
+        world = env.world
+        i = env.target if env.target is not None and world.active[env.target] else int(world.active_objects()[0])
+        centre, _, _ = footprint_rect(world.object_vertices(i)[:, :2])
+        r, c = self._clip_pixel(world, centre)
+        for k in range(NUM_ROTATIONS):
+            if not self.memory.repeats(primitive, k, r, c, depth):
+                return primitive, k, r, c, {"kind": "last_resort", "no_free_grasp": True}
+        return primitive, 0, r, c, {"kind": "last_resort", "no_free_grasp": True}
 
-def _hull_mm(points_xy: np.ndarray) -> np.ndarray:
-    """Convex hull in millimetres: OpenCV's polygon intersection loses areas in m^2."""
-    return cv2.convexHull((1000.0 * np.asarray(points_xy)).astype(np.float32))
+    # ------------------------------------------------------------ pieces
+    def _grasp_plans(self, env, i: int, depth: np.ndarray, ids: np.ndarray, require_fit: bool = True) -> list[GraspPlan]:
+        """Grasps of object ``i`` at the 8 angles, best first: free ones, then least blocked."""
+        world, c, pc = env.world, self.config, env.config.primitives
+        ws = world.workspace
+        verts = world.object_vertices(i)[:, :2]
+        centre, _, short_dir = footprint_rect(verts)
+        plans = []
+        for k in range(GRASP_ROTATIONS):
+            theta = k * math.pi / GRASP_ROTATIONS
+            d = np.array([math.cos(theta), math.sin(theta)])
+            n = np.array([-d[1], d[0]])
+            lo, hi = extent_along(verts, centre, d)
+            width = hi - lo
+            if require_fit and width > c.max_grasp_width:
+                continue
+            nlo, nhi = extent_along(verts, centre, n)
+            mid = centre + d * (lo + hi) / 2 + n * (nlo + nhi) / 2
+            row, col = self._clip_pixel(world, mid)
+            z = max(float(depth[row, col]) - pc.grasp_depth, pc.grasp_min_height)
+            limit = z - c.pad_below_tcp + c.finger_clearance
+            blocked, blockers = -math.inf, []
+            inner = width / 2 + c.finger_margin
+            outer = max(c.finger_open_reach, inner + 0.01)
+            for side in (-1, 1):
+                region = polygon_mask(ws, finger_region(mid, theta, side, inner, outer, c.finger_half_width))
+                blocked = max(blocked, region_max(depth, region) - limit)
+                for j in np.unique(ids[region & (depth > limit)]):
+                    if j >= 0 and j != i:
+                        blockers.append((side, int(j)))
+            off = angle_gap(theta, short_dir)
+            plans.append(GraspPlan(i, k, row, col, blocked, tuple(blockers), off))
+        # Free first, nearest the short axis; then the least blocked.
+        return sorted(plans, key=lambda p: (not p.free, p.angle_off if p.free else p.blocked, p.angle_off))
 
+    def _push_options(self, env, target: int, plans: list[GraspPlan]):
+        """Pushes that open a finger gap: each blocker pushed straight out along the closing
+        direction, from just outside the target's edge; least blocked angles first."""
+        world, c = env.world, self.config
+        verts = world.object_vertices(target)[:, :2]
+        options = []
+        for p in sorted(plans, key=lambda p: p.blocked):
+            theta = p.rotation * math.pi / GRASP_ROTATIONS
+            for side in sorted({s for s, _ in p.blockers}) or (-1, 1):
+                d = side * np.array([math.cos(theta), math.sin(theta)])
+                centre = verts.mean(axis=0)
+                _, reach = extent_along(verts, centre, d)
+                start = centre + d * (reach + c.push_start_gap)
+                rotation = angle_to_rotation(math.atan2(d[1], d[0]) % (2 * math.pi), symmetric=False)
+                options.append((side, start, rotation))
+        return options
 
-def _polygon_hits(points: np.ndarray, corners: list[np.ndarray]) -> bool:
-    area, _ = cv2.intersectConvexConvex(_hull_mm(points), _hull_mm(np.array(corners)))
-    return area > 1.0  # mm^2
+    def _occluders(self, env, target: int, depth: np.ndarray, ids: np.ndarray) -> list[int]:
+        """Objects seen above the target's footprint higher than its top, topmost first."""
+        world = env.world
+        mask = env._obs["mask"] > 0
+        over = mask & (depth > world.object_top(target) + self.config.occluder_tolerance)
+        found = {int(j): float(depth[over & (ids == j)].max()) for j in np.unique(ids[over]) if j >= 0 and j != target}
+        return sorted(found, key=lambda j: -found[j])
+
+    def _neighbours(self, world, target: int) -> list[int]:
+        t = world.object_position(target)[:2]
+        others = [int(j) for j in world.active_objects() if j != target]
+        return sorted(others, key=lambda j: float(np.linalg.norm(world.object_position(j)[:2] - t)))
+
+    def _object_ids(self, world) -> np.ndarray:
+        """Which object each heightmap pixel shows (-1 for the table)."""
+        if self._ids_model is not world.model:
+            from mpg_envs.heightmap import RaycastHeightmapper
+
+            if self._ids_caster is not None:
+                self._ids_caster.close()
+            self._ids_caster = RaycastHeightmapper(world.model, world.workspace, num_threads=1)
+            self._ids_model = world.model
+        geom_id, _ = self._ids_caster.cast(world.data)
+        return world.object_of_geom(geom_id)
+
+    @staticmethod
+    def _clip_pixel(world, xy: np.ndarray) -> tuple[int, int]:
+        rows, cols = world.workspace.shape
+        r, c = world_to_pixel(world.workspace, float(xy[0]), float(xy[1]))
+        return int(np.clip(r, 0, rows - 1)), int(np.clip(c, 0, cols - 1))

@@ -63,7 +63,7 @@ def save_scene(env: "MPGEnv", path: str | Path) -> Path:
     doc = {
         "format": SCENE_FORMAT,
         "version": SCENE_VERSION,
-        "stage": env.spec_stage.name,
+        "stage": env.stage.name,
         "object_set_seed": env.config.object_set_seed,
         "target": env.target,
         "objects": objects,
