@@ -8,8 +8,9 @@ and runs its episodes. Since episode ``i`` is seeded ``seed + i`` whatever proce
 (:func:`mpg_agents.evaluate.start_episode`), the gathered records, sorted by index, do not
 depend on the split. ``workers=1`` without a cluster address runs in this process, no Ray.
 
-Every task runs on one torch/OpenMP thread (``torch.set_num_threads(1)`` and
-``OMP_NUM_THREADS=1`` in Ray's runtime env), so ``workers`` tasks use ``workers`` cores.
+Every task runs on one torch/OpenMP thread (``OMP_NUM_THREADS=1`` in Ray's runtime env and
+:func:`mpg_envs.threads.worker_init` in the worker), so ``workers`` tasks use ``workers``
+cores; in-process, episodes run on one torch thread too, so their records are the same.
 On a cluster (``ray_address``) every node needs this package installed and checkpoint
 paths readable at the same absolute path.
 """
@@ -27,7 +28,8 @@ from typing import Any, Callable, Iterator, Sequence
 
 from mpg_agents.evaluate import EpisodeRecord, EvalResult, env_id_of, run_episodes, summarise
 
-THREAD_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+# what mpg_envs.threads.worker_init sets, before the worker imports torch
+THREAD_ENV = {"OMP_NUM_THREADS": "1", "MPG_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE", "MKL_NUM_THREADS": "1"}
 
 
 @dataclass(frozen=True)
@@ -128,6 +130,14 @@ def run_chunk(
     return ChunkResult(name, env_id, num_objects, records, time.perf_counter() - start)
 
 
+def _ray_chunk(job: EvalJob, indices: Sequence[int]) -> ChunkResult:
+    """:func:`run_chunk` in a Ray worker, which keeps one compute thread for good."""
+    from mpg_envs.threads import worker_init
+
+    worker_init()
+    return run_chunk(job, indices)
+
+
 def start_ray(workers: int | None = None, address: str | None = None, **init_kwargs: Any):
     """``ray.init`` as this module's tasks need it: a local Ray with ``workers`` CPUs, or the
     cluster at ``address``; one OpenMP thread per worker. Returns the ``ray`` module."""
@@ -201,7 +211,7 @@ def evaluate_jobs(
             startup = time.perf_counter() - start
             start += startup
             used_workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-            remote = ray.remote(num_cpus=1)(run_chunk)
+            remote = ray.remote(num_cpus=1)(_ray_chunk)
             pending = {
                 remote.remote(job, indices): j
                 for j, job in enumerate(jobs)
