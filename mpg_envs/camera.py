@@ -28,13 +28,8 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from mpg_envs.heightmap import (
-    VISIBLE_GEOM_GROUPS,
-    Heightmaps,
-    fuse_heightmaps,
-    geomgroup_mask,
-    heightmap_from_rgbd,
-)
+from mpg_envs.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
+from mpg_envs.rgbd import fuse_heightmaps, heightmap_from_rgbd
 from mpg_envs.workspace import Workspace
 
 GL_HELP = (

@@ -270,7 +270,7 @@ class MPGEnv(gym.Env):
         # Keep the last draw: the stage's start condition could not be met in the tries given.
 
     def _observe(self) -> dict[str, np.ndarray]:
-        from mpg_envs.heightmap import footprint_mask
+        from mpg_envs.footprint import footprint_mask
 
         world = self.world
         ws = self.config.workspace
