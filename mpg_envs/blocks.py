@@ -35,13 +35,19 @@ BLOCK_SHAPES: tuple[tuple[str, str, tuple[tuple[str, float], ...]], ...] = (
     ("tall_box", "box", (("x", 0.04), ("y", 0.04), ("z", 0.09))),
     ("cylinder", "cylinder", (("diameter", 0.045), ("height", 0.06))),
     ("disc", "cylinder", (("diameter", 0.054), ("height", 0.028))),
-    ("triangular_prism", "prism", (("length", 0.08), ("base", 0.05), ("height", 0.045))),
-    ("arch", "arch", (("length", 0.08), ("depth", 0.045), ("height", 0.045))),
+    # A right-angled triangle (as VPG's) extruded only 4.5 cm: the fingers close across the
+    # extrusion, on the two vertical triangular faces. Closed across the sloped faces instead
+    # (the old 8 cm extrusion), the wedge squeezes out of the pads (30% success).
+    ("triangular_prism", "prism", (("length", 0.045), ("base", 0.08), ("height", 0.04))),
+    # As VPG's arch (tunnel radius a quarter of the length, height half of it): a 2.5 cm
+    # bridge. With a 4.5 cm height and a 0.3 x length tunnel (a 2 cm bridge) the closing
+    # fingertips slid into the tunnel and lifted the arch from inside (92% success).
+    ("arch", "arch", (("length", 0.08), ("depth", 0.045), ("height", 0.05))),
 )
 """The "blocks" set, in colour order (object ``i`` gets ``TABLEAU_10[i]``)."""
 
-ARCH_TUNNEL_RATIO = 0.3
-"""Arch tunnel radius as a fraction of the arch length: leaves legs of 0.2 x length."""
+ARCH_TUNNEL_RATIO = 0.25
+"""Arch tunnel radius as a fraction of the arch length: leaves legs of 0.25 x length."""
 
 
 def blocks_object_set(
@@ -75,6 +81,8 @@ def blocks_object_set(
     for index, (name, kind, nominal) in enumerate(BLOCK_SHAPES):
         dims = _jitter_dims(nominal, seed, index)
         key_data = {"kind": kind, "dims": dims, "seed": seed, "coacd": dataclasses.asdict(params)}
+        if kind == "arch":
+            key_data["tunnel_ratio"] = ARCH_TUNNEL_RATIO
         parts, com = cached_parts(
             folder, f"blocks-{name}", key_data, lambda kind=kind, dims=dims: _make_block(kind, dims, seed, params)
         )

@@ -55,6 +55,11 @@ class PrimitiveConfig:
     target_moved_angle: float = 0.25  # ... or it turned more than this (radians)
 
 
+GRASP_FAILURES = ("closed_empty", "not_lifted")
+"""Why a grasp held nothing: the fingers closed fully on nothing (missed), or something was
+between the pads but did not rise with them (slipped out, or pinned under another object)."""
+
+
 @dataclass
 class PrimitiveResult:
     """What a primitive did."""
@@ -65,6 +70,7 @@ class PrimitiveResult:
     position: tuple[float, float, float]  # world (x, y, z) the TCP was sent to
     grasp_success: bool = False  # an object came up in the fingers (grasp and move)
     grasped_object: int | None = None  # index of that object
+    grasp_failure: str | None = None  # grasp/move that held nothing: one of GRASP_FAILURES
     placed_object: int | None = None  # move: the object put down elsewhere
     removed_objects: tuple[int, ...] = ()  # objects taken out of the scene by this primitive
     target_moved: bool = False
@@ -117,7 +123,7 @@ class Primitives:
     def _grasp(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
         x, y, z, z_pre, theta = self._grasp_pose(rotation, row, col, depth)
         result = PrimitiveResult("grasp", rotation, (row, col), (x, y, z))
-        held = self._pick(x, y, z, z_pre, theta)
+        held = self._pick(x, y, z, z_pre, theta, result)
         if held is not None:
             result.grasp_success, result.grasped_object = True, held
             self.world.remove_object(held)
@@ -128,7 +134,7 @@ class Primitives:
     def _move(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
         x, y, z, z_pre, theta = self._grasp_pose(rotation, row, col, depth)
         result = PrimitiveResult("move", rotation, (row, col), (x, y, z))
-        held = self._pick(x, y, z, z_pre, theta)
+        held = self._pick(x, y, z, z_pre, theta, result)
         if held is not None:
             result.grasp_success, result.grasped_object = True, held
             spot = self._free_place(held, target)
@@ -175,8 +181,9 @@ class Primitives:
         cols = np.clip(col + self._footprint_offsets[:, 1], 0, depth.shape[1] - 1)
         return float(depth[rows, cols].max())
 
-    def _pick(self, x: float, y: float, z: float, z_pre: float, theta: float) -> int | None:
-        """Descend open, close, lift; the index of the object held afterwards, if any."""
+    def _pick(self, x: float, y: float, z: float, z_pre: float, theta: float, result: PrimitiveResult) -> int | None:
+        """Descend open, close, lift; the index of the object held afterwards, if any (else
+        ``result.grasp_failure`` says why)."""
         cfg, world = self.config, self.world
         q = self._teleport((x, y, z_pre), theta, closed=False)
         q = self._linear((x, y, z_pre), (x, y, z), theta, q, cfg.approach_speed)
@@ -184,7 +191,11 @@ class Primitives:
         self._actuate_gripper(closed=True)
         z_lift = z_pre + cfg.lift_height
         self._linear((x, y, z), (x, y, z_lift), theta, q, cfg.lift_speed)
-        return self._held_object(heights)
+        held = self._held_object(heights)
+        if held is None:
+            closed = world.robot.driver_angle(world.data) > self.gripper.closed_driver_angle - cfg.closed_margin
+            result.grasp_failure = "closed_empty" if closed else "not_lifted"
+        return held
 
     def _held_object(self, heights_before: dict[int, float]) -> int | None:
         world, cfg = self.world, self.config
