@@ -14,6 +14,7 @@ import gymnasium as gym  # noqa: E402
 from mpg_envs.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
 from mpg_envs.stages import STAGES, StageSpec
 from mpg_envs.workspace import NUM_ROTATIONS, Workspace
+from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
 
 ENV_IDS: tuple[str, ...] = tuple(spec.env_id for spec in STAGES.values())
 
@@ -32,7 +33,10 @@ def env_primitives(env: gym.Env) -> tuple[str, ...]:
 _register()
 
 __all__ = [
+    "ContinuousAction",
     "ENV_IDS",
+    "GridAction",
+    "ImageObservation",
     "NUM_ROTATIONS",
     "PRIMITIVES",
     "PixelAction",
