@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 import sys
 import time
 from typing import Mapping
@@ -58,32 +59,36 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
-def runnable_now(samples: int = 3, interval_s: float = 0.005) -> float | None:
-    """Other threads runnable right now machine-wide (``/proc/loadavg``), the least of a few
+def runnable_now(samples: int = 5, interval_s: float = 0.005) -> float | None:
+    """Other threads runnable right now machine-wide (``/proc/loadavg``), the median of a few
     samples so a momentary burst does not count; ``None`` where ``/proc`` is absent."""
-    least = None
+    counts = []
     for i in range(samples):
         try:
             with open("/proc/loadavg") as fh:
                 running = int(fh.read().split()[3].split("/")[0])
         except (OSError, ValueError, IndexError):
             return None
-        others = max(0, running - 1)  # this thread, reading, is one of them
-        least = others if least is None else min(least, others)
+        counts.append(max(0, running - 1))  # this thread, reading, is one of them
         if i + 1 < samples:
             time.sleep(interval_s)
-    return float(least)
+    return float(statistics.median(counts))
 
 
 def load_average() -> float:
-    """The load other work puts on the machine: the 1-minute load average, or the threads
-    runnable right now when more (the average lags a minute behind a new busy process)."""
-    try:
-        minute = os.getloadavg()[0]
-    except (AttributeError, OSError):
-        minute = 0.0
+    """The load other work puts on the machine now: the threads runnable right now where Linux
+    tells (:func:`runnable_now`), else the 1-minute load average.
+
+    The 1-minute average lags a minute both ways: it misses a busy process started a second
+    ago and still counts one that ended half a minute ago (both seen when measuring).
+    """
     now = runnable_now()
-    return minute if now is None else max(minute, now)
+    if now is not None:
+        return now
+    try:
+        return os.getloadavg()[0]
+    except (AttributeError, OSError):
+        return 0.0
 
 
 def requested_threads(environ: Mapping[str, str] | None = None) -> int | None:

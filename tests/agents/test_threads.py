@@ -95,7 +95,6 @@ def test_worker_init_gives_one_thread(monkeypatch):
 
 
 def test_load_average_sees_the_machine():
-    load = threads.load_average()
-    assert load >= 0 and load >= os.getloadavg()[0]
+    assert threads.load_average() >= 0
     now = threads.runnable_now(samples=2, interval_s=0.001)
     assert now is None or now >= 0  # None off Linux
