@@ -22,7 +22,6 @@ ray per pixel centre with ``mujoco.mj_multiRay`` and sees only the geom groups o
 from __future__ import annotations
 
 import functools
-import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -138,11 +137,12 @@ def _ray_directions(workspace: Workspace, source_height: float) -> tuple[np.ndar
 
 
 def _default_threads() -> int:
-    try:
-        available = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        available = os.cpu_count() or 1
-    return max(1, min(2, available))
+    """Up to 2, fewer when the cores are busy or a worker asked for one thread
+    (``MPG_NUM_THREADS`` / ``OMP_NUM_THREADS``, as ``mpg_envs.threads.worker_init`` sets):
+    two vector-env workers with 2 ray-cast threads each would fight over 2 cores."""
+    from mpg_envs.threads import num_threads
+
+    return max(1, min(2, num_threads()))
 
 
 class RaycastHeightmapper:
@@ -190,7 +190,7 @@ class RaycastHeightmapper:
                 largest (by bounding radius) geom of the lowest visible group, the table.
             source_height: height (m) of the common ray origin above the table; must be
                 well above ``workspace.z_max``.
-            num_threads: threads sharing the rays; default ``min(2, available CPUs)``.
+            num_threads: threads sharing the rays; default up to 2 (see ``_default_threads``).
         """
         self.model = model
         self.workspace = workspace if workspace is not None else Workspace()
