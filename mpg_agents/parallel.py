@@ -79,8 +79,9 @@ class RunTiming:
     per_job_wall: list[float] = field(default_factory=list)
 
     @property
-    def speedup(self) -> float:
-        """Task seconds over wall seconds: how many tasks ran at once, on average."""
+    def parallelism(self) -> float:
+        """Task seconds over wall seconds: how many tasks ran at once, on average (not a
+        speed-up: tasks sharing cores each take longer)."""
         return self.task_seconds / self.wall_seconds if self.wall_seconds > 0 else float("nan")
 
 

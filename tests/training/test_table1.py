@@ -80,12 +80,13 @@ def test_benchmark_prints_the_table_and_ends_with_its_json(ray_two_cpus, tmp_pat
     spec = importlib.util.spec_from_file_location("table1_benchmark", BENCHMARK)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    argv = ["--policies", "grasp-only", "--episodes", "2", "--objects", "15", "--max-motions", "1", "--workers", "2", "--out", str(tmp_path)]
+    argv = ["--policies", "grasp-only", "--episodes", "2", "--objects", "15", "--max-motions", "1", "--workers", "2", "--out", str(tmp_path), "--speedup"]
     report = module.main(argv)
     lines = capsys.readouterr().out.strip().splitlines()
     assert json.loads(lines[-1]) == json.loads((tmp_path / "table1.json").read_text()) == report
     cell = report["rows"]["grasp-only"]["15"]
     assert cell["episodes"] == 2 and 0.0 <= cell["success"] <= 1.0 and cell["motions"] == 1.0
     assert cell["success_ci"][0] <= cell["success"] <= cell["success_ci"][1]
-    assert any("MPGNet (paper)" in line for line in lines) and any("speed-up" in line for line in lines)
+    assert report["identical_to_serial"] is True and report["speedup"] > 0 and report["workers"] == 2
+    assert any("MPGNet (paper)" in line for line in lines) and any("parallelism" in line for line in lines)
     assert "| grasp-only |" in (tmp_path / "table1.md").read_text()
