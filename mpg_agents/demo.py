@@ -4,44 +4,65 @@
                               [--episodes 3] [--seed 0] [--out demo_out]
 
 Runs ``--episodes`` seeded episodes, prints each step and a summary (task success,
-motions, grasp success), and writes ``scene.png`` (the colour heightmap of the first scene
-with the target outlined, beside a rendered view when OpenGL is available) and, for a
-network policy, ``qmaps.png`` (the Q maps of its first decision).
+motions, grasp success), and writes ``scene.png`` (the first scene's colour heightmap with
+the target outlined and its depth heightmap, beside ``env.render()``'s view when OpenGL is
+available) and, for a network policy, ``qmaps.png`` (every branch's Q map at its first
+decision, the chosen action drawn and named).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
-if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-    os.environ.setdefault("MUJOCO_GL", "egl")
+import cv2
+import gymnasium as gym
+import numpy as np
 
-import cv2  # noqa: E402
-import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
+import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
+from mpg_envs.render import RenderUnavailableError
 
-import mpg_envs  # noqa: E402,F401  (registers the envs)
+PANEL_PX = 448
+TITLE_PX = 34
+
+
+def titled(image: np.ndarray, title: str) -> np.ndarray:
+    """``image`` (RGB) under a black title bar."""
+    bar = np.zeros((TITLE_PX, image.shape[1], 3), np.uint8)
+    cv2.putText(bar, title, (8, 23), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1, cv2.LINE_AA)
+    return np.concatenate([bar, image], axis=0)
+
+
+def heightmap_panels(obs: dict[str, np.ndarray]) -> list[np.ndarray]:
+    """The colour heightmap with the target outlined, and the depth heightmap, titled (RGB)."""
+    size = (PANEL_PX, PANEL_PX)
+    color = cv2.resize(obs["color"], size, interpolation=cv2.INTER_NEAREST)
+    mask = cv2.resize(obs["mask"].astype(np.uint8), size, interpolation=cv2.INTER_NEAREST)
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    cv2.drawContours(color, contours, -1, (255, 255, 255), 2)
+    depth = np.asarray(obs["depth"], np.float32).reshape(obs["color"].shape[:2])
+    top = max(float(depth.max()), 1e-6)
+    depth_rgb = cv2.cvtColor(cv2.applyColorMap((depth / top * 255).astype(np.uint8), cv2.COLORMAP_VIRIDIS), cv2.COLOR_BGR2RGB)
+    depth_rgb = cv2.resize(depth_rgb, size, interpolation=cv2.INTER_NEAREST)
+    return [
+        titled(color, "colour heightmap (target outlined in white)"),
+        titled(depth_rgb, f"depth heightmap (dark: table, bright: {100 * top:.1f} cm)"),
+    ]
 
 
 def scene_picture(env: gym.Env, obs: dict[str, np.ndarray]) -> np.ndarray:
-    """Colour heightmap (target outlined), enlarged, beside the rendered scene if GL works."""
-    color = cv2.resize(obs["color"], (448, 448), interpolation=cv2.INTER_NEAREST)
-    mask = cv2.resize(obs["mask"], (448, 448), interpolation=cv2.INTER_NEAREST)
-    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    cv2.drawContours(color, contours, -1, (255, 255, 255), 2)
+    """The heightmap panels beside the rendered scene (``env.render()``) when OpenGL works."""
+    panels = heightmap_panels(obs)
     try:
-        from mpg_envs.render import OverviewRenderer
-
-        renderer = OverviewRenderer(env.unwrapped.world.model, 448, 597)
-        view = renderer.render(env.unwrapped.world.data)
-        renderer.close()
-        return np.concatenate([color, view], axis=1)
-    except RuntimeError as exc:
-        print(f"(no rendered view: {exc})")
-        return color
+        view = env.render()
+    except RenderUnavailableError as exc:
+        print(f"(no rendered view in scene.png: {exc})")
+    else:
+        width = round(view.shape[1] * PANEL_PX / view.shape[0])
+        view = cv2.resize(view, (width, PANEL_PX), interpolation=cv2.INTER_AREA)
+        panels.append(titled(view, "the scene (env.render(), overview camera)"))
+    return np.concatenate(panels, axis=1)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -56,11 +77,14 @@ def main(argv: list[str] | None = None) -> int:
     from mpg_agents.baselines import make_policy
     from mpg_agents.evaluate import evaluate
 
+    from mpg_envs.threads import set_torch_threads
+
+    threads = set_torch_threads()  # the cores free now (MPG_NUM_THREADS overrides)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    env = gym.make(args.env)
+    env = gym.make(args.env, render_mode="rgb_array")
     policy = make_policy(args.policy, env)
-    print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}")
+    print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}, {threads} torch threads")
 
     def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
         if episode == 0:

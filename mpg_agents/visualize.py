@@ -164,7 +164,9 @@ def save_qmap_png(
     body = np.concatenate(panels, axis=1)
     footer = np.zeros((FOOTER_PX, body.shape[1], 3), np.uint8)
     caption = "chosen action: " + action_label(chosen, chosen_q) if chosen is not None else "no action chosen"
-    _text(footer, caption + "   (white outline: target)", (8, 20), 0.5)
+    legend = caption + "   (white outline: target)"
+    fits = cv2.getTextSize(legend, FONT, 0.5, 1)[0][0] + 16 <= footer.shape[1]
+    _text(footer, legend if fits else caption, (8, 20), 0.5)
     image = np.concatenate([body, footer], axis=0)
     image = np.concatenate([image, _colorbar(image.shape[0], lo, hi)], axis=1)
     path = Path(path)

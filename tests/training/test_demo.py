@@ -1,13 +1,16 @@
-"""The README's demo command runs end to end and writes its pictures."""
+"""The README's demo command runs end to end and writes pictures that say what they show."""
 
+import cv2
+
+import mpg_envs.render as render_module
 from mpg_agents.baselines import shipped_checkpoint
-from mpg_agents.demo import main
+from mpg_agents.demo import PANEL_PX, TITLE_PX, main
 
 
 def test_shipped_checkpoint_is_small_and_loads():
     path = shipped_checkpoint()
     assert path.stat().st_size < 10 * 2**20
-    from mpg_agents.mpgnet import read_checkpoint_header
+    from mpg_agents.weights import read_checkpoint_header
 
     header = read_checkpoint_header(path)
     assert header["primitives"] == ["grasp"] and header["variant"] == "small"
@@ -17,6 +20,22 @@ def test_shipped_checkpoint_is_small_and_loads():
 def test_demo_runs_the_shipped_policy(tmp_path, capsys):
     assert main(["--episodes", "1", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "task success" in out and "mean motions" in out
+    assert "task success" in out and "mean motions" in out and "torch threads" in out
     for name in ("scene.png", "qmaps.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
+    scene = cv2.imread(str(tmp_path / "scene.png"))
+    assert scene.shape[0] == TITLE_PX + PANEL_PX
+    # Two heightmap panels, and the rendered view unless this machine has no OpenGL.
+    assert scene.shape[1] > 2 * PANEL_PX or "no rendered view" in out
+    assert (scene[:TITLE_PX].max(axis=-1) > 200).sum() > 100  # titles
+
+
+def test_demo_without_opengl_says_so_and_writes_the_heightmaps(tmp_path, capsys, monkeypatch):
+    # As after a failed GL context: render() raises without touching OpenGL.
+    monkeypatch.setattr(render_module, "_gl_failure", "could not create an OpenGL context (test)")
+    assert main(["--policy", "random", "--episodes", "1", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "no rendered view in scene.png" in out and "MUJOCO_GL" in out
+    scene = cv2.imread(str(tmp_path / "scene.png"))
+    assert scene.shape == (TITLE_PX + PANEL_PX, 2 * PANEL_PX, 3)
+    assert not (tmp_path / "qmaps.png").exists()  # a random policy has no Q maps
