@@ -90,3 +90,12 @@ def test_benchmark_prints_the_table_and_ends_with_its_json(ray_two_cpus, tmp_pat
     assert report["identical_to_serial"] is True and report["speedup"] > 0 and report["workers"] == 2
     assert any("MPGNet (paper)" in line for line in lines) and any("parallelism" in line for line in lines)
     assert "| grasp-only |" in (tmp_path / "table1.md").read_text()
+
+
+def test_mpg_eval_json_is_the_same_for_one_and_two_workers(ray_two_cpus, tmp_path):
+    from mpg_agents.cli import eval_main
+
+    argv = ["--policy", "random", "--env", "MPG-Stage2-v0", "--episodes", "2", "--seed", "3", "--quiet"]
+    for workers in (1, 2):
+        assert eval_main(argv + ["--workers", str(workers), "--json", str(tmp_path / f"w{workers}.json")]) == 0
+    assert (tmp_path / "w1.json").read_bytes() == (tmp_path / "w2.json").read_bytes()
