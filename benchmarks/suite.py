@@ -26,7 +26,6 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402
-from mpg_agents.baselines import OracleBaseline  # noqa: E402
 from mpg_agents.evaluate import evaluate  # noqa: E402
 from mpg_envs.policies import OraclePolicy  # noqa: E402
 
@@ -71,7 +70,7 @@ def random_soak(env_id: str, actions: int) -> dict[str, int]:
 
 def oracle_eval(num_objects: int, episodes: int) -> dict[str, float]:
     env = gym.make("MPG-Occluded-v0", num_objects=num_objects)
-    result = evaluate(OracleBaseline(env), env, episodes, seed=10_000, progress=True)
+    result = evaluate(OraclePolicy(env), env, episodes, seed=10_000, progress=True)
     env.close()
     return {"success": result.task_success_rate, "motions": result.average_motions}
 

@@ -36,15 +36,15 @@ def main() -> None:
     parser.add_argument("--batch-size", type=int, default=2)
     parser.add_argument("--variant", default="small")
     args = parser.parse_args()
-    cfg = TrainConfig(env_id="MPG-Stage5-v0", steps=10**9, variant=args.variant, batch_size=args.batch_size, torch_threads=2)
+    cfg = TrainConfig(steps=10**9, variant=args.variant, batch_size=args.batch_size, torch_threads=2)
     with tempfile.TemporaryDirectory() as out:
-        learner = Learner(cfg, out, log=lambda s: None)
+        learner = Learner(cfg, "MPG-Stage5-v0", out, log=lambda s: None)
         env = learner.env
         parts: dict[str, list[float]] = {"decide_s": [], "env_step_s": [], "replay_s": [], "learn_s": [], "iteration_s": []}
         obs, _ = env.reset(seed=0)
         for k in range(args.warmup + args.iterations):
             t0 = time.perf_counter()
-            action, primitive, how, q = learner.act(obs)
+            action = learner.act(obs).action
             t1 = time.perf_counter()
             next_obs, reward, terminated, truncated, info = env.step(action)
             t2 = time.perf_counter()

@@ -1,7 +1,8 @@
 """Policies by name for evaluation and the demo: a checkpoint or a built-in baseline.
 
-Every policy has ``name`` and ``act(obs) -> flat action``; network policies also have
-``save_qmaps(path, obs)``.
+Every policy is a :class:`mpg_envs.policies.Policy`: ``name``, ``reset()`` at each episode's
+start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(path, obs)`` and
+``primitives`` (what they act with).
 
 - ``oracle``: :class:`mpg_envs.policies.OraclePolicy` (reads the simulator: upper baseline).
 - ``random``: uniform over the whole action space (seeded).
@@ -9,13 +10,17 @@ Every policy has ``name`` and ``act(obs) -> flat action``; network policies also
 - ``shipped``: the checkpoint trained on this project's CPU (Stages I-II) that ships in
   ``mpg_agents/checkpoints/``.
 - a path: an MPGNet safetensors checkpoint (``mpg-train``'s ``weights.safetensors``).
+
+A checkpoint lacking some of the env's primitives acts with those it has and says so in its
+name, e.g. ``shipped:stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded-v0``
+(the paper's Grasping-Only baseline).
 """
 
 from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -34,18 +39,9 @@ def shipped_checkpoint() -> Path:
     return path
 
 
-class OracleBaseline:
-    def __init__(self, env: gym.Env):
-        from mpg_envs.policies import OraclePolicy
-
-        self.name = "oracle"
-        self._oracle = OraclePolicy(env)
-
-    def act(self, obs: Mapping[str, np.ndarray]) -> int:
-        return self._oracle.act()
-
-
 class RandomBaseline:
+    """Uniform over the whole action space."""
+
     def __init__(self, env: gym.Env, seed: int = 0):
         self.name = "random"
         self._space = gym.spaces.Discrete(int(env.action_space.n), seed=seed)
@@ -54,17 +50,25 @@ class RandomBaseline:
         """Restart the action stream; evaluation calls it with each episode's seed."""
         self._space.seed(seed)
 
+    def reset(self) -> None:
+        """Nothing to forget between episodes."""
+
     def act(self, obs: Mapping[str, np.ndarray]) -> int:
         return int(self._space.sample())
 
 
 class GraspOnlyBaseline:
+    """The pixel-only heuristic grasp at the target every step (random when no target is visible)."""
+
     def __init__(self, env: gym.Env):
         self.name = "grasp-only"
         self.primitives = tuple(env.unwrapped.primitives)
         if "grasp" not in self.primitives:
             raise ValueError(f"grasp-only needs an env that allows grasping; this one allows {self.primitives}")
         self._space = env.action_space
+
+    def reset(self) -> None:
+        """Nothing to forget between episodes."""
 
     def act(self, obs: Mapping[str, np.ndarray]) -> int:
         if not np.asarray(obs["mask"]).any():
@@ -73,9 +77,13 @@ class GraspOnlyBaseline:
 
 
 class NetworkPolicy:
-    """An MPGNet checkpoint with the paper's coordination (greedy, no exploration)."""
+    """An MPGNet checkpoint with the paper's coordination (greedy, no exploration).
 
-    def __init__(self, path: str | Path, env: gym.Env, coordination: str | None = None):
+    ``primitives`` are the env's primitives the network has branches for; when that is fewer
+    than the env allows, ``name`` ends with e.g. ``(grasp-only net)``.
+    """
+
+    def __init__(self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None):
         import torch
 
         from mpg_agents.policy import MPGNetPolicy
@@ -84,33 +92,43 @@ class NetworkPolicy:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"checkpoint {str(path)!r} does not exist")
-        self.name = path.name
         self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space)
         if coordination is not None:
             self.policy.set_coordination(coordination)
+        self.primitives: tuple[str, ...] = self.policy.usable_primitives
+        self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
+
+    def reset(self) -> None:
+        """The network keeps no per-episode memory."""
 
     def act(self, obs: Mapping[str, np.ndarray]) -> int:
         return int(self.policy.decide(obs).action)
 
     def save_qmaps(self, path: str | Path, obs: Mapping[str, np.ndarray]) -> None:
-        from mpg_agents.visualize import save_qmap_png
+        from mpg_agents.visualize import save_policy_qmaps
 
-        decision = self.policy.decide(obs)
-        save_qmap_png(path, obs, decision.q_maps, decision, primitives=self.policy.action_primitives)
+        save_policy_qmaps(path, self.policy, obs)  # every branch's map, not only the decision's
+
+
+def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
+    """``" (grasp-only net)"`` / ``" (push+grasp net)"`` when a net uses fewer primitives than allowed."""
+    if tuple(used) == tuple(allowed):
+        return ""
+    return f" ({used[0]}-only net)" if len(used) == 1 else f" ({'+'.join(used)} net)"
 
 
 def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
     """A policy by name (see the module docstring) for ``env``."""
     if name == "oracle":
-        return OracleBaseline(env)
+        from mpg_envs.policies import OraclePolicy
+
+        return OraclePolicy(env)
     if name == "random":
         return RandomBaseline(env, seed)
     if name == "grasp-only":
         return GraspOnlyBaseline(env)
     if name == "shipped":
-        policy = NetworkPolicy(shipped_checkpoint(), env, **kwargs)
-        policy.name = "shipped:" + SHIPPED_CHECKPOINT
-        return policy
+        return NetworkPolicy(shipped_checkpoint(), env, name="shipped:" + SHIPPED_CHECKPOINT, **kwargs)
     path = Path(name)
     if path.suffix == ".safetensors" or path.exists():
         return NetworkPolicy(path, env, **kwargs)

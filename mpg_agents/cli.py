@@ -11,7 +11,7 @@ import json
 import os
 import sys
 import tomllib
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -56,7 +56,7 @@ def _check_checkpoint(path: str | None) -> None:
         return
     if not Path(path).is_file():
         raise UsageError(f"checkpoint {path!r} does not exist")
-    from mpg_agents.mpgnet import read_checkpoint_header
+    from mpg_agents.weights import read_checkpoint_header
 
     try:
         read_checkpoint_header(path)
@@ -68,57 +68,50 @@ def _check_checkpoint(path: str | None) -> None:
 def train_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="mpg-train", description="Train MPGNet: one stage (--env) or the five-stage pipeline (--pipeline).")
     what = parser.add_mutually_exclusive_group(required=True)
-    what.add_argument("--env", help="one stage, e.g. MPG-Stage4-v0")
+    what.add_argument("--env", help="one stage, by its env id, e.g. MPG-Stage4-v0")
     what.add_argument("--pipeline", action="store_true", help="run Stages I-V in order (with Q*_g calibration after II)")
     parser.add_argument("--init", help="start from this MPGNet checkpoint (safetensors)")
-    parser.add_argument("--steps", type=int, help="iterations (one stage), or iterations of every stage (pipeline)")
     parser.add_argument("--out", default="runs/mpg", help="run directory (resumes if it holds a saved state)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--config", help="JSON or TOML file of training settings (TrainConfig fields; pipeline: also stage_steps, stages, ...)")
+    parser.add_argument(
+        "--config",
+        help="JSON or TOML file of training settings: TrainConfig fields, and 'stages': {name: {TrainingStage field: value}}",
+    )
+    # Flags named after TrainConfig fields override the config file (dest = the field's name).
+    parser.add_argument("--steps", type=int, help="iterations (one stage), or iterations of every stage (pipeline)")
+    parser.add_argument("--seed", type=int, help="default 0")
     parser.add_argument("--variant", choices=("small", "large"), help="MobileNetV3 trunks (default small)")
-    parser.add_argument("--num-objects", type=int)
+    parser.add_argument("--num-objects", type=int, help="a fixed object count (default: the stage's)")
     parser.add_argument("--q-star", type=float, help="the grasp threshold Q*_g (default: from --init or calibrated)")
     parser.add_argument("--discriminator", help="fixed grasp-net checkpoint scoring states (Stages III-V)")
-    parser.add_argument("--stages", help="pipeline: which stages, e.g. 1,2")
-    parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: start at Stage V from scratch")
+    parser.add_argument("--stages", help="pipeline: which stages, by name or position, e.g. 1,2")
+    parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: only Stage V, from scratch")
     parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")
     args = parser.parse_args(argv)
     try:
         from mpg_agents.learner import Learner, TrainConfig, json_safe
+        from mpg_agents import training_stages as ts
 
         settings = _read_config(args.config)
-        pipeline_keys = {"stage_steps", "stages", "multistage", "alternating", "stage3_objects", "alternate_every"}
-        pipe_settings = {k: settings.pop(k) for k in list(settings) if k in pipeline_keys}
+        stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
         base = TrainConfig.from_dict(settings)
-        overrides: dict[str, Any] = {"seed": args.seed}
-        for key, value in (("variant", args.variant), ("num_objects", args.num_objects), ("q_star", args.q_star), ("discriminator", args.discriminator)):
-            if value is not None:
-                overrides[key] = value
-        base = replace(base, **overrides)
+        flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name, None) is not None}
+        base = replace(base, **flags)
         _check_checkpoint(args.init)
         _check_checkpoint(args.discriminator)
         if args.pipeline:
             from mpg_agents.pipeline import PipelineConfig, run_pipeline
 
-            pcfg = PipelineConfig(base=base, **{k: (tuple(v) if isinstance(v, list) else v) for k, v in pipe_settings.items()})
             if args.stages:
-                try:
-                    pcfg.stages = tuple(f"Stage{int(s)}" for s in args.stages.split(","))
-                except ValueError as exc:
-                    raise UsageError(f"--stages takes stage numbers like 1,2; got {args.stages!r}") from exc
-                bad = [s for s in pcfg.stages if s not in pcfg.stage_steps]
-                if bad:
-                    raise UsageError(f"unknown stages {bad}; valid 1..5")
-            if args.steps is not None:
-                pcfg.stage_steps = {k: args.steps for k in pcfg.stage_steps}
-            pcfg.multistage = pcfg.multistage and not args.no_multistage
-            pcfg.alternating = pcfg.alternating and not args.no_alternating
-            summary = run_pipeline(pcfg, args.out, init=args.init)
+                stages = ts.select_stages(stages, args.stages.split(","))
+            if args.no_multistage:
+                stages = ts.without_multistage(stages)
+            if args.no_alternating:
+                stages = ts.without_alternation(stages)
+            summary = run_pipeline(PipelineConfig(base=base, stages=stages), args.out, init=args.init)
             print(json.dumps(summary, indent=1))
             return 0
         _check_env_id(args.env)
-        cfg = replace(base, env_id=args.env, **({"steps": args.steps} if args.steps is not None else {}))
-        learner = Learner(cfg, args.out, init=args.init)
+        learner = Learner(base, ts.stage_for_env(args.env, stages), args.out, init=args.init)
         summary = learner.run()
         print(json.dumps(json_safe(summary)))
         return 0

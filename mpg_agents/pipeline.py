@@ -1,14 +1,14 @@
-"""The five-stage training pipeline of the paper (Section III-C) and its ablations.
+"""The paper's multi-stage training pipeline (Section III-C), driven by the stage table.
 
-I target-agnostic grasping (Stage1) -> II target-oriented grasping (Stage2) -> calibrate
-Q*_g from the grasp net -> III moving (Stage3; the Stage II grasp net, frozen, scores states
-for the rewards; objects grow from 2) -> IV pushing (Stage4; grasp and move nets frozen) ->
-V joint training (Stage5; the three nets trained in turn, the other two frozen).
+The stages run in order (:data:`~mpg_agents.training_stages.TRAINING_STAGES` by default), each
+starting from the previous stage's weights. After a stage that ``calibrates_q_star`` the
+threshold Q*_g is taken from its successful grasps and its weights become the discriminator of
+the stages that ``use_discriminator``. Ablations are changes of the table
+(:func:`~mpg_agents.training_stages.without_multistage`,
+:func:`~mpg_agents.training_stages.without_alternation`).
 
-Ablations: ``multistage=False`` starts at V from scratch ("w/o mt"); ``alternating=False``
-trains all three nets together in V with actions chosen by the largest Q ("w/o at").
-Each stage writes to ``out/<stage>/`` and resumes there if interrupted; finished stages are
-skipped on a re-run.
+Each stage writes to ``out/<stage name>/`` and resumes there if interrupted; finished stages
+are skipped on a re-run.
 """
 
 from __future__ import annotations
@@ -20,44 +20,15 @@ from pathlib import Path
 from typing import Any, Callable
 
 from mpg_agents.learner import Learner, TrainConfig, json_safe
+from mpg_agents.training_stages import TRAINING_STAGES, TrainingStage
 
 
 @dataclass
 class PipelineConfig:
-    """Iterations per stage and the ablation switches (one base TrainConfig for the rest)."""
+    """The stages to run and one base :class:`TrainConfig` for the algorithm's settings."""
 
     base: TrainConfig = field(default_factory=TrainConfig)
-    stage_steps: dict[str, int] = field(
-        default_factory=lambda: {"Stage1": 500, "Stage2": 1000, "Stage3": 600, "Stage4": 600, "Stage5": 1500}
-    )
-    stages: tuple[str, ...] = ("Stage1", "Stage2", "Stage3", "Stage4", "Stage5")
-    multistage: bool = True
-    alternating: bool = True
-    stage3_objects: tuple[int, int] = (2, 4)  # curriculum: from 2 objects to this many
-    alternate_every: int = 50
-
-
-def stage_configs(cfg: PipelineConfig) -> list[TrainConfig]:
-    """The per-stage training configs, in order (the ablations change which and how)."""
-    b = cfg.base
-    stages = cfg.stages if cfg.multistage else ("Stage5",)
-    out = []
-    for name in stages:
-        steps = cfg.stage_steps[name]
-        common = dict(env_id=f"MPG-{name}-v0", steps=steps, epsilon_decay_steps=steps)
-        if name in ("Stage1", "Stage2"):
-            out.append(replace(b, **common, trainable=("grasp",)))
-        elif name == "Stage3":
-            start, end = cfg.stage3_objects
-            out.append(replace(b, **common, trainable=("move",), num_objects_start=start, num_objects=end))
-        elif name == "Stage4":
-            out.append(replace(b, **common, trainable=("push",)))
-        elif name == "Stage5":
-            if cfg.alternating:
-                out.append(replace(b, **common, trainable=("move", "push", "grasp"), alternate_every=cfg.alternate_every))
-            else:
-                out.append(replace(b, **common, trainable=("move", "push", "grasp"), coordination="max_q"))
-    return out
+    stages: tuple[TrainingStage, ...] = TRAINING_STAGES
 
 
 def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
@@ -67,22 +38,19 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
     summary: dict[str, Any] = {}
     weights = init
     q_star = cfg.base.q_star
-    discriminator: str | None = None
-    for stage_cfg in stage_configs(cfg):
-        name = stage_cfg.env_id.split("-")[1]
-        stage_cfg = replace(stage_cfg, q_star=q_star)
-        if name in ("Stage3", "Stage4", "Stage5") and discriminator is not None:
-            stage_cfg = replace(stage_cfg, discriminator=discriminator)
-        stage_dir = out / name
+    discriminator: str | None = cfg.base.discriminator
+    for stage in cfg.stages:
+        stage_cfg = replace(cfg.base, q_star=q_star, discriminator=discriminator if stage.uses_discriminator else None)
+        stage_dir = out / stage.name
         done = stage_dir / "done.json"
         if done.is_file():
-            log(f"{name}: already finished, skipping")
+            log(f"{stage.name}: already finished, skipping")
             result = json.loads(done.read_text())
         else:
-            log(f"{name}: {stage_cfg.steps} iterations, training {stage_cfg.trainable}, init {weights}")
-            learner = Learner(stage_cfg, stage_dir, init=weights, log=log)
+            learner = Learner(stage_cfg, stage, stage_dir, init=weights, log=log)
+            log(f"{stage.name}: {learner.steps} iterations, training {learner.trainable}, init {weights}")
             result = learner.run()
-            if name == "Stage2":
+            if stage.calibrates_q_star:
                 # Q*_g: where the Q of successful target grasps settled (paper, Stage II).
                 result["q_star"] = learner.calibrated_q_star()
                 if not math.isnan(result["q_star"]):
@@ -90,13 +58,12 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
                     learner.save_state()
             result = json_safe(result)
             done.write_text(json.dumps(result))
-        summary[name] = result
+        summary[stage.name] = result
         weights = str(stage_dir / "weights.safetensors")
-        if name == "Stage2":
+        if stage.calibrates_q_star:
             q_star = float(result["q_star"]) if result.get("q_star") is not None else float("nan")
             discriminator = weights
     summary["q_star"] = None if math.isnan(q_star) else q_star
     summary["final_weights"] = weights
     (out / "pipeline.json").write_text(json.dumps(json_safe(summary), indent=1))
     return summary
-

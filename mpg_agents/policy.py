@@ -4,30 +4,22 @@
 the flat Q vector in the env's action order (C order over primitive, rotation, row, col,
 primitives in the env's allowed subset of ``move, push, grasp``).
 
-Coordination (``predict`` and the greedy action SB3's DQN takes while collecting):
+A decision (``predict``, :meth:`MPGNetPolicy.decide`) picks the primitive with
+:func:`mpg_agents.coordination.choose_primitive` and then the best pixel and rotation of that
+primitive's Q maps; only the branches the rule needs are computed. Move and grasp act inside
+the rough target region (:mod:`mpg_agents.regions`): outside it their Q is 0 by construction,
+which must not win over a negative Q inside it.
 
-- ``"workflow"`` (paper, Section III-C): target occluded -> move; else grasp when the best
-  grasp Q inside the target region is at least Q*_g; else push. Only the branches the
-  decision needs are computed (mask trunk + move; or mask trunk + grasp, + push when the
-  target is not graspable). Until Q*_g is calibrated (NaN) the grasp/push choice falls back
-  to the larger of the best grasp Q and the best push Q; the occlusion rule still applies
-  because it needs no threshold. Primitives the env does not allow are skipped.
-- ``"max_q"``: the action with the largest Q over all allowed primitives (the paper's
-  "without alternating training" ablation).
-
-Move and grasp actions are chosen inside the rough target mask (the target's bounding
-rectangle): outside it their Q is 0 by construction, which must not win over a negative Q
-inside it.
+A network may lack branches the env allows (a grasp-only checkpoint on ``MPG-Occluded-v0``):
+it acts with the primitives it has (:attr:`MPGQNetwork.usable_primitives`); the others get
+Q = -inf in the flat vector and are never chosen.
 """
 
 from __future__ import annotations
 
-import math
-import warnings
 from pathlib import Path
 from typing import Any, Mapping, NamedTuple, Sequence
 
-import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.policies import BasePolicy
@@ -35,56 +27,17 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from torch import Tensor, nn
 
-from mpg_agents.mpgnet import (
-    ROUGH_MASKED,
-    EncodedObs,
-    MPGNet,
-    MPGNetConfig,
-    flat_q,
-    load_mpgnet_weights,
-    read_checkpoint_header,
-    region_max,
-    save_mpgnet,
-)
-from mpg_envs.actions import PRIMITIVES, check_primitives, encode_action
-
-COORDINATIONS: tuple[str, ...] = ("workflow", "max_q")
-"""Ways to pick the primitive: the paper's workflow, or the plain max over the Q maps."""
+from mpg_agents.coordination import check_coordination, choose_primitive, usable_primitives
+from mpg_agents.grasp_scorer import GraspScorer
+from mpg_agents.mpgnet import EncodedObs, MPGNet, flat_q
+from mpg_agents.mpgnet_config import ROUGH_MASKED, MPGNetConfig
+from mpg_agents.regions import region_max
+from mpg_agents.spaces import check_observation_space, resolve_primitives
+from mpg_agents.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet
+from mpg_envs.actions import check_primitives, encode_action
 
 PAPER_OPTIMIZER_KWARGS: dict[str, Any] = {"weight_decay": 2.0**-5, "betas": (0.9, 0.99)}
 """Adam settings of the paper (the learning rate, 1e-4, comes from the algorithm)."""
-
-
-def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | None = None) -> tuple[str, ...]:
-    """The primitives an action space indexes, in canonical order.
-
-    Read from ``action_space.primitives`` (``mpg_envs.actions.PixelActionSpace``), else from the
-    ``primitives`` argument, else inferred from the size: 3 -> all, 2 -> push and grasp; a
-    one-primitive space is ambiguous and raises.
-    """
-    if not isinstance(action_space, spaces.Discrete):
-        raise TypeError(f"MPGNet needs a Discrete pixel action space, got {action_space}")
-    declared = getattr(action_space, "primitives", None)
-    if declared is not None:
-        found = check_primitives(declared)
-        if primitives is not None and tuple(primitives) != found:
-            raise ValueError(f"primitives={tuple(primitives)} contradicts the action space's primitives {found}")
-        return found
-    if primitives is not None:
-        return check_primitives(primitives)
-    per = 16 * 224 * 224
-    n = int(action_space.n)
-    if n % per:
-        raise ValueError(f"action space Discrete({n}) is not P * 16 * 224 * 224 pixel actions")
-    count = n // per
-    if count == 3:
-        return PRIMITIVES
-    if count == 2:
-        return ("push", "grasp")
-    raise ValueError(
-        f"cannot tell which primitive a {count}-primitive action space Discrete({n}) uses; "
-        f"pass primitives=(...) in policy_kwargs, one of {PRIMITIVES}"
-    )
 
 
 class Decision(NamedTuple):
@@ -118,11 +71,10 @@ class MPGQNetwork(QNetwork):
         q_star: float = float("nan"),
     ) -> None:
         BasePolicy.__init__(self, observation_space, action_space, features_extractor=None, normalize_images=False)
-        _check_observation_space(observation_space, net_config.heightmap_size)
+        check_observation_space(observation_space, net_config.heightmap_size)
         self.action_primitives = check_primitives(action_primitives)
-        not_built = [p for p in self.action_primitives if p not in net_config.primitives]
-        if not_built:
-            raise ValueError(f"the network lacks branches {not_built} the action space needs {self.action_primitives}")
+        # What the coordination may choose: the env's primitives the network has a branch for.
+        self.usable_primitives = usable_primitives(self.action_primitives, net_config.primitives)
         r, s = net_config.num_rotations, net_config.heightmap_size
         expected = len(self.action_primitives) * r * s * s
         if int(action_space.n) != expected:
@@ -130,9 +82,7 @@ class MPGQNetwork(QNetwork):
                 f"action space Discrete({action_space.n}) does not match primitives {self.action_primitives} "
                 f"x {r} rotations x {s} x {s} = {expected}"
             )
-        if coordination not in COORDINATIONS:
-            raise ValueError(f"coordination must be one of {COORDINATIONS}, got {coordination!r}")
-        self.coordination = coordination
+        self.coordination = check_coordination(coordination)
         self.net_config = net_config
         self.mpgnet = MPGNet(net_config)
         # float64 so a calibrated value such as 1.85 round-trips exactly through saves.
@@ -140,12 +90,17 @@ class MPGQNetwork(QNetwork):
 
     # ------------------------------------------------------------ Q values
     def forward(self, obs: PyTorchObs) -> Tensor:
-        """Flat Q ``(B, P * R * H * W)`` in the env's action order."""
-        return flat_q(self.mpgnet(obs, self.action_primitives), self.action_primitives)
+        """Flat Q ``(B, P * R * H * W)`` in the env's action order (-inf for a missing branch)."""
+        return flat_q(self._with_missing(self.mpgnet(obs, self.usable_primitives)), self.action_primitives)
 
     def q_maps(self, obs: PyTorchObs) -> dict[str, Tensor]:
-        """``{primitive: (B, R, H, W)}`` for the env's primitives."""
-        return self.mpgnet(obs, self.action_primitives)
+        """``{primitive: (B, R, H, W)}`` for the usable primitives."""
+        return self.mpgnet(obs, self.usable_primitives)
+
+    def _with_missing(self, maps: Mapping[str, Tensor]) -> dict[str, Tensor]:
+        """``maps`` plus -inf maps for the env's primitives this network has no branch for."""
+        some = next(iter(maps.values()))
+        return {p: maps[p] if p in maps else torch.full_like(some, float("-inf")) for p in self.action_primitives}
 
     def split_actions(self, actions: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Flat actions ``(B,)``/``(B, 1)`` -> primitive index, rotation, row, col tensors."""
@@ -167,24 +122,28 @@ class MPGQNetwork(QNetwork):
         pass, and batch norm statistics come from those inputs alone.
         """
         prim, rot, row, col = self.split_actions(actions)
+        lacking = sorted({self.action_primitives[i] for i in prim.tolist()} - set(self.usable_primitives))
+        if lacking:
+            raise ValueError(f"actions use {lacking}, for which this network has no branch ({self.usable_primitives})")
         q = self.mpgnet.chosen_q(obs, self.action_primitives, prim, rot)
         b = torch.arange(q.shape[0], device=q.device)
         return q[b, row.to(q.device), col.to(q.device)].unsqueeze(1)
 
     def masked_flat_q(self, maps: Mapping[str, Tensor], region: Tensor) -> Tensor:
-        """Flat Q for choosing actions: move/grasp set to -inf outside the target region."""
-        parts = []
-        for p in self.action_primitives:
-            q = maps[p]
-            if self.net_config.rough_mask and p in ROUGH_MASKED:
-                q = q.masked_fill(~region[:, None], float("-inf"))
-            parts.append(q)
-        return torch.stack(parts, dim=1).flatten(1)
+        """Flat Q for choosing actions: move/grasp set to -inf outside the target region, and
+        primitives without a branch -inf everywhere."""
+        return flat_q(self._with_missing({p: self._actable(maps[p], p, region[:, None]) for p in maps}), self.action_primitives)
+
+    def _actable(self, q: Tensor, primitive: str, region: Tensor) -> Tensor:
+        """``q`` with -inf where ``primitive`` may not act (move/grasp: outside the target region)."""
+        if self.net_config.rough_mask and primitive in ROUGH_MASKED:
+            return q.masked_fill(~region, float("-inf"))
+        return q
 
     def greedy_actions(self, obs: PyTorchObs) -> Tensor:
         """Max-Q actions ``(B,)`` over all allowed primitives (region-restricted for move/grasp)."""
         enc = self.mpgnet.encode(obs)
-        maps = self.mpgnet.maps_from(enc, self.action_primitives)
+        maps = self.mpgnet.maps_from(enc, self.usable_primitives)
         return self.masked_flat_q(maps, enc.region).argmax(dim=1)
 
     # ---------------------------------------------------------- decisions
@@ -199,50 +158,31 @@ class MPGQNetwork(QNetwork):
         return decisions
 
     def _decide_one(self, enc: EncodedObs, primitive: str | None = None) -> Decision:
-        allowed = self.action_primitives
-        q_star = float(self.q_star)
-        occluded = bool(enc.occluded[0]) if enc.occluded is not None else False
         maps: dict[str, Tensor] = {}
+        actable: dict[str, Tensor] = {}
 
         def run(p: str) -> Tensor:
+            """``p``'s ``(R, H, W)`` Q maps, -inf where it may not act (each branch run once)."""
             if p not in maps:
                 maps[p] = self.mpgnet.maps_from(enc, (p,))[p][0]
-            return maps[p]
+                actable[p] = self._actable(maps[p], p, enc.region[0][None])
+            return actable[p]
 
         if primitive is not None:
-            if primitive not in allowed:
-                raise ValueError(f"primitive {primitive!r} is not allowed here; allowed: {allowed}")
-            candidates = [primitive]
-        elif self.coordination == "max_q" or len(allowed) == 1:
-            candidates = list(allowed)
-        elif "move" in allowed and occluded:
-            candidates = ["move"]
-        elif "grasp" in allowed and "push" in allowed:
-            score = float(region_max(run("grasp")[None], enc.region)[0])
-            if math.isnan(q_star):
-                candidates = ["grasp", "push"]  # uncalibrated: larger of best grasp and best push
-            else:
-                candidates = ["grasp"] if score >= q_star else ["push"]
+            if primitive not in self.usable_primitives:
+                raise ValueError(f"primitive {primitive!r} is not allowed here; allowed: {self.usable_primitives}")
         else:
-            # Not occluded and only one of grasp/push allowed (e.g. a move+grasp env).
-            candidates = [p for p in allowed if p != "move"] or ["move"]
-
-        best: tuple[float, str, int, int, int] | None = None
-        for p in candidates:
-            q = run(p)
-            if self.net_config.rough_mask and p in ROUGH_MASKED:
-                q = q.masked_fill(~enc.region[0][None], float("-inf"))
-            flat = int(q.flatten().argmax())
-            value = float(q.flatten()[flat])
-            rot, rest = divmod(flat, q.shape[1] * q.shape[2])
-            row, col = divmod(rest, q.shape[2])
-            if best is None or value > best[0]:
-                best = (value, p, rot, row, col)
-        assert best is not None
-        value, p, rot, row, col = best
+            occluded = bool(enc.occluded[0]) if enc.occluded is not None else False
+            best = lambda p: float(run(p).max())  # noqa: E731
+            primitive = choose_primitive(self.coordination, self.usable_primitives, occluded, float(self.q_star), best)
+        q = run(primitive)
+        flat = int(q.flatten().argmax())
+        value = float(q.flatten()[flat])
+        rot, rest = divmod(flat, q.shape[1] * q.shape[2])
+        row, col = divmod(rest, q.shape[2])
         grasp_score = float(region_max(maps["grasp"][None], enc.region)[0]) if "grasp" in maps else float("nan")
-        action = encode_action(allowed, p, rot, row, col, size=self.net_config.heightmap_size)
-        return Decision(action, p, rot, row, col, value, grasp_score, maps)
+        action = encode_action(self.action_primitives, primitive, rot, row, col, size=self.net_config.heightmap_size)
+        return Decision(action, primitive, rot, row, col, value, grasp_score, maps)
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> Tensor:
         # Q-greedy either way: SB3's DQN does its epsilon-greedy exploration outside the policy.
@@ -313,8 +253,7 @@ class MPGNetPolicy(DQNPolicy):
         if unused:
             raise TypeError(f"MPGNetPolicy got unexpected keyword arguments {sorted(unused)}")
         self.action_primitives = resolve_primitives(action_space, primitives)
-        if coordination not in COORDINATIONS:
-            raise ValueError(f"coordination must be one of {COORDINATIONS}, got {coordination!r}")
+        check_coordination(coordination)
         built = check_primitives(branches) if branches is not None else self.action_primitives
         if isinstance(net_config, MPGNetConfig):
             cfg = MPGNetConfig.from_dict({**net_config.to_dict(), "primitives": list(built)})
@@ -378,6 +317,11 @@ class MPGNetPolicy(DQNPolicy):
         )
         return data
 
+    @property
+    def usable_primitives(self) -> tuple[str, ...]:
+        """The env's primitives this policy's network has a branch for (what it acts with)."""
+        return self.q_net.usable_primitives
+
     # ------------------------------------------------------------ Q*_g
     @property
     def q_star(self) -> float:
@@ -392,9 +336,7 @@ class MPGNetPolicy(DQNPolicy):
 
     def set_coordination(self, coordination: str) -> None:
         """Switch between ``"workflow"`` and ``"max_q"``."""
-        if coordination not in COORDINATIONS:
-            raise ValueError(f"coordination must be one of {COORDINATIONS}, got {coordination!r}")
-        self.coordination = coordination
+        self.coordination = check_coordination(coordination)
         self.q_net.coordination = coordination
         self.q_net_target.coordination = coordination
 
@@ -442,60 +384,12 @@ class MPGNetPolicy(DQNPolicy):
         """A policy built with the checkpoint's own configuration (variant, head, trunk depth)."""
         header = read_checkpoint_header(path)
         cfg = MPGNetConfig.from_checkpoint(header["config"])
-        kwargs.setdefault("branches", None)
+        # Build the branches the file has that the env can use (an error names none usable).
+        kwargs.setdefault("branches", usable_primitives(resolve_primitives(action_space), header["primitives"]))
         policy = cls(observation_space, action_space, lambda _: 1e-4, variant=cfg.variant, net_config=cfg, **kwargs)
         policy.load_weights(path, strict_branches=True)
         return policy
 
 
-class GraspScorer:
-    """``callable(obs) -> float``: the best grasp Q inside the target region (for the envs).
-
-    Runs the grasp branch in eval mode without gradients and restores the network's mode.
-    """
-
-    def __init__(self, net: MPGNet) -> None:
-        if "grasp" not in net.primitives:
-            raise ValueError(f"the grasp scorer needs a grasp branch; this MPGNet has {net.primitives}")
-        self.net = net
-
-    @classmethod
-    def from_weights(cls, path: str | Path) -> "GraspScorer":
-        """A scorer from a saved MPGNet (e.g. the Stage II grasp net)."""
-        from mpg_agents.mpgnet import load_mpgnet
-
-        net, _ = load_mpgnet(path, primitives=("grasp",))
-        return cls(net)
-
-    def __call__(self, obs: Mapping[str, Any]) -> float:
-        was_training = self.net.training
-        self.net.eval()
-        try:
-            with torch.inference_mode():
-                return float(self.net.grasp_score(obs)[0])
-        finally:
-            self.net.train(was_training)
-
-
 def _batch_size(obs: Mapping[str, Tensor]) -> int:
     return int(next(iter(obs.values())).shape[0])
-
-
-def _check_observation_space(space: spaces.Space, size: int) -> None:
-    """Fail early, naming the key, when an env's observation space is not MPG-shaped."""
-    if not isinstance(space, spaces.Dict):
-        raise TypeError(f"MPGNetPolicy needs a Dict observation space with color/depth/mask, got {space}")
-    shapes = {
-        "color": ((size, size, 3), (3, size, size)),
-        "depth": ((size, size),),
-        "mask": ((size, size),),
-    }
-    for key, allowed in shapes.items():
-        if key not in space.spaces:
-            raise ValueError(f"observation space lacks {key!r}; MPGNet needs keys {sorted(shapes)}")
-        if tuple(space.spaces[key].shape) not in allowed:
-            raise ValueError(
-                f"observation space {key!r} has shape {space.spaces[key].shape}; expected one of {allowed}"
-            )
-    if space.spaces["color"].dtype != np.uint8:
-        warnings.warn("colour observations are not uint8; MPGNet reads them on the 0..255 scale", stacklevel=3)

@@ -231,6 +231,23 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
         self.max_priority = 1.0
         self._last_next = [None] * self.n_envs
 
+    def forget_last_frames(self) -> None:
+        """Share nothing with the last stored frame: the next :meth:`add` starts a fresh episode
+        (after :func:`mpg_agents.run_state.load_replay`, whose frames were not added here)."""
+        self._last_next = [None] * self.n_envs
+
+    @property
+    def rng_state(self) -> dict | None:
+        """The sampling generator's state (``None`` when the buffer was built without a seed)."""
+        return self._rng.bit_generator.state if self._rng is not None else None
+
+    @rng_state.setter
+    def rng_state(self, state: dict | None) -> None:
+        if (state is None) != (self._rng is None):
+            raise ValueError("a seeded buffer needs a generator state and an unseeded one none")
+        if self._rng is not None:
+            self._rng.bit_generator.state = state
+
     def sampling_probabilities(self) -> np.ndarray:
         """Probability of each stored transition, flat index ``pos * n_envs + env``."""
         p = self.priorities[: self.size()].reshape(-1) ** self.alpha

@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.mpgnet import MPGNet, MPGNetConfig, recompute_batch_norm_statistics
+from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics
+from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.policy import MPGNetPolicy
 
-from .scenes import random_scene
+from .fake_env import random_scene
 
 
 @pytest.fixture(autouse=True)
@@ -38,3 +40,19 @@ def small_net() -> MPGNet:
     net = MPGNet(MPGNetConfig.small())
     calibrate_bn(net, random_scene(np.random.default_rng(7), occluded=False))
     return net
+
+
+TINY = {"net_config": {"trunk_depth": 4}}
+"""A cheap network: small trunks cut after features.3 (output stride 8)."""
+
+
+@pytest.fixture(scope="session")
+def build_policy():
+    """Factory ``(observation_space, action_space, **kwargs) -> MPGNetPolicy``: the tiny net,
+    seeded, as the policy and env tests build it."""
+
+    def build(observation_space, action_space, **kwargs) -> MPGNetPolicy:
+        torch.manual_seed(0)
+        return MPGNetPolicy(observation_space, action_space, lambda _: 1e-4, **{**TINY, **kwargs})
+
+    return build

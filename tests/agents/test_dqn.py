@@ -1,4 +1,4 @@
-"""MPGDQN's training step: double-DQN targets and surprise priorities."""
+"""MPGDQN's training step (the shared td_step): double-DQN targets and surprise priorities."""
 
 from __future__ import annotations
 
@@ -10,18 +10,20 @@ import torch
 from stable_baselines3.common.logger import configure
 
 from mpg_agents import MPGDQN, MPGNetPolicy
-from mpg_agents.dqn import td_targets
+from mpg_agents.td_step import td_targets
 from mpg_envs.actions import encode_action
 
-from .scenes import FakeMPGEnv, random_scene
-
-TINY = {"net_config": {"trunk_depth": 4}}
+from .conftest import TINY
+from .fake_env import FakeMPGEnv, random_scene
 
 
 @pytest.fixture(scope="module")
 def model() -> MPGDQN:
     env = FakeMPGEnv(("push", "grasp"))
-    model = MPGDQN(MPGNetPolicy, env, buffer_size=20, learning_starts=0, batch_size=2, seed=0, policy_kwargs=dict(TINY))
+    # No grasp symmetry: the expected surprise below is computed on the sampled transitions alone.
+    model = MPGDQN(
+        MPGNetPolicy, env, buffer_size=20, learning_starts=0, batch_size=2, seed=0, grasp_symmetry=False, policy_kwargs=dict(TINY)
+    )
     model.set_logger(configure(None, []))
     rng = np.random.default_rng(0)
     obs = random_scene(rng, occluded=False)

@@ -16,6 +16,8 @@ mpg_envs = pytest.importorskip("mpg_envs")
 from mpg_agents import MPGDQN, MPGNetPolicy, PrioritizedHeightmapReplayBuffer  # noqa: E402
 from mpg_envs.actions import decode_action  # noqa: E402
 
+from .conftest import TINY  # noqa: E402
+
 EXPECTED = {
     "MPG-Stage1-v0": ("grasp",),
     "MPG-Stage2-v0": ("grasp",),
@@ -24,7 +26,6 @@ EXPECTED = {
     "MPG-Stage5-v0": ("move", "push", "grasp"),
     "MPG-Occluded-v0": ("move", "push", "grasp"),
 }
-TINY = {"net_config": {"trunk_depth": 4}}
 
 
 def make(env_id: str, **kwargs) -> gym.Env:
@@ -37,12 +38,11 @@ def make(env_id: str, **kwargs) -> gym.Env:
 
 
 @pytest.mark.parametrize("env_id", list(EXPECTED))
-def test_policy_acts_on_every_env(env_id):
+def test_policy_acts_on_every_env(env_id, build_policy):
     env = make(env_id)
     try:
         obs, _ = env.reset(seed=0)
-        torch.manual_seed(0)
-        policy = MPGNetPolicy(env.observation_space, env.action_space, lambda _: 1e-4, **TINY)
+        policy = build_policy(env.observation_space, env.action_space)
         assert policy.action_primitives == EXPECTED[env_id]
         action, _ = policy.predict(obs, deterministic=True)
         assert env.action_space.contains(int(action))
@@ -54,10 +54,9 @@ def test_policy_acts_on_every_env(env_id):
         env.close()
 
 
-def test_grasp_scorer_drives_stage4_rewards():
-    torch.manual_seed(0)
+def test_grasp_scorer_drives_stage4_rewards(build_policy):
     probe = make("MPG-Stage4-v0")
-    policy = MPGNetPolicy(probe.observation_space, probe.action_space, lambda _: 1e-4, **TINY)
+    policy = build_policy(probe.observation_space, probe.action_space)
     probe.close()
     scorer = policy.grasp_scorer()
     env = make("MPG-Stage4-v0", grasp_scorer=scorer)

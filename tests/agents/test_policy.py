@@ -12,20 +12,20 @@ from gymnasium import spaces
 from stable_baselines3 import DQN
 
 from mpg_agents import MPGDQN, MPGNetPolicy, PrioritizedHeightmapReplayBuffer
-from mpg_agents.mpgnet import region_max
-from mpg_agents.policy import resolve_primitives
+from mpg_agents.regions import region_max, target_region
+from mpg_agents.spaces import resolve_primitives
 from mpg_envs.actions import PixelActionSpace, decode_action
 
-from .conftest import calibrate_bn
-from .scenes import FakeMPGEnv, observation_space, random_scene
-
-# A cheap network for the learning tests: small trunks cut after features.3 (output stride 8).
-TINY = {"net_config": {"trunk_depth": 4}}
+from .conftest import TINY, calibrate_bn
+from .fake_env import FakeMPGEnv, observation_space, random_scene
 
 
-def make_policy(primitives=("move", "push", "grasp"), **kwargs) -> MPGNetPolicy:
-    torch.manual_seed(0)
-    return MPGNetPolicy(observation_space(), PixelActionSpace(primitives), lambda _: 1e-4, **kwargs)
+@pytest.fixture(scope="module")
+def make_policy(build_policy):
+    """A policy on the fake env's spaces for ``primitives``."""
+    return lambda primitives=("move", "push", "grasp"), **kwargs: build_policy(
+        observation_space(), PixelActionSpace(primitives), **kwargs
+    )
 
 
 def test_resolve_primitives():
@@ -42,7 +42,7 @@ def test_resolve_primitives():
         MPGNetPolicy(observation_space(), spaces.Discrete(16 * 224 * 224), lambda _: 1e-4, primitives=("move", "grasp"))
 
 
-def test_policy_rejects_bad_configuration():
+def test_policy_rejects_bad_configuration(make_policy):
     with pytest.raises(ValueError, match="normalize_images=False"):
         make_policy(normalize_images=True)
     with pytest.raises(ValueError, match="coordination"):
@@ -54,7 +54,7 @@ def test_policy_rejects_bad_configuration():
 
 
 @pytest.fixture(scope="module")
-def stage5_policy() -> MPGNetPolicy:
+def stage5_policy(make_policy) -> MPGNetPolicy:
     policy = make_policy()
     obs = {
         k: torch.as_tensor(np.stack([random_scene(np.random.default_rng(i), occluded=False)[k] for i in range(1)]))
@@ -102,9 +102,7 @@ def test_workflow_coordination(stage5_policy, rng):
 
 
 def _region(scene):
-    from mpg_agents.mpgnet import MPGNet
-
-    return MPGNet.target_region(torch.as_tensor(scene["mask"])[None])
+    return target_region(torch.as_tensor(scene["mask"])[None])
 
 
 def test_max_q_coordination(stage5_policy, rng):
@@ -133,7 +131,7 @@ def test_predict_batches_and_rejects_bad_shapes(stage5_policy, rng):
         stage5_policy.predict(dict(scenes[0], depth=scenes[0]["depth"][:100]), deterministic=True)
 
 
-def test_safetensors_weights_roundtrip_and_mismatch(tmp_path, stage5_policy, rng):
+def test_safetensors_weights_roundtrip_and_mismatch(tmp_path, stage5_policy, rng, make_policy):
     path = tmp_path / "stage5.safetensors"
     stage5_policy.set_q_star(1.85)
     try:
@@ -224,7 +222,7 @@ def test_dqn_learns_saves_loads_predicts(tmp_path, algo):
         assert a1 == a2
 
 
-def test_imagenet_initialisation_reaches_every_trunk(tmp_path):
+def test_imagenet_initialisation_reaches_every_trunk(tmp_path, make_policy):
     from mpg_agents.mobilenet import MobileNetV3Features
 
     torch.manual_seed(1)

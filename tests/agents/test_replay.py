@@ -11,7 +11,7 @@ from stable_baselines3.common.type_aliases import DictReplayBufferSamples
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
 from mpg_envs.actions import PixelActionSpace
 
-from .scenes import observation_space, random_scene
+from .fake_env import observation_space, random_scene
 
 
 def make_buffer(size=50, n_envs=1, **kwargs) -> PrioritizedHeightmapReplayBuffer:

@@ -10,6 +10,7 @@ import torch
 from mpg_agents.cli import eval_main, plot_main, train_main
 from mpg_agents.learner import Learner, StopRequested, TrainConfig
 from mpg_agents.pipeline import PipelineConfig, run_pipeline
+from mpg_agents.training_stages import TRAINING_STAGES, with_overrides
 
 # A shallow trunk keeps every test fast; the code paths are the full ones.
 TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
@@ -21,12 +22,11 @@ def _quiet_threads():
 
 
 def test_tiny_pipeline_runs_stages_one_to_five(tmp_path):
-    cfg = PipelineConfig(
-        base=TrainConfig(**TINY),
-        stage_steps={f"Stage{i}": 2 for i in range(1, 6)},
-        stage3_objects=(2, 3),
-        alternate_every=1,
+    stages = with_overrides(
+        TRAINING_STAGES,
+        {s.name: {"iterations": 2} for s in TRAINING_STAGES} | {"Stage3": {"iterations": 2, "objects": [2, 3]}, "Stage5": {"iterations": 2, "alternate_every": 1}},
     )
+    cfg = PipelineConfig(base=TrainConfig(**TINY), stages=stages)
     summary = run_pipeline(cfg, tmp_path, log=lambda s: None)
     for i in range(1, 6):
         stage = tmp_path / f"Stage{i}"
@@ -39,8 +39,8 @@ def test_tiny_pipeline_runs_stages_one_to_five(tmp_path):
 
 
 def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
-    cfg = TrainConfig(env_id="MPG-Stage2-v0", steps=5, **TINY)
-    learner = Learner(cfg, tmp_path, log=lambda s: None)
+    cfg = TrainConfig(steps=5, **TINY)
+    learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
     original = learner.iteration
 
     def iteration_then_kill(obs):
@@ -55,7 +55,7 @@ def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
     killed = (learner.counters.iteration, learner.counters.episode, learner.replay.size())
     assert killed[0] == 3 and killed[2] == 3
 
-    resumed = Learner(cfg, tmp_path, log=lambda s: None)
+    resumed = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
     assert (resumed.counters.iteration, resumed.counters.episode, resumed.replay.size()) == killed
     assert resumed.replay.priorities[:3].tolist() == learner.replay.priorities[:3].tolist()
     for a, b in zip(resumed.net.state_dict().values(), learner.net.state_dict().values()):
@@ -68,8 +68,8 @@ def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
 
 def test_learning_steps_shrink_the_surprise_of_a_transition(tmp_path):
     # One stored transition; repeated steps on it must shrink |Q - y| (its priority).
-    cfg = TrainConfig(env_id="MPG-Stage2-v0", steps=1, learning_rate=1e-3, weight_decay=0.0, **{**TINY, "target_update_every": 1000})
-    learner = Learner(cfg, tmp_path, log=lambda s: None)
+    cfg = TrainConfig(steps=1, learning_rate=1e-3, weight_decay=0.0, **{**TINY, "target_update_every": 1000})
+    learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
     learner.run()
     assert learner.replay.size() == 1
     errors = []
@@ -104,7 +104,9 @@ def test_mpg_train_rejects_bad_input(tmp_path, capsys, argv, message):
 
 
 def test_checkpoint_of_another_architecture_is_refused(tmp_path, capsys):
-    from mpg_agents.mpgnet import MPGNet, MPGNetConfig, save_mpgnet
+    from mpg_agents.mpgnet import MPGNet
+    from mpg_agents.mpgnet_config import MPGNetConfig
+    from mpg_agents.weights import save_mpgnet
 
     other = tmp_path / "other.safetensors"
     save_mpgnet(MPGNet(MPGNetConfig.small(trunk_depth=3, primitives=("grasp",))), other)
@@ -121,20 +123,21 @@ def test_checkpoint_of_another_architecture_is_refused(tmp_path, capsys):
 
 
 def test_mpg_plot_draws_curves(tmp_path):
-    cfg = TrainConfig(env_id="MPG-Stage1-v0", steps=4, window=2, **TINY)
-    Learner(cfg, tmp_path, log=lambda s: None).run()
+    cfg = TrainConfig(steps=4, window=2, **TINY)
+    Learner(cfg, "MPG-Stage1-v0", tmp_path, log=lambda s: None).run()
     assert plot_main([str(tmp_path), "--window", "2"]) == 0
     png = tmp_path / "curves.png"
     assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
 
 
 def test_stage4_grasps_after_five_pushes(tmp_path):
-    cfg = TrainConfig(env_id="MPG-Stage4-v0", steps=1, epsilon_start=0.0, epsilon_end=0.0, **TINY)
-    learner = Learner(cfg, tmp_path, log=lambda s: None)
+    cfg = TrainConfig(steps=1, epsilon_start=0.0, epsilon_end=0.0, **TINY)
+    learner = Learner(cfg, "MPG-Stage4-v0", tmp_path, log=lambda s: None)
+    assert learner.stage.push_budget == 5  # from the stage table, not the env
     obs = learner._reset_episode()
     learner.counters.pushes_in_episode = 5
-    action, primitive, how, _ = learner.act(obs)
-    assert primitive == "grasp" and how == "greedy"
-    assert learner.env.unwrapped.action_space.decode(action).primitive == "grasp"
+    choice = learner.act(obs)
+    assert choice.primitive == "grasp" and choice.how == "greedy"
+    assert learner.env.unwrapped.action_space.decode(choice.action).primitive == "grasp"
     with pytest.raises(ValueError, match="not allowed"):
         learner.policy.decide(obs, "move")

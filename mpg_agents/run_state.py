@@ -1,4 +1,5 @@
-"""Resumable training state on disk, without pickle.
+"""A training run's resumable state on disk (not the network's weight format: see
+:mod:`mpg_agents.weights`), without pickle.
 
 A run directory holds ``weights.safetensors`` (the online MPGNet, usable on its own) and a
 ``state/`` folder: the target network (safetensors), the optimiser (tensors in safetensors,
@@ -19,7 +20,10 @@ import numpy as np
 import torch
 from safetensors.torch import load_file, save_file
 
+from mpg_agents.mpgnet import MPGNet
 from mpg_agents.replay import Frame, PrioritizedHeightmapReplayBuffer
+from mpg_agents.weights import chmod_by_umask
+from mpg_agents.weights import load_mpgnet_weights, save_mpgnet
 
 STATE_FORMAT = "mpg-train-state-v1"
 
@@ -81,7 +85,7 @@ def load_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
         buffer.max_priority = float(data["max_priority"])
     buffer.pos, buffer.full = pos, bool(full)
     # The next add starts a fresh episode: nothing to share with the last stored frame.
-    buffer._last_next = [None] * buffer.n_envs
+    buffer.forget_last_frames()
 
 
 def save_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
@@ -96,6 +100,7 @@ def save_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
             else:
                 scalars["state"][str(pid)][name] = value
     save_file(tensors, str(folder / "optimizer.safetensors"))
+    chmod_by_umask(folder / "optimizer.safetensors")
     (folder / "optimizer.json").write_text(json.dumps(scalars))
 
 
@@ -135,14 +140,50 @@ def state_folder(run_dir: Path) -> Path | None:
     return None
 
 
-def export_weights(src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True) -> Path:
-    """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
-    the shared mask trunk), floating tensors stored as float16 (loading casts them back)."""
-    from mpg_agents.mpgnet import load_mpgnet, save_mpgnet
+def save_run_state(
+    run_dir: Path,
+    *,
+    online: MPGNet,
+    target: MPGNet,
+    q_star: float,
+    optimizer: torch.optim.Optimizer,
+    replay: PrioritizedHeightmapReplayBuffer,
+    rng: np.random.Generator,
+    counters: dict[str, Any],
+    config: dict[str, Any],
+) -> None:
+    """Write everything a run needs to continue (atomically, see :func:`write_state`)."""
 
-    net, header = load_mpgnet(src, primitives=primitives)
-    if half:
-        net = net.half()
-    q_star = header.get("q_star")
-    save_mpgnet(net, dst, q_star=float("nan") if q_star is None else float(q_star), extra={**header.get("extra", {}), "exported_from": str(src), "float16": half})
-    return Path(dst)
+    def writer(tmp: Path) -> None:
+        save_mpgnet(online, tmp / "online.safetensors", q_star=q_star)
+        save_mpgnet(target, tmp / "target.safetensors", q_star=q_star)
+        save_optimizer(optimizer, tmp)
+        save_replay(replay, tmp / "replay.npz")
+        rngs = {"numpy": rng.bit_generator.state, "replay": replay.rng_state, "torch": torch.get_rng_state().tolist()}
+        (tmp / "rng.json").write_text(json.dumps(rngs))
+        (tmp / "counters.json").write_text(json.dumps(counters))
+        (tmp / "config.json").write_text(json.dumps(config))
+
+    write_state(run_dir, writer)
+
+
+def load_run_state(
+    folder: Path,
+    *,
+    online: MPGNet,
+    target: MPGNet,
+    optimizer: torch.optim.Optimizer,
+    replay: PrioritizedHeightmapReplayBuffer,
+    rng: np.random.Generator,
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Restore a :func:`save_run_state` folder into the given objects; returns the saved
+    ``(counters, config)``."""
+    load_mpgnet_weights(online, folder / "online.safetensors")
+    load_mpgnet_weights(target, folder / "target.safetensors")
+    load_optimizer(optimizer, folder)
+    load_replay(replay, folder / "replay.npz")
+    rngs = json.loads((folder / "rng.json").read_text())
+    rng.bit_generator.state = rngs["numpy"]
+    replay.rng_state = rngs["replay"]
+    torch.set_rng_state(torch.tensor(rngs["torch"], dtype=torch.uint8))
+    return json.loads((folder / "counters.json").read_text()), json.loads((folder / "config.json").read_text())

@@ -1,0 +1,103 @@
+"""How the learner explores (paper, Training Details and Simulation Experiments).
+
+- epsilon-greedy with epsilon annealed linearly from ``start`` to ``end``;
+- an exploratory action is a random rotation at a random pixel where the primitive can
+  matter: move and grasp inside the target's bounding rectangle, push within 25 pixels
+  (5 cm) of it; with the ``max_q`` coordination the primitive is random too;
+- after ``heuristic_after_failed_grasps`` failed grasps in a row the next grasp is the
+  pixel-only heuristic grasp (:mod:`mpg_agents.heuristics`), a training aid of the paper.
+
+One seeded generator drives every random choice; its state is saved with the run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from mpg_agents.heuristics import heuristic_grasp
+from mpg_agents.policy import Decision
+from mpg_envs.actions import encode_action
+from mpg_envs.workspace import NUM_ROTATIONS
+
+PUSH_REACH_PX = 25
+"""How far (pixels, 2 mm each) around the target's rectangle an exploratory push may start."""
+
+
+@dataclass(frozen=True)
+class Choice:
+    """An action the learner takes, how it was chosen and the Q it was chosen by."""
+
+    action: int
+    primitive: str
+    how: str  # "greedy", "explore" or "heuristic"
+    q_value: float = float("nan")
+
+
+def linear_epsilon(iteration: int, start: float, end: float, decay_steps: int) -> float:
+    """Epsilon after ``iteration`` iterations: ``start`` to ``end`` linearly over ``decay_steps``."""
+    frac = min(1.0, iteration / max(1, decay_steps))
+    return start + frac * (end - start)
+
+
+class Explorer:
+    """Turns the policy's greedy decision into the action taken (exploration and training aids).
+
+    Args:
+        primitives: the env's primitives (the action encoding).
+        rng: the run's generator.
+        heuristic_after_failed_grasps: failed grasps in a row before the heuristic grasp (0: never).
+        random_primitive: explore the primitive too (the ``max_q`` coordination).
+    """
+
+    def __init__(
+        self,
+        primitives: Sequence[str],
+        rng: np.random.Generator,
+        heuristic_after_failed_grasps: int = 2,
+        random_primitive: bool = False,
+    ) -> None:
+        self.primitives = tuple(primitives)
+        self.rng = rng
+        self.heuristic_after_failed_grasps = heuristic_after_failed_grasps
+        self.random_primitive = random_primitive
+
+    def choose(self, obs: Mapping[str, np.ndarray], decision: Decision, epsilon: float, failed_grasps_in_a_row: int) -> Choice:
+        """The action for ``obs`` given the policy's greedy ``decision`` (its primitive is kept
+        unless :attr:`random_primitive`)."""
+        primitive = decision.primitive
+        n = self.heuristic_after_failed_grasps
+        if primitive == "grasp" and n and failed_grasps_in_a_row >= n and obs["mask"].any():
+            rot, row, col = heuristic_grasp(obs)
+            return Choice(encode_action(self.primitives, "grasp", rot, row, col), "grasp", "heuristic")
+        if self.rng.random() < epsilon:
+            if self.random_primitive:
+                primitive = self.primitives[int(self.rng.integers(len(self.primitives)))]
+            rot, row, col = self.explore_pixel(obs, primitive)
+            return Choice(encode_action(self.primitives, primitive, rot, row, col), primitive, "explore")
+        return Choice(int(decision.action), primitive, "greedy", float(decision.q_value))
+
+    def explore_pixel(self, obs: Mapping[str, np.ndarray], primitive: str) -> tuple[int, int, int]:
+        """A random ``(rotation, row, col)`` where ``primitive`` can matter.
+
+        Move and grasp: inside the target's bounding rectangle (the rough mask). Push: within
+        :data:`PUSH_REACH_PX` of it. An empty mask falls back to any occupied pixel, then to any pixel.
+        """
+        mask = obs["mask"] > 0
+        size = mask.shape[0]
+        if mask.any():
+            rows, cols = np.nonzero(mask)
+            pad = PUSH_REACH_PX if primitive == "push" else 0
+            r0, r1 = max(rows.min() - pad, 0), min(rows.max() + pad, size - 1)
+            c0, c1 = max(cols.min() - pad, 0), min(cols.max() + pad, size - 1)
+            row, col = int(self.rng.integers(r0, r1 + 1)), int(self.rng.integers(c0, c1 + 1))
+        else:
+            occupied = np.argwhere(obs["depth"] > 0.005)
+            if len(occupied):
+                row, col = (int(v) for v in occupied[self.rng.integers(len(occupied))])
+            else:
+                row, col = (int(v) for v in self.rng.integers(size, size=2))
+        return int(self.rng.integers(NUM_ROTATIONS)), row, col
+

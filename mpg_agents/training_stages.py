@@ -1,0 +1,144 @@
+"""The paper's training stages as data (Section III-C): one :class:`TrainingStage` per stage.
+
+I target-agnostic grasping -> II target-oriented grasping (then Q*_g is calibrated) -> III
+moving (the Stage II grasp net scores states; objects grow from 2) -> IV pushing (grasp and
+move frozen; a grasp ends the episode after the push budget) -> V joint training (the three
+nets in turn). The pipeline, the learner and ``mpg-train`` read this table; the ablations are
+changes of it (:func:`without_multistage`, :func:`without_alternation`).
+
+The envs' own differences (scene, rewards, motion cap) are in :mod:`mpg_envs.stages`; this
+table holds only how the agent trains on them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Mapping, Sequence
+
+from mpg_agents.coordination import check_coordination
+from mpg_envs.actions import check_primitives
+
+
+@dataclass(frozen=True)
+class TrainingStage:
+    """How one training stage trains.
+
+    Attributes:
+        name: the stage's name (also its run folder, ``out/<name>/``).
+        env_id: the env it trains on.
+        trainable: the branches that learn (``None``: the env's primitives); the rest are frozen.
+        objects: curriculum ``(start, end)``: objects grow linearly from ``start`` to ``end``
+            over the stage; ``None`` keeps the env's count.
+        alternate_every: train the trainable nets in turn, switching every this many
+            iterations (0: all together).
+        coordination: how the primitive is chosen (:mod:`mpg_agents.coordination`).
+        calibrates_q_star: Q*_g is calibrated from this stage's successful grasps.
+        uses_discriminator: the envs score states with the calibrated stage's grasp net.
+        push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
+        iterations: default number of training iterations.
+    """
+
+    name: str
+    env_id: str
+    trainable: tuple[str, ...] | None = None
+    objects: tuple[int, int] | None = None
+    alternate_every: int = 0
+    coordination: str = "workflow"
+    calibrates_q_star: bool = False
+    uses_discriminator: bool = False
+    push_budget: int | None = None
+    iterations: int = 1000
+
+    def __post_init__(self) -> None:
+        if self.trainable is not None:
+            object.__setattr__(self, "trainable", check_primitives(self.trainable))
+        if self.objects is not None:
+            start, end = (int(v) for v in self.objects)
+            if not 1 <= start <= end:
+                raise ValueError(f"stage {self.name}: objects must be (start, end) with 1 <= start <= end, got {self.objects}")
+            object.__setattr__(self, "objects", (start, end))
+        check_coordination(self.coordination)
+        if self.alternate_every < 0 or self.iterations < 1:
+            raise ValueError(f"stage {self.name}: need alternate_every >= 0 and iterations >= 1")
+        if self.push_budget is not None and self.push_budget < 0:
+            raise ValueError(f"stage {self.name}: push_budget must be None or >= 0, got {self.push_budget}")
+
+    def objects_at(self, fraction: float) -> int | None:
+        """The curriculum's object count after ``fraction`` (0..1) of the stage; ``None``: the env's."""
+        if self.objects is None:
+            return None
+        start, end = self.objects
+        return int(round(start + min(1.0, max(0.0, fraction)) * (end - start)))
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "TrainingStage":
+        check_fields(cls, data, "training stage")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+
+
+TRAINING_STAGES: tuple[TrainingStage, ...] = (
+    TrainingStage("Stage1", "MPG-Stage1-v0", trainable=("grasp",), iterations=500),
+    TrainingStage("Stage2", "MPG-Stage2-v0", trainable=("grasp",), calibrates_q_star=True, iterations=1000),
+    TrainingStage("Stage3", "MPG-Stage3-v0", trainable=("move",), objects=(2, 4), uses_discriminator=True, iterations=600),
+    TrainingStage("Stage4", "MPG-Stage4-v0", trainable=("push",), uses_discriminator=True, push_budget=5, iterations=600),
+    TrainingStage(
+        "Stage5", "MPG-Stage5-v0", trainable=("move", "push", "grasp"), alternate_every=50, uses_discriminator=True,
+        iterations=1500,
+    ),
+)
+"""The paper's five stages, in order."""
+
+
+def stage_for_env(env_id: str, stages: Sequence[TrainingStage] = TRAINING_STAGES) -> TrainingStage:
+    """The stage that trains on ``env_id``; an env no stage names (e.g. ``MPG-Occluded-v0``)
+    trains all its primitives together, with no curriculum, budget or discriminator."""
+    for stage in stages:
+        if stage.env_id == env_id:
+            return stage
+    return TrainingStage(env_id, env_id)
+
+
+def select_stages(stages: Sequence[TrainingStage], which: Sequence[str]) -> tuple[TrainingStage, ...]:
+    """The stages named in ``which``: stage names (``Stage2``) or 1-based positions (``2``)."""
+    by_name = {s.name: s for s in stages}
+    chosen = []
+    for item in which:
+        item = str(item).strip()
+        if item in by_name:
+            chosen.append(by_name[item])
+        elif item.isdigit() and 1 <= int(item) <= len(stages):
+            chosen.append(stages[int(item) - 1])
+        else:
+            raise ValueError(f"unknown stage {item!r}; valid: {', '.join(by_name)} or 1..{len(stages)}")
+    return tuple(chosen)
+
+
+def without_multistage(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Ablation "w/o multi-stage training": only the last (joint) stage, from scratch."""
+    return (stages[-1],)
+
+
+def without_alternation(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Ablation "w/o alternating training": stages that alternate train all their nets at once
+    and choose actions by the largest Q."""
+    return tuple(replace(s, alternate_every=0, coordination="max_q") if s.alternate_every else s for s in stages)
+
+
+def with_overrides(stages: Sequence[TrainingStage], overrides: Mapping[str, Mapping[str, Any]]) -> tuple[TrainingStage, ...]:
+    """``stages`` with fields replaced per stage name, e.g. ``{"Stage3": {"objects": [2, 3]}}``."""
+    unknown = sorted(set(overrides) - {s.name for s in stages})
+    if unknown:
+        raise ValueError(f"overrides for unknown stages {unknown}; valid: {[s.name for s in stages]}")
+    return tuple(TrainingStage.from_dict({**s.to_dict(), **overrides[s.name]}) if s.name in overrides else s for s in stages)
+
+
+def check_fields(cls: type, data: Mapping[str, Any], what: str) -> None:
+    """``ValueError`` naming the keys of ``data`` that are not fields of dataclass ``cls``."""
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"unknown {what} settings {unknown}; valid: {sorted(known)}")

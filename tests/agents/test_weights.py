@@ -1,0 +1,49 @@
+"""The MPGNet weight file (mpg_agents.weights): round trip, architecture checks, no unpickling."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from mpg_agents.mpgnet import MPGNet
+from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.weights import load_mpgnet, load_mpgnet_weights, save_mpgnet
+
+
+def test_checkpoint_roundtrip_and_mismatch(tmp_path, small_net, scene):
+    path = tmp_path / "net.safetensors"
+    save_mpgnet(small_net, path, q_star=1.25)
+    net, header = load_mpgnet(path)
+    net.eval()
+    assert header["q_star"] == 1.25 and header["variant"] == "small"
+    with torch.inference_mode():
+        assert torch.equal(net(scene)["grasp"], small_net(scene)["grasp"])
+    # Another architecture: a clear error naming the difference.
+    with pytest.raises(ValueError, match="variant='small' but this network has variant='large'"):
+        load_mpgnet_weights(MPGNet(MPGNetConfig.large(primitives=("grasp",))), path)
+    with pytest.raises(ValueError, match="trunk_depth"):
+        load_mpgnet_weights(MPGNet(MPGNetConfig.small(trunk_depth=9, primitives=("grasp",))), path)
+    # A grasp-only file cannot fill a push branch unless asked to.
+    grasp_only = tmp_path / "grasp.safetensors"
+    save_mpgnet(MPGNet(MPGNetConfig.small(primitives=("grasp",))), grasp_only)
+    target = MPGNet(MPGNetConfig.small(primitives=("push", "grasp")))
+    with pytest.raises(ValueError, match=r"missing \['push'\]"):
+        load_mpgnet_weights(target, grasp_only)
+    load_mpgnet_weights(target, grasp_only, strict_branches=False)
+    # Not a safetensors file at all (e.g. a pickle): refused without unpickling.
+    bogus = tmp_path / "bogus.safetensors"
+    torch.save({"x": torch.zeros(1)}, bogus)
+    with pytest.raises(ValueError, match="not a safetensors file"):
+        load_mpgnet(bogus)
+
+
+def test_weights_file_mode_follows_the_umask(tmp_path, small_net):
+    """safetensors writes 0600 through a temporary file; the weights get 0666 less the umask."""
+    import os
+
+    old = os.umask(0o022)
+    try:
+        save_mpgnet(small_net, tmp_path / "w.safetensors")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "w.safetensors").stat().st_mode & 0o777 == 0o644

@@ -1,0 +1,52 @@
+"""The training stages as data (mpg_agents.training_stages) and the ablations as table changes."""
+
+from __future__ import annotations
+
+import pytest
+
+from mpg_agents.training_stages import (
+    TRAINING_STAGES,
+    TrainingStage,
+    select_stages,
+    stage_for_env,
+    with_overrides,
+    without_alternation,
+    without_multistage,
+)
+
+
+def test_the_paper_table():
+    by = {s.name: s for s in TRAINING_STAGES}
+    assert [s.name for s in TRAINING_STAGES] == ["Stage1", "Stage2", "Stage3", "Stage4", "Stage5"]
+    assert by["Stage2"].calibrates_q_star and not any(s.calibrates_q_star for s in TRAINING_STAGES if s.name != "Stage2")
+    assert [s.name for s in TRAINING_STAGES if s.uses_discriminator] == ["Stage3", "Stage4", "Stage5"]
+    assert by["Stage3"].objects == (2, 4) and by["Stage4"].push_budget == 5 and by["Stage4"].trainable == ("push",)
+    assert by["Stage5"].alternate_every > 0 and by["Stage5"].coordination == "workflow"
+
+
+def test_curriculum_grows_linearly():
+    stage = TrainingStage("s", "MPG-Stage3-v0", objects=(2, 4))
+    assert [stage.objects_at(f) for f in (0.0, 0.2, 0.5, 1.0, 3.0)] == [2, 2, 3, 4, 4]
+    assert TrainingStage("s", "MPG-Stage2-v0").objects_at(0.5) is None
+
+
+def test_ablations_are_table_changes():
+    assert without_multistage(TRAINING_STAGES) == (TRAINING_STAGES[-1],)
+    ablated = without_alternation(TRAINING_STAGES)
+    assert ablated[-1].alternate_every == 0 and ablated[-1].coordination == "max_q"
+    assert ablated[:-1] == TRAINING_STAGES[:-1]
+
+
+def test_lookup_selection_and_overrides():
+    assert stage_for_env("MPG-Stage4-v0").push_budget == 5
+    other = stage_for_env("MPG-Occluded-v0")
+    assert other.trainable is None and other.push_budget is None and not other.uses_discriminator
+    assert [s.name for s in select_stages(TRAINING_STAGES, ["1", "Stage2"])] == ["Stage1", "Stage2"]
+    with pytest.raises(ValueError, match="unknown stage"):
+        select_stages(TRAINING_STAGES, ["9"])
+    changed = with_overrides(TRAINING_STAGES, {"Stage3": {"objects": [2, 3], "iterations": 7}})
+    assert changed[2].objects == (2, 3) and changed[2].iterations == 7
+    with pytest.raises(ValueError, match="unknown training stage settings"):
+        with_overrides(TRAINING_STAGES, {"Stage3": {"objetcs": [2, 3]}})
+    with pytest.raises(ValueError, match="coordination"):
+        TrainingStage("s", "MPG-Stage5-v0", coordination="vote")
