@@ -29,10 +29,8 @@ from mpg_envs.grasp_geometry import (
     angle_gap,
     angle_to_rotation,
     extent_along,
-    finger_region,
     footprint_rect,
-    polygon_mask,
-    region_max,
+    jaw_strip_heights,
 )
 from mpg_envs.workspace import NUM_ROTATIONS, world_to_pixel
 
@@ -64,8 +62,10 @@ class OracleConfig:
     """Geometry the oracle plans with (metres); the finger sizes are the 2F-85's."""
 
     max_grasp_width: float = 0.075  # wider than this across the fingers: not graspable
-    finger_open_reach: float = 0.052  # an open finger's outer face, from the grasp centre
+    finger_open_inner: float = 0.0425  # an open finger's inner face, from the jaw's centre
+    finger_thickness: float = 0.0095  # a finger's thickness along the closing direction, with a margin
     finger_half_width: float = 0.013  # half a pad's width across the jaw, with a margin
+    offset_step: float = 0.004  # the jaw slides along the closing direction in steps of this
     finger_margin: float = 0.004  # the swept strip starts this far off the object's side
     pad_below_tcp: float = 0.005  # the pads' lower edge lies this far below the TCP
     finger_clearance: float = 0.004  # a strip is free if nothing in it rises above the pads' lower edge + this
@@ -144,6 +144,7 @@ class OraclePolicy:
         self.memory = ActionMemory(config)
         self.last_plan: dict[str, Any] | None = None  # what the last act() decided and why
         self._episode_motions = -1
+        self._obs: dict[str, np.ndarray] | None = None
         self._ids_model = None
         self._ids_caster = None
 
@@ -157,12 +158,14 @@ class OraclePolicy:
         self.last_plan = None
 
     def act(self, obs: Any = None) -> int:
-        """The flat action index the oracle chooses now (it reads the env's state; ``obs`` is unused)."""
+        """The flat action index the oracle chooses now, for the env's current observation
+        ``obs`` (``None``: the env's last one) and the simulator state behind it."""
         env = self.env.unwrapped
         if env.num_motions == 0 and self._episode_motions != 0:
             self.reset()  # a new episode even if the caller did not say so
         self._episode_motions = env.num_motions
-        depth = env._obs["depth"]
+        self._obs = env._obs if obs is None else obs
+        depth = np.asarray(self._obs["depth"])
         primitive, rotation, row, col, plan = self._choose(env, depth)
         self.memory.record(primitive, rotation, row, col, depth)
         self.last_plan = plan
@@ -179,7 +182,7 @@ class OraclePolicy:
                 if step:
                     return (*step, {"kind": "grasp_any"})
             return self._last_resort(env, depth, "grasp")
-        occluded = bool(env._obs["occluded"][0])
+        occluded = bool(self._obs["occluded"][0])
         if "move" in allowed and (occluded or "grasp" not in allowed):
             movers = self._occluders(env, target, depth, ids)
             if not movers and "grasp" not in allowed:  # Stage III, nothing on top: clear the nearest
@@ -226,11 +229,15 @@ class OraclePolicy:
 
     # ------------------------------------------------------------ pieces
     def _grasp_plans(self, env, i: int, depth: np.ndarray, ids: np.ndarray, require_fit: bool = True) -> list[GraspPlan]:
-        """Grasps of object ``i`` at the 8 angles, best first: free ones, then least blocked."""
+        """Grasps of object ``i`` at the 8 angles, best first: free ones nearest the short
+        axis, then the least blocked. At each angle the jaw slides along the closing
+        direction (the open fingers span 85 mm) to where both fingers come down on free space."""
         world, c, pc = env.world, self.config, env.config.primitives
         ws = world.workspace
         verts = world.object_vertices(i)[:, :2]
         centre, _, short_dir = footprint_rect(verts)
+        gx, gy = ws.pixel_centers()
+        reach = c.finger_open_inner + c.finger_thickness
         plans = []
         for k in range(GRASP_ROTATIONS):
             theta = k * math.pi / GRASP_ROTATIONS
@@ -242,20 +249,28 @@ class OraclePolicy:
                 continue
             nlo, nhi = extent_along(verts, centre, n)
             mid = centre + d * (lo + hi) / 2 + n * (nlo + nhi) / 2
-            row, col = self._clip_pixel(world, mid)
-            z = max(float(depth[row, col]) - pc.grasp_depth, pc.grasp_min_height)
-            limit = z - c.pad_below_tcp + c.finger_clearance
-            blocked, blockers = -math.inf, []
-            inner = width / 2 + c.finger_margin
-            outer = max(c.finger_open_reach, inner + 0.01)
-            for side in (-1, 1):
-                region = polygon_mask(ws, finger_region(mid, theta, side, inner, outer, c.finger_half_width))
-                blocked = max(blocked, region_max(depth, region) - limit)
-                for j in np.unique(ids[region & (depth > limit)]):
-                    if j >= 0 and j != i:
-                        blockers.append((side, int(j)))
-            off = angle_gap(theta, short_dir)
-            plans.append(GraspPlan(i, k, row, col, blocked, tuple(blockers), off))
+            max_offset = max(0.0, c.finger_open_inner - width / 2 - c.finger_margin)
+            rel_x, rel_y = gx - mid[0], gy - mid[1]
+            s, t = rel_x * d[0] + rel_y * d[1], rel_x * n[0] + rel_y * n[1]
+            band = (np.abs(t) <= c.finger_half_width) & (np.abs(s) <= reach + max_offset)
+            sb, hb, ib = s[band], depth[band], ids[band]
+            best = None
+            for offset in sorted(np.arange(-max_offset, max_offset + 1e-9, c.offset_step).tolist() + [0.0], key=abs):
+                row, col = self._clip_pixel(world, mid + offset * d)
+                z = max(float(depth[row, col]) - pc.grasp_depth, pc.grasp_min_height)
+                limit = z - c.pad_below_tcp + c.finger_clearance
+                heights = jaw_strip_heights(sb, hb, width, offset, c.finger_open_inner, c.finger_thickness, c.finger_margin)
+                blocked = max(heights) - limit
+                if best is None or blocked < best[0] - 1e-4:
+                    best = (blocked, offset, row, col, limit)
+                if blocked <= 0:
+                    break
+            blocked, offset, row, col, limit = best
+            edge = width / 2 + c.finger_margin
+            in_low = (sb <= -edge) & (sb >= offset - reach) & (hb > limit)
+            in_high = (sb >= edge) & (sb <= offset + reach) & (hb > limit)
+            blockers = [(side, int(j)) for side, sel in ((-1, in_low), (1, in_high)) for j in np.unique(ib[sel]) if j >= 0 and j != i]
+            plans.append(GraspPlan(i, k, row, col, blocked, tuple(blockers), angle_gap(theta, short_dir)))
         # Free first, nearest the short axis; then the least blocked.
         return sorted(plans, key=lambda p: (not p.free, p.angle_off if p.free else p.blocked, p.angle_off))
 
@@ -279,7 +294,7 @@ class OraclePolicy:
     def _occluders(self, env, target: int, depth: np.ndarray, ids: np.ndarray) -> list[int]:
         """Objects seen above the target's footprint higher than its top, topmost first."""
         world = env.world
-        mask = env._obs["mask"] > 0
+        mask = np.asarray(self._obs["mask"]) > 0
         over = mask & (depth > world.object_top(target) + self.config.occluder_tolerance)
         found = {int(j): float(depth[over & (ids == j)].max()) for j in np.unique(ids[over]) if j >= 0 and j != target}
         return sorted(found, key=lambda j: -found[j])
