@@ -25,14 +25,21 @@ def read_progress(path: Path) -> dict[str, np.ndarray]:
 
 
 def window_success(data: dict[str, np.ndarray], window: int) -> tuple[np.ndarray, np.ndarray]:
-    """Target grasp success rate of the grasps in each ``window`` iterations (paper metric)."""
+    """Target grasp success rate of the grasps in each ``window`` iterations (paper metric).
+
+    Each point sits at the last iteration of its window; a last, partial window counts the
+    grasps it has (a run shorter than ``window`` gives one point, at its end).
+    """
+    if window < 1:
+        raise ValueError(f"window must be >= 1, got {window}")
     it = data["iteration"]
     grasp = data["primitive"] == "grasp"
+    last = int(np.nanmax(it))
     xs, ys = [], []
-    for start in range(0, int(it.max()), window):
+    for start in range(0, last, window):
         sel = grasp & (it > start) & (it <= start + window)
         if sel.any():
-            xs.append(start + window)
+            xs.append(min(start + window, last))
             ys.append(float(data["target_grasped"][sel].mean()))
     return np.array(xs), np.array(ys)
 
@@ -60,27 +67,40 @@ def plot_run(run: str | Path, out: str | Path | None = None, window: int = 200) 
         raise FileNotFoundError(f"no progress.csv in {run} or its Stage*/ folders")
     fig, axes = plt.subplots(2, 2, figsize=(11, 7))
     offset = 0
+    longest = 0
+    no_loss = []
     for name, path in stages:
         d = read_progress(path)
-        x, y = window_success(d, window)
+        x, y = window_success(d, min(window, max(1, int(d["iteration"].max()))))
         axes[0, 0].plot(x + offset, y, marker="o", label=name)
         loss = d["loss"]
         ok = np.isfinite(loss)
-        if ok.sum() > 1:
-            k = min(50, int(ok.sum()))
+        if ok.any():
+            k = max(1, min(50, int(ok.sum()) // 5))  # a short run still gets a curve
             smooth = np.convolve(loss[ok], np.ones(k) / k, mode="valid")
-            axes[0, 1].plot(d["iteration"][ok][k - 1 :] + offset, smooth, label=name)
+            axes[0, 1].plot(d["iteration"][ok][k - 1 :] + offset, smooth, marker="." if len(smooth) < 20 else None, label=name)
+        else:
+            no_loss.append(name)
         axes[1, 0].plot(d["iteration"] + offset, d["epsilon"], label=name)
         ex, ey = episode_motions(d)
         axes[1, 1].plot(ex + offset, ey, ".", alpha=0.5, label=name)
+        longest = max(longest, int(d["iteration"].max()))
         offset += int(d["iteration"].max())
-    axes[0, 0].set(title=f"target grasp success per {window} iterations", xlabel="iteration", ylim=(0, 1))
-    axes[0, 1].set(title="Huber loss (moving average)", xlabel="iteration")
-    axes[1, 0].set(title="epsilon", xlabel="iteration")
-    axes[1, 1].set(title="motions per episode", xlabel="iteration")
+    shown = min(window, longest)  # a run shorter than the window: one window of what there is
+    note = "" if shown == window else f"\n(the run is shorter than the {window}-iteration window)"
+    axes[0, 0].set(
+        title=f"target grasp success per {shown} iterations{note}", xlabel="iteration", ylabel="success rate", ylim=(-0.02, 1.02)
+    )
+    axes[0, 1].set(title="Huber loss (moving average)", xlabel="iteration", ylabel="loss")
+    if no_loss:
+        axes[0, 1].text(0.5, 0.5, "no training steps yet in " + ", ".join(no_loss), ha="center", transform=axes[0, 1].transAxes)
+    axes[1, 0].set(title="exploration epsilon", xlabel="iteration", ylabel="epsilon")
+    axes[1, 1].set(title="motions per finished episode", xlabel="iteration (episode end)", ylabel="motions")
     for ax in axes.flat:
+        ax.set_xlim(0, max(offset, 1))
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
     fig.tight_layout()
     out = Path(out) if out is not None else run / "curves.png"
     fig.savefig(out, dpi=100)

@@ -82,3 +82,30 @@ def test_save_policy_qmaps_draws_every_branch_of_a_three_branch_net(tmp_path, rn
     r, c = 2 * decision.row + 1, 448 * panel + 2 * decision.col + 1
     ring = image[HEADER_PX + max(0, r - 6) : HEADER_PX + r + 7, max(0, c - 6) : c + 7]
     assert (ring.max(axis=-1) < 40).any()
+
+
+def _write_progress(path, iterations: int, rng) -> None:
+    """A ``progress.csv`` as mpg-train writes it: loss from iteration 5 on, episodes of 3 motions."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    lines = ["iteration,episode,primitive,loss,epsilon,target_grasped,num_motions"]
+    for i in range(1, iterations + 1):
+        loss = f"{rng.uniform(0.1, 1.0):.4f}" if i >= 5 else ""
+        lines.append(f"{i},{(i - 1) // 3},grasp,{loss},{0.5 - 0.01 * i:.3f},{int(rng.random() < 0.4)},{(i - 1) % 3 + 1}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_plot_run_shorter_than_the_window(tmp_path, rng):
+    from mpg_agents.plotting import plot_run, read_progress, window_success
+
+    _write_progress(tmp_path / "run" / "progress.csv", 30, rng)
+    data = read_progress(tmp_path / "run" / "progress.csv")
+    x, y = window_success(data, 200)
+    assert x.tolist() == [30]  # one point at the run's end, not at iteration 200
+    assert y[0] == data["target_grasped"].mean()
+    x, _ = window_success(data, 12)
+    assert x.tolist() == [12, 24, 30]
+    with pytest.raises(ValueError, match="window"):
+        window_success(data, 0)
+    out = plot_run(tmp_path / "run", window=200)
+    image = cv2.imread(str(out))
+    assert image is not None and image.shape[0] > 500
