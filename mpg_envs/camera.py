@@ -22,27 +22,15 @@ images, just as it is invisible to the ray-cast heightmaps.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
 from mpg_envs.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
+from mpg_envs.render import make_renderer
 from mpg_envs.rgbd import fuse_heightmaps, heightmap_from_rgbd
 from mpg_envs.workspace import Workspace
-
-GL_HELP = (
-    "Camera observations need an OpenGL context. On headless Linux set MUJOCO_GL=egl (or "
-    "MUJOCO_GL=osmesa) before the first `import mujoco` in the process, and install the "
-    "Debian packages libegl1 libegl-mesa0 libgl1-mesa-dri (EGL) or libosmesa6 (OSMesa). "
-    "The default ray-cast observations need no OpenGL."
-)
-
-# The first failure to create a GL context in this process. Retrying is pointless (the
-# backend is fixed at import) and can abort the interpreter (seen with MUJOCO_GL=glfw and no
-# display: the second attempt dies in libc++abi), so later attempts re-raise this at once.
-_gl_failure: str | None = None
 
 # OpenCV camera axes (x right, y down, z forward) expressed in MuJoCo's camera frame
 # (x right, y up, looking along -z): flip y and z.
@@ -230,7 +218,8 @@ class CameraHeightmapper:
         ValueError: if a configured camera is missing from ``model`` (call
             :func:`add_cameras` on the spec before compiling) or is not a plain perspective
             camera with ``fovy``.
-        RuntimeError: if no OpenGL context can be created (message says how to fix it).
+        RenderUnavailableError: (a ``RuntimeError``) if no OpenGL context can be created in
+            this process (the message says how to fix it).
     """
 
     def __init__(
@@ -268,17 +257,11 @@ class CameraHeightmapper:
         ):
             groups[:] = 0
 
-        global _gl_failure
-        if _gl_failure is not None:
-            raise RuntimeError(_gl_failure)
-        try:
-            self._renderer = mujoco.Renderer(model, height=self.config.height, width=self.config.width)
-        except ValueError:
-            raise  # a framebuffer too small for the image: MuJoCo's message says what to do
-        except Exception as exc:  # the GL backends raise various types
-            backend = os.environ.get("MUJOCO_GL", "<unset>")
-            _gl_failure = f"could not create an OpenGL context (MUJOCO_GL={backend}): {exc}. {GL_HELP}"
-            raise RuntimeError(_gl_failure) from exc
+        # One record of GL failure per process, shared with env.render(): a retry can abort.
+        self._renderer = make_renderer(
+            model, self.config.height, self.config.width,
+            purpose="Camera observations (the default ray-cast observations need none)",
+        )
         # Mirror images of the objects in a reflective table would paint wrong colours.
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(self.config.shadows)
