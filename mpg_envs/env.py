@@ -20,12 +20,39 @@ from mpg_envs.occlusion import ChangeConfig, OcclusionConfig, change_detected, i
 from mpg_envs.primitives import PrimitiveConfig, PrimitiveResult, Primitives
 from mpg_envs.rewards import RewardConfig, StepOutcome
 from mpg_envs.robot import ArmIK, RobotConfig
-from mpg_envs.scenes import SCENES, SceneConfig
+from mpg_envs.scene_io import (
+    SceneFile,
+    SceneFileError,
+    SceneObject,
+    kept_target,
+    objects_outside,
+    read_scene,
+    resolve_outside,
+)
+from mpg_envs.scenes import SCENES, InvalidSceneError, SceneConfig, keep_inside
 from mpg_envs.stages import STAGES, StageSpec
 from mpg_envs.workspace import Workspace
 from mpg_envs.world import PhysicsConfig, World
 
 OBS_MODES = ("raycast", "camera")
+RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside")
+END_REASONS = (
+    "target_grasped",
+    "table_empty",
+    "move_success",
+    "target_left_workspace",
+    "grasp_done",
+    "motion_cap",
+)
+"""Values of ``info["end_reason"]`` on the last step of an episode (``None`` before it):
+
+- ``target_grasped``: the target was grasped (success; Stages 2-5 and Occluded).
+- ``table_empty``: no object is left in the workspace (Stage 1's success).
+- ``move_success``: a move uncovered the target (Stage 3's success).
+- ``target_left_workspace``: the target was pushed or knocked out of the workspace.
+- ``grasp_done``: Stage 4's one grasp was made and did not take the target.
+- ``motion_cap``: ``max_motions`` motions were used up (truncated).
+"""
 GraspScorer = Callable[[dict[str, np.ndarray]], float]
 
 
@@ -41,7 +68,7 @@ class EnvConfig:
     reward: RewardConfig = RewardConfig()
     occlusion: OcclusionConfig = OcclusionConfig()
     change: ChangeConfig = ChangeConfig()
-    scene_tries: int = 20  # redraws allowed to meet a stage's start condition
+    scene_tries: int = 20  # whole-scene redraws allowed to make a valid scene, then InvalidSceneError
     raycast_threads: int | None = None  # threads per env for the heightmap; None: up to 2 (set 1 with one env per core)
     object_set_seed: int = 0
 
@@ -76,6 +103,21 @@ class MPGEnv(gym.Env):
             object is a target).
         world: the :class:`~mpg_envs.world.World` of the current episode (``None`` before
             the first reset).
+
+    Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
+    workspace (objects that roll out are dropped again on the pile, deterministically from
+    the seed), and meets the stage's start condition (Occluded: the target is one of the
+    first five dropped and is occluded; Stage 5: the first or second dropped). When that
+    cannot be made in ``config.scene_tries`` draws, reset raises
+    :class:`~mpg_envs.scenes.InvalidSceneError` rather than return a lesser scene.
+    ``reset(options=...)`` takes ``scene`` (a scene file, ours or a VPG test case),
+    ``mesh_dir`` (meshes for a VPG case) and ``drop_outside`` (leave out, with a warning,
+    the file's objects outside the workspace instead of raising
+    :class:`~mpg_envs.scene_io.SceneFileError`). Reset's ``info`` has ``objects_left`` (the
+    scene's object count), ``occluded``, ``target``, ``num_motions`` and ``is_success``.
+
+    Step ``info`` has ``end_reason``: ``None`` until the episode's last step, then one of
+    :data:`END_REASONS`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -137,14 +179,12 @@ class MPGEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = dict(options or {})
-        scene_path = options.pop("scene", None)
-        mesh_dir = options.pop("mesh_dir", None)
-        if options:
-            raise ValueError(f"unknown reset options {sorted(options)}; valid: ['mesh_dir', 'scene']")
-        if scene_path is not None:
-            from mpg_envs.scene_io import load_scene
-
-            load_scene(self, scene_path, mesh_dir=mesh_dir)
+        unknown = sorted(set(options) - set(RESET_OPTIONS))
+        if unknown:
+            raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
+        if options.get("scene") is not None:
+            scene = read_scene(options["scene"], options.get("mesh_dir"), self.config.object_set_seed)
+            self._apply_scene(scene, drop_outside=bool(options.get("drop_outside", False)))
         else:
             self._generate_scene()
         self.num_motions = 0
@@ -180,6 +220,15 @@ class MPGEnv(gym.Env):
         truncated = not terminated and (
             self.num_motions >= self.max_motions or (self.stage.end_after_grasp and primitive == "grasp")
         )
+        end_reason = None
+        if is_success:
+            end_reason = "table_empty" if self.stage.mask_all_objects else "target_grasped"
+        elif target_out:
+            end_reason = "target_left_workspace"
+        elif terminated:
+            end_reason = "move_success"
+        elif truncated:
+            end_reason = "grasp_done" if self.stage.end_after_grasp and primitive == "grasp" else "motion_cap"
         info = {
             "primitive": primitive,
             "rotation": int(rotation),
@@ -199,6 +248,7 @@ class MPGEnv(gym.Env):
             "grasp_q_gain": float(gain),
             "physics_steps": int(result.physics_steps),
             "sim_warnings": sim_warnings,
+            "end_reason": end_reason,
         }
         return self._copy_obs(obs), reward, bool(terminated), bool(truncated), info
 
@@ -253,48 +303,119 @@ class MPGEnv(gym.Env):
         return world
 
     def _generate_scene(self) -> None:
+        """Draw scenes until one is valid (see the class docstring); sets world and target."""
         rng = self.np_random
         stage = self.stage
         scene_fn = SCENES[stage.scene]
-        for attempt in range(self.config.scene_tries):
+        astray_draws = 0
+        for _ in range(self.config.scene_tries):
             picks = rng.integers(len(self.object_set), size=self.num_objects)
             world = self._build_world([self.object_set[int(k)] for k in picks])
-            self.target = scene_fn(world, rng, self.config.scene)
-            if (stage.start_occluded is None and not stage.start_surrounded) or self.target is None:
+            layout = scene_fn(world, rng, self.config.scene)
+            redropped = keep_inside(world, rng, layout, self.config.scene)
+            if redropped is None:
+                astray_draws += 1
+                continue
+            if not layout.targets:
+                self.target = None
                 return
-            obs = self._observe()
-            occluded_ok = stage.start_occluded is None or bool(obs["occluded"][0]) == stage.start_occluded
-            surrounded_ok = surrounded_sectors(obs["depth"], obs["mask"]) >= stage.start_surrounded
-            if occluded_ok and surrounded_ok and not self._target_out():
+            # Re-dropped objects landed on the pile afterwards: no longer "the n-th dropped".
+            target = self._first_acceptable_target([t for t in layout.targets if t not in redropped])
+            if target is not None:
+                self.target = target
                 return
-        # Keep the last draw: the stage's start condition could not be met in the tries given.
+        raise InvalidSceneError(
+            f"{stage.env_id}: no valid scene of {self.num_objects} objects in {self.config.scene_tries} draws "
+            f"({astray_draws} with objects left outside the workspace or not at rest after "
+            f"{self.config.scene.redrop_rounds} re-drop rounds, the others with no candidate target meeting the "
+            f"start condition: occluded={stage.start_occluded}, surrounded sectors>={stage.start_surrounded}). "
+            f"Raise EnvConfig.scene_tries or use fewer objects."
+        )
 
-    def _observe(self) -> dict[str, np.ndarray]:
-        from mpg_envs.footprint import footprint_mask
+    def _first_acceptable_target(self, candidates: Sequence[int]) -> int | None:
+        """The first candidate meeting the stage's start condition (occlusion, surround)."""
+        stage = self.stage
+        if stage.start_occluded is None and not stage.start_surrounded:
+            return candidates[0] if candidates else None
+        depth = self._heightmaps().depth
+        for target in candidates:
+            mask, occluded = self._target_view(depth, target)
+            if stage.start_occluded is not None and occluded != stage.start_occluded:
+                continue
+            if surrounded_sectors(depth, mask) >= stage.start_surrounded:
+                return target
+        return None
 
-        world = self.world
+    def _apply_scene(self, scene: SceneFile, drop_outside: bool) -> None:
+        """Build the world of a scene file; objects outside the workspace raise
+        :class:`SceneFileError` or, with ``drop_outside``, are left out with a warning."""
         ws = self.config.workspace
+        dropped = objects_outside(scene, ws)
+        resolve_outside(scene, dropped, ws, drop_outside, "in the file")
+        world = self._build_world([obj.asset for obj in scene.objects])
+        for i, obj in enumerate(scene.objects):
+            if obj.active and i not in dropped:
+                world.set_object_pose(i, obj.position, obj.quat)
+        world.forward()
+        if scene.settle:
+            world.settle(4 * world.physics.settle_max_steps)
+            moved_out = sorted(set(world.objects_out_of_room().tolist()) | set(world.objects_outside_workspace().tolist()))
+            positions = np.array([world.object_position(i) for i in moved_out]).reshape(-1, 3)
+            resolve_outside(scene, moved_out, ws, drop_outside, "after settling", positions)
+            for i in moved_out:
+                world.remove_object(i)
+            world.forward()
+            dropped = dropped + moved_out
+        self.target = kept_target(scene, set(dropped))
+        if self.target is None and not self.stage.mask_all_objects:
+            raise SceneFileError(f"scene {scene.source!r} has no target; {self.stage.env_id} needs one")
+
+    def current_scene(self) -> SceneFile:
+        """The current scene (every object's asset, pose and state, the target), as
+        :func:`mpg_envs.scene_io.save_scene` writes it."""
+        world = self.world
+        if world is None:
+            raise RuntimeError("call reset() before current_scene()")
+        objects = tuple(
+            SceneObject(asset, *world.object_pose(i), active=bool(world.active[i]), label=f"object {i} ({asset.name!r})")
+            for i, asset in enumerate(world.assets)
+        )
+        return SceneFile(objects, self.target, "", self.stage.name, self.config.object_set_seed)
+
+    def _heightmaps(self):
+        """Colour and depth heightmaps of the current state (ray-cast or camera)."""
         if self.obs_mode == "camera":
             if self._camera is None:
                 from mpg_envs.camera import CameraConfig, CameraHeightmapper
 
-                self._camera = CameraHeightmapper(world.model, self.camera_config or CameraConfig(), ws)
-            hm = self._camera.heightmaps(world.data, self.np_random)
-        else:
-            hm = self._raycaster(world.data)
-        if self.stage.mask_all_objects or self.target is None:
+                self._camera = CameraHeightmapper(self.world.model, self.camera_config or CameraConfig(), self.config.workspace)
+            return self._camera.heightmaps(self.world.data, self.np_random)
+        return self._raycaster(self.world.data)
+
+    def _target_view(self, depth: np.ndarray, target: int | None) -> tuple[np.ndarray, bool]:
+        """The mask heightmap for ``target`` (every object in Stage 1) and whether it is occluded."""
+        from mpg_envs.footprint import footprint_mask
+
+        world = self.world
+        ws = self.config.workspace
+        if self.stage.mask_all_objects or target is None:
             ids = [world.object_geom_ids[i] for i in world.active_objects()]
         else:
-            ids = [world.object_geom_ids[self.target]] if world.active[self.target] else []
+            ids = [world.object_geom_ids[target]] if world.active[target] else []
         geoms = np.concatenate(ids) if ids else np.zeros(0, dtype=int)
         mask = footprint_mask(ws, world.model, world.data, geoms) if geoms.size else np.zeros(ws.shape, np.uint8)
         occluded = False
-        if self.target is not None and not self.stage.mask_all_objects and world.active[self.target]:
-            occluded = is_occluded(hm.depth, mask, world.object_top(self.target), self.config.occlusion)
+        if target is not None and not self.stage.mask_all_objects and world.active[target]:
+            occluded = is_occluded(depth, mask, world.object_top(target), self.config.occlusion)
+        return (mask > 0).astype(np.uint8), bool(occluded)
+
+    def _observe(self) -> dict[str, np.ndarray]:
+        hm = self._heightmaps()
+        mask, occluded = self._target_view(hm.depth, self.target)
         return {
             "color": hm.color,
             "depth": hm.depth.astype(np.float32),
-            "mask": (mask > 0).astype(np.uint8),
+            "mask": mask,
             "occluded": np.array([int(occluded)], dtype=np.int8),
         }
 

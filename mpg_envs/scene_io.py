@@ -1,4 +1,8 @@
-"""Scene files: save the current scene, load it again, and load VPG's test cases.
+"""Scene files: read and write them, and say what is wrong with them.
+
+This module only reads and writes files; :meth:`mpg_envs.env.MPGEnv.reset` (option
+``scene``) applies a :class:`SceneFile` to a world, and :meth:`MPGEnv.current_scene` makes
+one from the current episode.
 
 Our format is JSON (``.json``): the object set, each object's asset, pose and state, and
 the target. VPG's plain-text test cases (``.txt``, one ``mesh r g b x y z rx ry rz`` line per
@@ -7,6 +11,11 @@ so a VPG pose ``(x, y)`` maps to ``(-x, -y)``; its Euler angles are CoppeliaSim'
 (``R = Rx(rx) Ry(ry) Rz(rz)``) of the mesh frame. The first object of a VPG case is the
 target. Mesh files are read from ``mesh_dir``, else from a ``blocks`` folder beside the
 test-case folder (VPG's layout), else mapped onto our blocks set (:data:`VPG_TO_BLOCKS`).
+
+Errors (:class:`SceneFileError`, a ``ValueError``) name the file, the object (its index and,
+for VPG cases, its line) and what is wrong: an unreadable file, an unknown mesh or asset, a
+missing or out-of-range target, an object outside the workspace. Objects outside the
+workspace can be dropped instead (``drop_outside=True``; a warning names them).
 """
 
 from __future__ import annotations
@@ -14,19 +23,20 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from mpg_envs.objects import ObjectAsset, blocks_object_set, load_mesh_folder
-
-if TYPE_CHECKING:
-    from mpg_envs.env import MPGEnv
+from mpg_envs.workspace import Workspace
 
 SCENE_FORMAT = "mpg-scene"
 SCENE_VERSION = 1
+BELOW_TABLE = -0.02
+"""An object whose centre is this far below the table top (m) has fallen off it."""
 
 VPG_TO_BLOCKS: dict[str, str] = {
     "0": "triangular_prism",
@@ -41,31 +51,142 @@ VPG_TO_BLOCKS: dict[str, str] = {
 """VPG block mesh stem -> the blocks-set shape it resembles (by size and shape)."""
 
 
-def save_scene(env: "MPGEnv", path: str | Path) -> Path:
-    """Write the env's current scene (every object's asset and pose, the target) as JSON."""
-    env = env.unwrapped
-    world = env.world
-    if world is None:
-        raise RuntimeError("call reset() before save_scene()")
-    objects = []
-    for i, asset in enumerate(world.assets):
-        pos, quat = world.object_pose(i)
-        objects.append(
-            {
-                "name": asset.name,
-                "source": asset.source,
-                "rgba": list(asset.rgba),
-                "position": pos.tolist(),
-                "quat": quat.tolist(),
-                "active": bool(world.active[i]),
-            }
-        )
+class SceneFileError(ValueError):
+    """A scene file that cannot be loaded as it is; the message says what and where."""
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """One object of a scene file.
+
+    Attributes:
+        asset: the object's asset (shape, colour, mass).
+        position: ``(3,)`` world position of the body frame (metres).
+        quat: ``(4,)`` orientation, unit quaternion, w first.
+        active: False for an object already taken out of the scene (grasped).
+        label: where the object comes from, for messages (``"object 3 ('cube')"``).
+    """
+
+    asset: ObjectAsset
+    position: np.ndarray
+    quat: np.ndarray
+    active: bool = True
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class SceneFile:
+    """The content of a scene file, independent of any env.
+
+    Attributes:
+        objects: every object, in world order.
+        target: index into ``objects`` of the target (``None``: no target, Stage I).
+        source: the file it was read from (for messages), or ``""``.
+        stage: the stage name it was saved from (ours only).
+        object_set_seed: the seed of the object set its assets come from.
+        settle: let the physics settle after placing (VPG's hand-made poses may start
+            slightly interpenetrating; our own files were saved at rest).
+        target_is_first_kept: the target is "the first object listed" (VPG's convention),
+            so when outside objects are dropped it is the first object that stays.
+    """
+
+    objects: tuple[SceneObject, ...]
+    target: int | None
+    source: str = ""
+    stage: str | None = None
+    object_set_seed: int = 0
+    settle: bool = False
+    target_is_first_kept: bool = False
+
+
+# ------------------------------------------------------------------------------ checks
+def objects_outside(scene: SceneFile, workspace: Workspace) -> list[int]:
+    """Active objects whose pose is not finite, whose centre is outside the workspace
+    footprint, or which lie below the table."""
+    out = []
+    for i, obj in enumerate(scene.objects):
+        pos = np.asarray(obj.position, float)
+        if not obj.active:
+            continue
+        if not np.all(np.isfinite(pos)) or not workspace.contains_xy(pos[0], pos[1]) or pos[2] < BELOW_TABLE:
+            out.append(i)
+    return out
+
+
+def describe_objects(scene: SceneFile, indices: list[int] | np.ndarray, positions: np.ndarray | None = None) -> str:
+    """``"object 3 ('cube', line 4) at (0.86, -0.20, 0.03), ..."`` for messages."""
+    parts = []
+    for k, i in enumerate(indices):
+        obj = scene.objects[int(i)]
+        pos = np.asarray(obj.position if positions is None else positions[k], float)
+        parts.append(f"{obj.label or f'object {int(i)}'} at ({pos[0]:.3f}, {pos[1]:.3f}, {pos[2]:.3f})")
+    return ", ".join(parts)
+
+
+def resolve_outside(
+    scene: SceneFile,
+    outside: list[int],
+    workspace: Workspace,
+    drop_outside: bool,
+    when: str,
+    positions: np.ndarray | None = None,
+) -> None:
+    """Raise a :class:`SceneFileError` naming the ``outside`` objects (at ``positions``, else
+    their file poses), or, with ``drop_outside``, warn naming them (the caller leaves them out)."""
+    if not outside:
+        return
+    ws = workspace
+    what = (
+        f"{len(outside)} object(s) outside the workspace (x in [{ws.x_min}, {ws.x_max}], y in [{ws.y_min}, "
+        f"{ws.y_max}], on the table) {when}: {describe_objects(scene, outside, positions)}"
+    )
+    if not drop_outside:
+        raise SceneFileError(f"scene {scene.source!r}: {what}. Pass reset(options={{'drop_outside': True}}) to leave them out.")
+    warnings.warn(f"scene {scene.source!r}: leaving out {what}", stacklevel=3)
+
+
+def kept_target(scene: SceneFile, dropped: set[int]) -> int | None:
+    """The target once ``dropped`` objects are left out; raises if the scene then has none."""
+    target = scene.target
+    if target is None:
+        return None
+    if target not in dropped:
+        return target
+    if scene.target_is_first_kept:
+        kept = [i for i, obj in enumerate(scene.objects) if obj.active and i not in dropped]
+        if kept:
+            warnings.warn(
+                f"scene {scene.source!r}: the target {scene.objects[target].label} was left out; the first object "
+                f"listed that stays, {scene.objects[kept[0]].label}, is the target",
+                stacklevel=3,
+            )
+            return kept[0]
+    raise SceneFileError(f"scene {scene.source!r}: the target {scene.objects[target].label} is not in the scene (left out)")
+
+
+# ------------------------------------------------------------------------------ writing
+def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
+    """Write a scene as JSON: a :class:`SceneFile`, or an env's current scene
+    (``env.unwrapped.current_scene()``)."""
+    if not isinstance(scene, SceneFile):
+        scene = scene.unwrapped.current_scene()  # type: ignore[attr-defined]
+    objects = [
+        {
+            "name": obj.asset.name,
+            "source": obj.asset.source,
+            "rgba": list(obj.asset.rgba),
+            "position": np.asarray(obj.position, float).tolist(),
+            "quat": np.asarray(obj.quat, float).tolist(),
+            "active": bool(obj.active),
+        }
+        for obj in scene.objects
+    ]
     doc = {
         "format": SCENE_FORMAT,
         "version": SCENE_VERSION,
-        "stage": env.stage.name,
-        "object_set_seed": env.config.object_set_seed,
-        "target": env.target,
+        "stage": scene.stage,
+        "object_set_seed": scene.object_set_seed,
+        "target": scene.target,
         "objects": objects,
     }
     path = Path(path)
@@ -73,65 +194,62 @@ def save_scene(env: "MPGEnv", path: str | Path) -> Path:
     return path
 
 
-def load_scene(env: "MPGEnv", path: str | Path, mesh_dir: str | Path | None = None) -> None:
-    """Rebuild ``env``'s world from a scene file (ours ``.json`` or VPG's ``.txt``)."""
+# ------------------------------------------------------------------------------ reading
+def read_scene(path: str | Path, mesh_dir: str | Path | None = None, object_set_seed: int = 0) -> SceneFile:
+    """Read a scene file (ours ``.json`` or VPG's ``.txt``); ``object_set_seed`` is used for
+    VPG cases (ours carry their own)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
     if path.suffix.lower() == ".txt":
-        assets, poses, active, target = _read_vpg_case(path, mesh_dir, env.config.object_set_seed)
-    elif path.suffix.lower() == ".json":
-        assets, poses, active, target = _read_json_scene(path, mesh_dir)
-    else:
-        raise ValueError(f"scene file {str(path)!r}: expected a .json scene or a VPG .txt test case")
-    world = env._build_world(assets)
-    for i, (pos, quat) in enumerate(poses):
-        if active[i]:
-            world.set_object_pose(i, pos, quat)
-    world.forward()
-    # Poses below the table or outside the room (VPG files hold a few) leave the object out.
-    for i in world.objects_out_of_room().tolist() + world.objects_off_table().tolist():
-        world.remove_object(i)
-    world.forward()
-    if path.suffix.lower() == ".txt":
-        # VPG poses are hand-made and may start slightly interpenetrating; our own files were
-        # saved at rest and are restored exactly.
-        world.settle(4 * world.physics.settle_max_steps)
-    env.target = target
+        return _read_vpg_case(path, mesh_dir, object_set_seed)
+    if path.suffix.lower() == ".json":
+        return _read_json_scene(path, mesh_dir)
+    raise SceneFileError(f"scene file {str(path)!r}: expected a .json scene or a VPG .txt test case")
 
 
-def _read_json_scene(path: Path, mesh_dir: str | Path | None):
+def _read_json_scene(path: Path, mesh_dir: str | Path | None) -> SceneFile:
     try:
         doc = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"scene file {str(path)!r} is not readable JSON: {exc}") from exc
-    if doc.get("format") != SCENE_FORMAT or doc.get("version") != SCENE_VERSION:
-        raise ValueError(f"scene file {str(path)!r}: not an {SCENE_FORMAT} v{SCENE_VERSION} file")
+        raise SceneFileError(f"scene file {str(path)!r} is not readable JSON: {exc}") from exc
+    if not isinstance(doc, dict) or doc.get("format") != SCENE_FORMAT or doc.get("version") != SCENE_VERSION:
+        raise SceneFileError(f"scene file {str(path)!r}: not an {SCENE_FORMAT} v{SCENE_VERSION} file")
     seed = int(doc.get("object_set_seed", 0))
     blocks = None
     folders: dict[str, dict[str, ObjectAsset]] = {}
-    assets, poses, active = [], [], []
-    for k, obj in enumerate(doc["objects"]):
-        if obj["source"] == "blocks":
+    objects = []
+    for k, obj in enumerate(doc.get("objects") or []):
+        try:
+            name, source = obj["name"], obj["source"]
+            position, quat = np.asarray(obj["position"], float), np.asarray(obj["quat"], float)
+            rgba, active = tuple(obj["rgba"]), bool(obj.get("active", True))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SceneFileError(f"scene file {str(path)!r}: object {k} is malformed ({exc!r})") from exc
+        if source == "blocks":
             blocks = blocks or {a.name: a for a in blocks_object_set(seed=seed)}
-            asset = blocks.get(obj["name"])
+            asset = blocks.get(name)
         else:
-            folder = str(Path(mesh_dir) if mesh_dir is not None else Path(obj["source"]).parent)
+            folder = str(Path(mesh_dir) if mesh_dir is not None else Path(source).parent)
             if folder not in folders:
-                folders[folder] = {a.name: a for a in load_mesh_folder(folder, seed=seed)}
-            asset = folders[folder].get(obj["name"])
+                folders[folder] = {a.name: a for a in load_mesh_folder(folder, seed=seed)} if Path(folder).is_dir() else {}
+            asset = folders[folder].get(name)
         if asset is None:
-            raise ValueError(f"scene file {str(path)!r}: object {k} ({obj['name']!r} from {obj['source']!r}) not found")
-        assets.append(dataclasses.replace(asset, rgba=tuple(obj["rgba"])))
-        poses.append((np.asarray(obj["position"], float), np.asarray(obj["quat"], float)))
-        active.append(bool(obj["active"]))
+            raise SceneFileError(f"scene file {str(path)!r}: object {k} has an unknown asset {name!r} (from {source!r})")
+        label = f"object {k} ({name!r})"
+        objects.append(SceneObject(dataclasses.replace(asset, rgba=rgba), position, quat, active, label))
+    if not objects:
+        raise SceneFileError(f"scene file {str(path)!r} lists no objects")
     target = doc.get("target")
-    if target is not None and not 0 <= int(target) < len(assets):
-        raise ValueError(f"scene file {str(path)!r}: target {target} is not an object index 0..{len(assets) - 1}")
-    return assets, poses, active, None if target is None else int(target)
+    if target is not None:
+        if not isinstance(target, int) or not 0 <= target < len(objects):
+            raise SceneFileError(f"scene file {str(path)!r}: target {target!r} is not an object index 0..{len(objects) - 1}")
+        if not objects[target].active:
+            raise SceneFileError(f"scene file {str(path)!r}: the target {objects[target].label} is not in the scene (inactive)")
+    return SceneFile(tuple(objects), target, str(path), doc.get("stage"), seed)
 
 
-def _read_vpg_case(path: Path, mesh_dir: str | Path | None, seed: int):
+def _read_vpg_case(path: Path, mesh_dir: str | Path | None, seed: int) -> SceneFile:
     folder = Path(mesh_dir) if mesh_dir is not None else path.parent.parent / "blocks"
     by_name: dict[str, ObjectAsset]
     if folder.is_dir():
@@ -142,33 +260,33 @@ def _read_vpg_case(path: Path, mesh_dir: str | Path | None, seed: int):
             raise FileNotFoundError(f"mesh_dir {str(mesh_dir)!r} does not exist")
         by_name = {a.name: a for a in blocks_object_set(seed=seed)}
         mapping = VPG_TO_BLOCKS
-    assets, poses, active = [], [], []
+    objects = []
     for lineno, line in enumerate(path.read_text().splitlines(), start=1):
         if not line.strip():
             continue
         fields = line.split()
         if len(fields) != 10:
-            raise ValueError(f"{path}:{lineno}: expected 'mesh r g b x y z rx ry rz', got {len(fields)} fields")
+            raise SceneFileError(f"{path}:{lineno}: expected 'mesh r g b x y z rx ry rz', got {len(fields)} fields")
         stem = Path(fields[0]).stem
         name = mapping.get(stem, stem) if mapping else stem
         if name not in by_name:
-            raise ValueError(f"{path}:{lineno}: mesh {fields[0]!r} not found in {str(folder) if mapping is None else 'the blocks set'}")
+            where = str(folder) if mapping is None else f"the blocks set (VPG meshes known: {sorted(mapping)})"
+            raise SceneFileError(f"{path}:{lineno}: unknown mesh {fields[0]!r}, not in {where}")
         try:
             r, g, b, x, y, z, rx, ry, rz = (float(v) for v in fields[1:])
         except ValueError as exc:
-            raise ValueError(f"{path}:{lineno}: {exc}") from exc
+            raise SceneFileError(f"{path}:{lineno}: {exc}") from exc
         asset = dataclasses.replace(by_name[name], rgba=(r, g, b, 1.0))
         rot = _rot_z(math.pi) @ _rot_x(rx) @ _rot_y(ry) @ _rot_z(rz)
         # The VPG pose is the mesh frame's; our body frame sits at the parts' centre of mass.
         position = np.array([-x, -y, z]) + rot @ np.asarray(asset.mesh_offset)
         quat = np.empty(4)
         mujoco.mju_mat2Quat(quat, rot.ravel())
-        assets.append(asset)
-        poses.append((position, quat))
-        active.append(bool(np.all(np.isfinite(position))))
-    if not assets:
-        raise ValueError(f"VPG test case {str(path)!r} lists no objects")
-    return assets, poses, active, 0
+        label = f"object {len(objects)} ({fields[0]}, line {lineno})"
+        objects.append(SceneObject(asset, position, quat, True, label))
+    if not objects:
+        raise SceneFileError(f"VPG test case {str(path)!r} lists no objects")
+    return SceneFile(tuple(objects), 0, str(path), None, seed, settle=True, target_is_first_kept=True)
 
 
 def _rot_x(a: float) -> np.ndarray:

@@ -1,23 +1,46 @@
 """Scene generators: where objects are dropped for each training stage.
 
-A generator is a small hook ``(world, rng, config) -> target index`` over a :class:`World`
+A generator is a small hook ``(world, rng, config) -> SceneLayout`` over a :class:`World`
 whose objects are all parked: it drops them one by one (each settles before the next) and
-says which object is the target (``None`` when the mask covers every object, Stage I).
-Whether the result is acceptable (e.g. the target really is occluded) is the stage's call,
-which retries with fresh random draws.
+says which objects may be the target, in the order to try them (none when the mask covers
+every object, Stage I), and where an object that rolled out of the workspace is dropped
+again (:func:`keep_inside`: same pile, same seed stream, so scenes stay deterministic).
+Whether a candidate target is acceptable (e.g. it really is occluded) is the stage's call
+(:class:`~mpg_envs.stages.StageSpec`), made by the env, which redraws the whole scene when
+no candidate is.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Optional
+from typing import Callable
 
 import numpy as np
 
 from mpg_envs.world import World
 
-SceneFn = Callable[[World, np.random.Generator, "SceneConfig"], Optional[int]]
+
+class InvalidSceneError(RuntimeError):
+    """A valid scene (every object resting inside the workspace, the stage's start
+    condition met) could not be made in the bounded number of tries."""
+
+
+@dataclass(frozen=True)
+class SceneLayout:
+    """What a generator made.
+
+    Attributes:
+        targets: candidate target indices in the order to try them (empty: no target, the
+            mask shows every object).
+        redrop: draws the ``(x, y)`` where an object that left the workspace is dropped again.
+    """
+
+    targets: tuple[int, ...]
+    redrop: Callable[[], np.ndarray]
+
+
+SceneFn = Callable[[World, np.random.Generator, "SceneConfig"], SceneLayout]
 
 
 @dataclass(frozen=True)
@@ -32,6 +55,7 @@ class SceneConfig:
     cluster_radius: float = 0.06  # Stage V: "dropped close together"
     test_cluster_radius: float = 0.075  # test scenes (15 or 30 objects)
     max_point_tries: int = 200
+    redrop_rounds: int = 4  # rounds of re-dropping the objects that left the workspace
 
 
 def random_quat(rng: np.random.Generator) -> np.ndarray:
@@ -71,14 +95,14 @@ def _cluster_point(center: np.ndarray, radius: float, rng: np.random.Generator) 
     return center + r * np.array([math.cos(a), math.sin(a)])
 
 
-def scattered(world: World, rng: np.random.Generator, cfg: SceneConfig) -> None:
+def scattered(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
     """Stage I: every object dropped apart from the others; the mask shows them all."""
     for i, p in enumerate(_points_apart(world, rng, world.num_objects, cfg.apart_distance, cfg)):
         world.drop_object(i, p, random_quat(rng))
-    return None
+    return SceneLayout((), lambda: _uniform_point(world, rng, cfg.edge_margin))
 
 
-def isolated_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> int:
+def isolated_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
     """Stage II: the n-th dropped object is the target, kept clear of the others."""
     n = world.num_objects
     target = int(rng.integers(n))
@@ -88,10 +112,10 @@ def isolated_target(world: World, rng: np.random.Generator, cfg: SceneConfig) ->
     points[target], points[best] = points[best], points[target]
     for i, p in enumerate(points):
         world.drop_object(i, p, random_quat(rng))
-    return target
+    return SceneLayout((target,), lambda: _uniform_point(world, rng, cfg.edge_margin))
 
 
-def occluded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> int:
+def occluded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
     """Stage III: an occluder dropped onto the target, more objects nearby as they grow."""
     center = _uniform_point(world, rng, cfg.edge_margin + 0.03)
     world.drop_object(0, center, yaw_quat(rng))
@@ -99,10 +123,10 @@ def occluded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) ->
     world.drop_object(1, center + offset, random_quat(rng), height=0.05)
     for i in range(2, world.num_objects):
         world.drop_object(i, _cluster_point(center, 2 * cfg.cluster_radius, rng), random_quat(rng))
-    return 0
+    return SceneLayout((0,), lambda: _cluster_point(center, 2 * cfg.cluster_radius, rng))
 
 
-def surrounded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> int:
+def surrounded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
     """Stage IV: the target boxed in by neighbours on all sides, none on top of it."""
     center = _uniform_point(world, rng, cfg.edge_margin + 0.05)
     world.drop_object(0, center, yaw_quat(rng), height=0.02)
@@ -114,23 +138,59 @@ def surrounded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) 
         radius = target_radius + 0.5 * float(np.min(world.assets[k + 1].extents[:2])) + cfg.surround_gap
         p = center + radius * np.array([math.cos(a), math.sin(a)])
         world.drop_object(k + 1, p, yaw_quat(rng), height=0.02)
-    return 0
+    # A neighbour that rolled away can't be put back in the ring: the stage's surround check decides.
+    return SceneLayout((0,), lambda: _cluster_point(center, 3 * target_radius, rng))
 
 
-def clustered(world: World, rng: np.random.Generator, cfg: SceneConfig) -> int:
+def clustered(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
     """Stage V: all objects dropped close together; the target is the 1st or 2nd dropped."""
     center = _uniform_point(world, rng, cfg.edge_margin + cfg.cluster_radius)
     for i in range(world.num_objects):
         world.drop_object(i, _cluster_point(center, cfg.cluster_radius, rng), random_quat(rng))
-    return int(rng.integers(2))
+    return SceneLayout(tuple(int(k) for k in rng.permutation(2)), lambda: _cluster_point(center, cfg.cluster_radius, rng))
 
 
-def test_scene(world: World, rng: np.random.Generator, cfg: SceneConfig) -> int:
+def test_scene(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
     """Test scenes: 15 or 30 objects close together; the target one of the first five."""
     center = _uniform_point(world, rng, cfg.edge_margin + cfg.test_cluster_radius)
     for i in range(world.num_objects):
         world.drop_object(i, _cluster_point(center, cfg.test_cluster_radius, rng), random_quat(rng))
-    return int(rng.integers(min(5, world.num_objects)))
+    first = rng.permutation(min(5, world.num_objects))
+    return SceneLayout(tuple(int(k) for k in first), lambda: _cluster_point(center, cfg.test_cluster_radius, rng))
+
+
+def objects_astray(world: World) -> np.ndarray:
+    """Objects that make a scene invalid: inactive, left the room, or centre outside the workspace."""
+    astray = set(np.flatnonzero(~world.active).tolist())
+    astray.update(world.objects_out_of_room().tolist())
+    astray.update(world.objects_outside_workspace().tolist())
+    return np.array(sorted(astray), dtype=int)
+
+
+def keep_inside(world: World, rng: np.random.Generator, layout: SceneLayout, cfg: SceneConfig) -> tuple[int, ...] | None:
+    """Re-drop, at ``layout.redrop`` points, every object that is not resting inside the
+    workspace, for up to ``cfg.redrop_rounds`` rounds.
+
+    Returns the indices that were re-dropped (they land on top of the pile, so they are no
+    longer candidate targets), or ``None`` when objects are still astray after the last
+    round or the pile does not come to rest.
+    """
+    redropped: set[int] = set()
+    for round_ in range(cfg.redrop_rounds + 1):
+        astray = objects_astray(world)
+        if astray.size == 0 and not world.objects_at_rest():
+            world.settle()  # a pile still creeping after the capped settle of the last drop
+            astray = objects_astray(world)
+        if astray.size == 0:
+            return tuple(sorted(redropped)) if world.objects_at_rest() else None
+        if round_ == cfg.redrop_rounds:
+            return None
+        for i in astray:
+            world.remove_object(int(i))
+        for i in astray:
+            world.drop_object(int(i), layout.redrop(), random_quat(rng))
+        redropped.update(int(i) for i in astray)
+    return None  # not reached: the last round returns
 
 
 SCENES: dict[str, SceneFn] = {

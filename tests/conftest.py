@@ -29,5 +29,26 @@ def vpg_dir():
     return path
 
 
+@pytest.fixture
+def make_env():
+    """Factory ``make_env(env_id, wrapped=False, **kwargs)``: ``gym.make(env_id, **kwargs)``
+    (its unwrapped ``MPGEnv`` unless ``wrapped``), closed when the test ends. Shared by the
+    env tests and the agents' integration tests."""
+    import gymnasium as gym
+
+    import mpg_envs  # noqa: F401  (registers the ids)
+
+    made = []
+
+    def make(env_id: str, wrapped: bool = False, **kwargs):
+        env = gym.make(env_id, **kwargs)
+        made.append(env)
+        return env if wrapped else env.unwrapped
+
+    yield make
+    for env in made:
+        env.close()
+
+
 def flat_quat(yaw: float = 0.0) -> np.ndarray:
     return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])

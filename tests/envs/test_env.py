@@ -51,12 +51,12 @@ def test_make_with_module_prefix_in_a_fresh_interpreter():
 
 
 @pytest.mark.parametrize("env_id", ALL_IDS)
-def test_gymnasium_and_sb3_env_checkers_pass(env_id):
+def test_gymnasium_and_sb3_env_checkers_pass(env_id, make_env):
     from gymnasium.utils.env_checker import check_env as gym_check
     from stable_baselines3.common.env_checker import check_env as sb3_check
 
     kwargs = {"num_objects": 5} if env_id == "MPG-Occluded-v0" else {}
-    env = gym.make(env_id, **kwargs).unwrapped
+    env = make_env(env_id, **kwargs)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # SB3 notes the image-like Box spaces; not errors
         gym_check(env, skip_render_check=True)
@@ -85,8 +85,8 @@ def same(a, b):
     return a == b
 
 
-def test_same_seed_and_actions_are_bit_identical():
-    env = gym.make("MPG-Stage5-v0")
+def test_same_seed_and_actions_are_bit_identical(make_env):
+    env = make_env("MPG-Stage5-v0", wrapped=True)
     rng = np.random.default_rng(0)
     actions = [int(a) for a in rng.integers(env.action_space.n, size=4)]
     assert same(rollout(env, 11, actions), rollout(env, 11, actions))
@@ -104,8 +104,8 @@ def test_same_seed_and_actions_are_bit_identical():
         (np.array([1, 2]), "single integer"),
     ],
 )
-def test_malformed_action_raises_clearly(action, match):
-    env = gym.make("MPG-Stage2-v0").unwrapped
+def test_malformed_action_raises_clearly(action, match, make_env):
+    env = make_env("MPG-Stage2-v0")
     env.reset(seed=0)
     with pytest.raises(ValueError, match=match):
         env.step(action)
@@ -113,8 +113,8 @@ def test_malformed_action_raises_clearly(action, match):
     assert obs["depth"].shape == (224, 224)
 
 
-def test_primitive_not_allowed_raises():
-    env = gym.make("MPG-Stage4-v0").unwrapped
+def test_primitive_not_allowed_raises(make_env):
+    env = make_env("MPG-Stage4-v0")
     env.reset(seed=0)
     with pytest.raises(ValueError, match="not allowed"):
         env.action_space.encode("move", 0, 0, 0)
@@ -126,8 +126,8 @@ def test_primitive_not_allowed_raises():
         MPGEnv("Stage9")
 
 
-def test_info_has_every_key_and_is_fresh():
-    env = gym.make("MPG-Stage5-v0").unwrapped
+def test_info_has_every_key_and_is_fresh(make_env):
+    env = make_env("MPG-Stage5-v0")
     env.reset(seed=1)
     _, _, _, _, a = env.step(env.action_space.encode("push", 0, 100, 100))
     _, _, _, _, b = env.step(env.action_space.encode("push", 4, 120, 100))
@@ -135,15 +135,15 @@ def test_info_has_every_key_and_is_fresh():
 
 
 @pytest.mark.parametrize("env_id, occluded", [("MPG-Stage3-v0", True), ("MPG-Occluded-v0", True)])
-def test_occluded_stages_start_occluded(env_id, occluded):
-    env = gym.make(env_id).unwrapped
+def test_occluded_stages_start_occluded(env_id, occluded, make_env):
+    env = make_env(env_id)
     seeds = range(10)
     starts = [bool(env.reset(seed=s)[0]["occluded"][0]) for s in seeds]
     assert sum(starts) >= 9
 
 
-def test_stage4_target_is_surrounded_but_not_occluded():
-    env = gym.make("MPG-Stage4-v0").unwrapped
+def test_stage4_target_is_surrounded_but_not_occluded(make_env):
+    env = make_env("MPG-Stage4-v0")
     for seed in range(10):
         obs, info = env.reset(seed=seed)
         assert not obs["occluded"][0]
@@ -162,37 +162,39 @@ def test_surrounded_sectors_hand_made():
     assert surrounded_sectors(depth, mask, reach_pixels=5) == 8
 
 
-def test_scene_file_round_trip(tmp_path):
-    env = gym.make("MPG-Stage5-v0").unwrapped
+def test_scene_file_round_trip(tmp_path, make_env):
+    env = make_env("MPG-Stage5-v0")
     obs, info = env.reset(seed=5)
     path = save_scene(env, tmp_path / "scene.json")
     obs2, info2 = env.reset(options={"scene": str(path)})
     assert same(obs, obs2) and info2["target"] == info["target"]
 
 
-def test_vpg_test_case_loads_with_its_object_count(vpg_dir):
+def test_vpg_test_case_loads_with_its_object_count(vpg_dir, make_env):
     case = vpg_dir / "test-cases" / "test-10-obj-02.txt"
     lines = [ln for ln in case.read_text().splitlines() if ln.strip()]
-    env = gym.make("MPG-Occluded-v0").unwrapped
-    obs, info = env.reset(options={"scene": str(case)})
+    env = make_env("MPG-Occluded-v0")
+    with pytest.warns(UserWarning, match="outside the workspace"):  # 7 of its 10 objects lie outside
+        obs, info = env.reset(options={"scene": str(case), "drop_outside": True})
     assert env.world.num_objects == len(lines) == 10
     names = [a.name for a in env.world.assets]
     assert names == [ln.split()[0].split(".")[0] for ln in lines]  # VPG's own meshes
     assert obs["depth"].max() > 0.02 and obs["mask"].any()
 
 
-def test_vpg_case_maps_onto_blocks_without_the_meshes(vpg_dir, tmp_path):
+def test_vpg_case_maps_onto_blocks_without_the_meshes(vpg_dir, tmp_path, make_env):
     case = tmp_path / "cases" / "case.txt"
     case.parent.mkdir()
     case.write_text((vpg_dir / "test-cases" / "test-10-obj-03.txt").read_text())
-    env = gym.make("MPG-Stage5-v0").unwrapped
-    env.reset(options={"scene": str(case)})
+    env = make_env("MPG-Stage5-v0")
+    with pytest.warns(UserWarning, match="outside the workspace"):  # 5 of its objects lie outside
+        env.reset(options={"scene": str(case), "drop_outside": True})
     assert env.world.num_objects == 10
     assert {a.source for a in env.world.assets} == {"blocks"}
 
 
-def test_bad_scene_files_raise(tmp_path):
-    env = gym.make("MPG-Stage5-v0").unwrapped
+def test_bad_scene_files_raise(tmp_path, make_env):
+    env = make_env("MPG-Stage5-v0")
     with pytest.raises(FileNotFoundError):
         env.reset(options={"scene": str(tmp_path / "missing.json")})
     bad = tmp_path / "bad.txt"
@@ -220,8 +222,8 @@ def test_reward_equations_on_constructed_cases():
     assert reward_push(o("push", change_detected=False, grasp_q_gain=0.9)) == -0.5
 
 
-def test_move_that_uncovers_the_target_earns_1_in_stage3():
-    env = gym.make("MPG-Stage3-v0").unwrapped
+def test_move_that_uncovers_the_target_earns_1_in_stage3(make_env):
+    env = make_env("MPG-Stage3-v0")
     env.reset(seed=0)
     oracle = OraclePolicy(env)
     for _ in range(5):
@@ -232,13 +234,13 @@ def test_move_that_uncovers_the_target_earns_1_in_stage3():
     pytest.fail("the oracle's moves never uncovered the target")
 
 
-def test_push_rewards_no_change_and_scorer_gain():
+def test_push_rewards_no_change_and_scorer_gain(make_env):
     # A scorer that likes empty space around the target: pushing a neighbour away pays.
     def scorer(obs):
         ring = cv2.dilate(obs["mask"], np.ones((31, 31), np.uint8)) & (1 - obs["mask"])
         return -float(obs["depth"][ring > 0].mean()) * 100
 
-    env = gym.make("MPG-Stage4-v0", grasp_scorer=scorer).unwrapped
+    env = make_env("MPG-Stage4-v0", grasp_scorer=scorer)
     obs, _ = env.reset(seed=0)
     # A push in an empty corner changes nothing.
     _, r, *_, info = env.step(env.action_space.encode("push", 0, 5, 5))
@@ -273,8 +275,8 @@ def test_occlusion_and_change_detection_on_hand_made_maps():
 
 
 # --------------------------------------------------------------------------- robustness
-def _random_soak(env_id, actions, **kwargs):
-    env = gym.make(env_id, **kwargs).unwrapped
+def _random_soak(make_env, env_id, actions, **kwargs):
+    env = make_env(env_id, **kwargs)
     env.reset(seed=0)
     env.action_space.seed(0)
     for step in range(actions):
@@ -287,14 +289,14 @@ def _random_soak(env_id, actions, **kwargs):
 
 
 @pytest.mark.parametrize("env_id", ALL_IDS)
-def test_random_actions_keep_the_simulation_sane(env_id):
-    _random_soak(env_id, 40, **({"num_objects": 8} if env_id == "MPG-Occluded-v0" else {}))
+def test_random_actions_keep_the_simulation_sane(env_id, make_env):
+    _random_soak(make_env, env_id, 40, **({"num_objects": 8} if env_id == "MPG-Occluded-v0" else {}))
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("env_id", ALL_IDS)
-def test_200_random_actions_keep_the_simulation_sane(env_id):
-    _random_soak(env_id, 200)
+def test_200_random_actions_keep_the_simulation_sane(env_id, make_env):
+    _random_soak(make_env, env_id, 200)
 
 
 def test_vector_envs_run_with_two_workers():
@@ -335,10 +337,10 @@ def test_render_rgb_array_headless():
 
 
 @pytest.mark.gl
-def test_camera_obs_mode_agrees_with_raycast():
+def test_camera_obs_mode_agrees_with_raycast(make_env):
     _gl_or_skip()
-    cam = gym.make("MPG-Stage5-v0", obs_mode="camera").unwrapped
-    ray = gym.make("MPG-Stage5-v0").unwrapped
+    cam = make_env("MPG-Stage5-v0", obs_mode="camera")
+    ray = make_env("MPG-Stage5-v0")
     a, _ = cam.reset(seed=2)
     b, _ = ray.reset(seed=2)
     occupied = b["depth"] > 0.005
