@@ -39,14 +39,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--episodes", type=int, default=50, help="per cell (paper: 50)")
     parser.add_argument("--objects", type=int, nargs="+", default=[15, 30])
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--workers", type=int, default=2, help="CPUs of the local Ray, and chunks per cell (1: in this process, no Ray)")
+    parser.add_argument("--workers", type=int, help="CPUs of a local Ray and chunks per cell (1: in this process, no Ray); default 2, or the cluster's CPUs with --ray-address")
     parser.add_argument("--ray-address", help="join this Ray cluster instead of starting a local one")
     parser.add_argument("--max-motions", type=int, help="override the env's motion cap (paper: 10); for quick checks")
     parser.add_argument("--out", default="runs/table1", help="folder for table1.json and table1.md")
     parser.add_argument("--quiet", action="store_true", help="no line per finished episode")
     parser.add_argument("--speedup", action="store_true", help="run the cells again with --workers 1: speed-up and equality")
     args = parser.parse_args(argv)
-    if args.episodes < 1 or args.workers < 1:
+    if args.workers is None and args.ray_address is None:
+        args.workers = 2
+    if args.episodes < 1 or (args.workers is not None and args.workers < 1):
         parser.error(f"--episodes and --workers must be >= 1, got {args.episodes} and {args.workers}")
     for policy in args.policies:
         if policy not in BUILTIN and not Path(policy).is_file():
@@ -73,7 +75,7 @@ def main(argv: list[str] | None = None) -> dict:
     def on_record(job: EvalJob, record) -> None:
         print(f"  [{job.policy}, {job.num_objects} obj.] {record.describe()}", flush=True)
 
-    print(f"Table I: {len(cells)} cells x {args.episodes} episodes on {ENV_ID}, seeds {args.seed}..{args.seed + args.episodes - 1}, {args.workers} workers", flush=True)
+    print(f"Table I: {len(cells)} cells x {args.episodes} episodes on {ENV_ID}, seeds {args.seed}..{args.seed + args.episodes - 1}, workers: {args.workers or 'the cluster CPUs'}", flush=True)
     results, timing = evaluate_jobs(jobs, args.workers, args.ray_address, on_record=None if args.quiet else on_record)
     by_cell = dict(zip(cells, results))
     header, body, paper_rows = table_rows(args.policies, args.objects, by_cell)

@@ -141,7 +141,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
     parser.add_argument("--json", help="also write the metrics and every episode's record to this JSON file")
     parser.add_argument("--coordination", choices=("workflow", "max_q"), help="network policies: override the coordination")
-    parser.add_argument("--workers", type=int, default=1, help="worker processes on Ray (1: in this process); same results for any number")
+    parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
     parser.add_argument("--quiet", action="store_true", help="no line per episode")
     args = parser.parse_args(argv)
@@ -154,12 +154,13 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             _check_checkpoint(args.policy)
         if args.episodes < 1:
             raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
-        if args.workers < 1:
+        if args.workers is not None and args.workers < 1:
             raise UsageError(f"--workers must be >= 1, got {args.workers}")
+        workers = 1 if args.workers is None and args.ray_address is None else args.workers
         extra = (("coordination", args.coordination),) if args.coordination else ()
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
-        result = evaluate_parallel(job, args.workers, args.ray_address, on_record=on_record)
+        result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record)
     except (UsageError, FileNotFoundError, ValueError) as exc:
         return _fail(exc)
     print(result.table())

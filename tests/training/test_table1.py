@@ -92,10 +92,13 @@ def test_benchmark_prints_the_table_and_ends_with_its_json(ray_two_cpus, tmp_pat
     assert "| grasp-only |" in (tmp_path / "table1.md").read_text()
 
 
-def test_mpg_eval_json_is_the_same_for_one_and_two_workers(ray_two_cpus, tmp_path):
+def test_mpg_eval_json_is_the_same_for_one_and_two_workers_and_a_cluster(ray_two_cpus, tmp_path):
     from mpg_agents.cli import eval_main
 
     argv = ["--policy", "random", "--env", "MPG-Stage2-v0", "--episodes", "2", "--seed", "3", "--quiet"]
-    for workers in (1, 2):
-        assert eval_main(argv + ["--workers", str(workers), "--json", str(tmp_path / f"w{workers}.json")]) == 0
-    assert (tmp_path / "w1.json").read_bytes() == (tmp_path / "w2.json").read_bytes()
+    # the running Ray stands in for a cluster: without --workers, one chunk per cluster CPU
+    runs = {"w1": ["--workers", "1"], "w2": ["--workers", "2"], "cluster": ["--ray-address", "auto"]}
+    for name, extra in runs.items():
+        assert eval_main(argv + extra + ["--json", str(tmp_path / f"{name}.json")]) == 0
+    texts = {(tmp_path / f"{name}.json").read_bytes() for name in runs}
+    assert len(texts) == 1
