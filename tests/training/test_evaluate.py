@@ -11,6 +11,7 @@ import pytest
 from mpg_agents.cli import eval_main
 from mpg_agents.evaluate import PRIMITIVES, EpisodeRecord, summarise
 from mpg_agents.stats import bootstrap_mean_interval, wilson_interval
+from mpg_envs.env import END_REASONS
 
 
 # ----------------------------------------------------------------------------- stats
@@ -133,6 +134,9 @@ def test_mpg_eval_writes_json_only_when_asked_and_reports_end_reasons(tmp_path, 
     assert sum(data["primitive_counts"].values()) == sum(r["motions"] for r in data["records"])
     assert [r["seed"] for r in data["records"]] == [7, 8]
     assert dict(Counter(r["end_reason"] for r in data["records"])) == data["end_reasons"]
+    assert set(data["end_reasons"]) <= set(END_REASONS)
+    for record in data["records"]:
+        assert (record["end_reason"] == "target_grasped") == record["success"]
     assert data["success_interval"][0] <= data["task_success_rate"] <= data["success_interval"][1]
 
 
