@@ -11,7 +11,9 @@ benchmark does about it:
   OpenMP/BLAS pool per process; two workers on two cores then fight over them. Each worker
   here runs one thread: ``raycast_threads=1`` and ``OMP_NUM_THREADS`` / ``MKL_NUM_THREADS``
   / ``OPENBLAS_NUM_THREADS`` = 1 set before numpy, MuJoCo or torch are imported (in this
-  process, inherited by every worker), plus ``torch.set_num_threads(1)`` if torch is loaded.
+  process, inherited by every worker), plus ``mpg_envs.threads.worker_init()`` in each
+  worker. (The ray-cast default, up to 2 threads, now drops to 1 under that setting too:
+  ``--raycast-threads 0`` checks it.)
 - the start method: "forkserver" starts workers from a clean process (no copied thread
   pools or locks of the parent) at the cost of a slower start, which is not timed.
 - lockstep: ``AsyncVectorEnv.step`` waits for the slowest worker, so a worker that resets
@@ -41,7 +43,6 @@ import argparse  # noqa: E402
 import functools  # noqa: E402
 import copy  # noqa: E402
 import json  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
@@ -68,10 +69,10 @@ class WorkerTimer(gym.Wrapper):
 
 def make_env(raycast_threads: int | None = 1) -> gym.Env:
     """One Stage-V env on one thread (module level, so any start method can pickle it)."""
-    if "torch" in sys.modules:
-        sys.modules["torch"].set_num_threads(1)
-    import mpg_envs  # noqa: F401
     from mpg_envs.env import EnvConfig
+    from mpg_envs.threads import worker_init
+
+    worker_init()  # one thread (OpenMP, torch if loaded); the workers' parallelism is their number
 
     return WorkerTimer(gym.make(ENV_ID, config=EnvConfig(raycast_threads=raycast_threads)))
 

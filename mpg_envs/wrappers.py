@@ -9,6 +9,10 @@ Gymnasium's own wrappers::
     env = ImageObservation(GridAction(gym.make("MPG-Stage2-v0")))
     model = stable_baselines3.PPO("CnnPolicy", env)        # 4.9M parameters
 
+SB3's DQN keeps 1M transitions by default: at 84 x 84 x 5 bytes an image that is 35 GB, so
+give it ``buffer_size=10_000`` (and ``optimize_memory_usage=True``, 350 MB), as
+``benchmarks/third_party.py`` does.
+
 - :class:`ImageObservation`: one ``uint8`` image, colour, depth and mask as channels.
 - :class:`GridAction`: ``Discrete(P x rotations x cells)``, each cell's centre pixel.
 - :class:`ContinuousAction`: ``Box(-1, 1, (3 + P,))`` for PPO/SAC/TD3.

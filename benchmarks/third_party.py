@@ -1,0 +1,249 @@
+"""Third-party baselines on ``MPG-Stage2-v0``: SB3 PPO and DQN beside the built-in policies.
+
+Trains SB3's PPO and DQN with ``CnnPolicy`` through the standard wrappers,
+``ImageObservation(GridAction(env))`` (an 84 x 84 x 5 image; 6,272 grid actions: 8 x 8
+pixel cells x 8 grasp angles), for a fixed budget of env steps on a ``SubprocVecEnv``
+(``--envs`` workers, one torch/OpenMP thread and ``raycast_threads=1`` each). Then it
+evaluates each trained model, and the built-in ``random``, ``grasp-only`` and ``shipped``
+(MPGNet) policies on the raw env, with ``mpg_agents.evaluate.evaluate``: the same
+episodes for all, seeded ``--eval-seed + k`` (held out: training envs draw scenes from
+``--seed + worker``).
+
+Prints one table: parameters, training env steps/s, peak memory (RSS of the trainer and
+all its worker processes, sampled every 0.2 s), task success with a Wilson 95% interval,
+mean motions per episode. Saves the trained models as ``<out>/ppo.zip`` and
+``<out>/dqn.zip``. The last output line is one JSON object.
+
+    python benchmarks/third_party.py [--steps 20000] [--envs N] [--episodes 50] [--out runs/third_party]
+
+Quick check (a minute or two): ``--steps 256 --episodes 3 --envs 2``.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    os.environ[_var] = "1"  # before numpy / torch start their pools; SubprocVecEnv workers inherit it
+if not os.environ.get("DISPLAY"):
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+import argparse  # noqa: E402
+import functools  # noqa: E402
+import json  # noqa: E402
+import threading  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+
+ENV_ID = "MPG-Stage2-v0"
+ALGOS = ("ppo", "dqn")
+BASELINES = ("random", "grasp-only", "shipped")
+
+
+# ----------------------------------------------------------------------------- envs
+def make_wrapped_env(cell: int, size: int) -> gym.Env:
+    """``ImageObservation(GridAction(MPG-Stage2-v0))`` on one thread (picklable for workers)."""
+    from mpg_envs.env import EnvConfig
+    from mpg_envs.threads import worker_init
+    from mpg_envs.wrappers import GridAction, ImageObservation
+
+    worker_init()  # one thread: the workers' parallelism is their number
+    return ImageObservation(GridAction(gym.make(ENV_ID, config=EnvConfig(raycast_threads=1)), cell=cell), size=size)
+
+
+def make_training_envs(n: int, cell: int, size: int):
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
+
+    # forkserver: workers start clean, not as copies of a trainer that has torch loaded.
+    envs = SubprocVecEnv([functools.partial(make_wrapped_env, cell, size)] * n, start_method="forkserver")
+    return VecMonitor(envs)
+
+
+# ----------------------------------------------------------------------------- memory
+def _tree_rss_bytes(root: int) -> int:
+    """Resident memory of ``root`` and all its descendants (Linux ``/proc``)."""
+    parents: dict[int, int] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as f:
+                    parents[int(entry)] = int(f.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue  # the process ended meanwhile
+    tree, frontier = {root}, [root]
+    while frontier:
+        pid = frontier.pop()
+        children = [c for c, p in parents.items() if p == pid and c not in tree]
+        tree.update(children)
+        frontier.extend(children)
+    total = 0
+    for pid in tree:
+        try:
+            with open(f"/proc/{pid}/statm") as f:
+                total += int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+        except (OSError, IndexError, ValueError):
+            continue
+    return total
+
+
+class PeakMemory:
+    """Samples the RSS of this process tree in a thread; ``peak`` in bytes."""
+
+    def __init__(self, interval: float = 0.2):
+        self.interval, self.peak = interval, 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            self.peak = max(self.peak, _tree_rss_bytes(os.getpid()))
+            self._stop.wait(self.interval)
+
+    def __enter__(self) -> "PeakMemory":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, _tree_rss_bytes(os.getpid()))
+
+
+# ----------------------------------------------------------------------------- training
+def build_model(algo: str, envs, steps: int, seed: int):
+    """SB3 PPO or DQN with ``CnnPolicy``; hyperparameters sized to the step budget."""
+    from stable_baselines3 import DQN, PPO
+
+    n = envs.num_envs
+    if algo == "ppo":
+        n_steps = max(8, min(128, steps // n))
+        return PPO("CnnPolicy", envs, n_steps=n_steps, batch_size=min(64, n_steps * n), n_epochs=4,
+                   learning_rate=2.5e-4, ent_coef=0.01, seed=seed, device="cpu", verbose=0)
+    # DQN: a replay of up to 10k images (uint8, next observation not stored twice).
+    return DQN("CnnPolicy", envs, buffer_size=max(100, min(steps, 10_000)), learning_starts=min(1000, steps // 4),
+               batch_size=32, train_freq=max(1, 4 // n), gradient_steps=1, target_update_interval=max(1, min(1000, steps // 10)),
+               exploration_fraction=0.5, exploration_final_eps=0.05, learning_rate=1e-4,
+               optimize_memory_usage=True, replay_buffer_kwargs={"handle_timeout_termination": False},
+               seed=seed, device="cpu", verbose=0)
+
+
+def train(algo: str, args: argparse.Namespace) -> tuple[object, dict]:
+    import torch
+
+    torch.set_num_threads(1)
+    with PeakMemory() as memory:
+        envs = make_training_envs(args.envs, args.cell, args.size)
+        model = build_model(algo, envs, args.steps, args.seed)
+        start = time.perf_counter()
+        model.learn(total_timesteps=args.steps)
+        seconds = time.perf_counter() - start
+        envs.close()
+    params = sum(p.numel() for p in model.policy.parameters())
+    path = Path(args.out) / f"{algo}.zip"
+    model.save(path)
+    return model, {
+        "parameters": int(params),
+        "train_env_steps": int(model.num_timesteps),
+        "train_seconds": round(seconds, 1),
+        "env_steps_per_s": round(model.num_timesteps / seconds, 2),
+        "peak_rss_mb": round(memory.peak / 2**20),
+        "model": str(path),
+    }
+
+
+class SB3Policy:
+    """A trained SB3 model as an ``act(obs)`` policy (greedy) for ``evaluate``."""
+
+    def __init__(self, name: str, model):
+        self.name, self.model = name, model
+
+    def act(self, obs) -> int:
+        return int(self.model.predict(obs, deterministic=True)[0])
+
+
+# ----------------------------------------------------------------------------- evaluation
+def evaluate_row(policy, env: gym.Env, args: argparse.Namespace) -> dict:
+    from scipy.stats import binomtest
+
+    from mpg_agents.evaluate import evaluate
+
+    result = evaluate(policy, env, args.episodes, args.eval_seed)
+    successes = int(round(result.task_success_rate * args.episodes))
+    interval = binomtest(successes, args.episodes).proportion_ci(confidence_level=0.95, method="wilson")
+    return {
+        "success_rate": result.task_success_rate,
+        "success_ci95": [round(float(interval.low), 3), round(float(interval.high), 3)],
+        "mean_motions": round(result.average_motions, 2),
+        "episodes": args.episodes,
+    }
+
+
+def table(rows: dict[str, dict]) -> str:
+    header = f"{'policy':<12} {'parameters':>11} {'env steps/s':>11} {'peak MB':>8} {'success [95% CI]':>22} {'motions':>7}"
+    lines = [header, "-" * len(header)]
+    for name, r in rows.items():
+        params = f"{r['parameters']:,}" if r.get("parameters") is not None else "-"
+        speed = f"{r['env_steps_per_s']:.2f}" if r.get("env_steps_per_s") is not None else "-"
+        memory = str(r["peak_rss_mb"]) if r.get("peak_rss_mb") is not None else "-"
+        lo, hi = r["success_ci95"]
+        success = f"{100 * r['success_rate']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
+        lines.append(f"{name:<12} {params:>11} {speed:>11} {memory:>8} {success:>22} {r['mean_motions']:>7.2f}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=20_000, help="training env steps per algorithm")
+    parser.add_argument("--envs", type=int, default=len(os.sched_getaffinity(0)), help="SubprocVecEnv workers (default: cores)")
+    parser.add_argument("--episodes", type=int, default=50, help="evaluation episodes per policy")
+    parser.add_argument("--algos", default=",".join(ALGOS), help=f"comma-separated, of {ALGOS}")
+    parser.add_argument("--baselines", default=",".join(BASELINES), help=f"comma-separated, of {BASELINES} (empty: none)")
+    parser.add_argument("--cell", type=int, default=8, help="GridAction cell in pixels")
+    parser.add_argument("--size", type=int, default=84, help="ImageObservation side in pixels")
+    parser.add_argument("--seed", type=int, default=0, help="training seed")
+    parser.add_argument("--eval-seed", type=int, default=100_000, help="first evaluation episode's seed (held out)")
+    parser.add_argument("--out", default="runs/third_party", help="folder for the trained models")
+    args = parser.parse_args(argv)
+    algos = [a for a in args.algos.split(",") if a]
+    baselines = [b for b in args.baselines.split(",") if b]
+    bad = [a for a in algos if a not in ALGOS] + [b for b in baselines if b not in BASELINES]
+    if bad or args.steps < 1 or args.envs < 1 or args.episodes < 1:
+        parser.error(f"--steps, --envs, --episodes must be >= 1; algorithms from {ALGOS}, baselines from {BASELINES} (got {bad})")
+    Path(args.out).mkdir(parents=True, exist_ok=True)
+
+    import torch
+
+    import mpg_envs  # noqa: F401
+    from mpg_agents.baselines import make_policy
+    from mpg_envs.env import EnvConfig
+
+    torch.set_num_threads(1)
+    rows: dict[str, dict] = {}
+    print(f"{ENV_ID}: {args.steps} training steps per algorithm on {args.envs} workers; {args.episodes} evaluation episodes from seed {args.eval_seed}", flush=True)
+    wrapped = make_wrapped_env(args.cell, args.size)
+    for algo in algos:
+        model, row = train(algo, args)
+        print(f"{algo}: trained {row['train_env_steps']} steps in {row['train_seconds']} s ({row['env_steps_per_s']} steps/s), "
+              f"{row['parameters']:,} parameters, peak {row['peak_rss_mb']} MB; saved {row['model']}", flush=True)
+        row.update(evaluate_row(SB3Policy(algo, model), wrapped, args))
+        rows[algo] = row
+    wrapped.close()
+    raw = gym.make(ENV_ID, config=EnvConfig(raycast_threads=1))
+    for name in baselines:
+        policy = make_policy(name, raw, seed=args.eval_seed)
+        params = None
+        if hasattr(policy, "policy"):
+            params = int(sum(p.numel() for p in policy.policy.parameters()))
+        rows[name] = {"parameters": params, "env_steps_per_s": None, "peak_rss_mb": None, **evaluate_row(policy, raw, args)}
+    raw.close()
+    print(table(rows))
+    summary = {"env": ENV_ID, "steps": args.steps, "envs": args.envs, "episodes": args.episodes, "eval_seed": args.eval_seed, "rows": rows}
+    print(json.dumps(summary))
+    return summary
+
+
+if __name__ == "__main__":
+    main()
