@@ -36,7 +36,6 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
-import numpy as np  # noqa: E402
 
 ENV_ID = "MPG-Stage2-v0"
 ALGOS = ("ppo", "dqn")
