@@ -6,20 +6,19 @@ new heightmaps, check occlusion and change, score the stage's reward, decide ter
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from mpg_envs.actions import PixelActionSpace
+from mpg_envs.config import OBS_MODES, EnvConfig, observation_space
 from mpg_envs.objects import ObjectAsset, load_object_set
-from mpg_envs.occlusion import ChangeConfig, OcclusionConfig, change_detected, is_occluded, surrounded_sectors
-from mpg_envs.primitives import PrimitiveConfig, PrimitiveResult, Primitives
-from mpg_envs.rewards import RewardConfig, StepOutcome
-from mpg_envs.robot import ArmIK, RobotConfig
+from mpg_envs.occlusion import change_detected, is_occluded, surrounded_sectors
+from mpg_envs.primitives import PrimitiveResult, Primitives
+from mpg_envs.rewards import StepOutcome
+from mpg_envs.robot import ArmIK
 from mpg_envs.scene_io import (
     SceneFile,
     SceneFileError,
@@ -29,62 +28,14 @@ from mpg_envs.scene_io import (
     read_scene,
     resolve_outside,
 )
-from mpg_envs.scenes import SCENES, InvalidSceneError, SceneConfig, keep_inside
-from mpg_envs.stages import STAGES, StageSpec
-from mpg_envs.workspace import Workspace
-from mpg_envs.world import PhysicsConfig, World
+from mpg_envs.scenes import SCENES, InvalidSceneError, keep_inside
+from mpg_envs.stages import END_REASONS, STAGES, StageSpec, episode_end
+from mpg_envs.world import World
 
-OBS_MODES = ("raycast", "camera")
+__all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "MPGEnv", "observation_space"]
+
 RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside")
-END_REASONS = (
-    "target_grasped",
-    "table_empty",
-    "move_success",
-    "target_left_workspace",
-    "grasp_done",
-    "motion_cap",
-)
-"""Values of ``info["end_reason"]`` on the last step of an episode (``None`` before it):
-
-- ``target_grasped``: the target was grasped (success; Stages 2-5 and Occluded).
-- ``table_empty``: no object is left in the workspace (Stage 1's success).
-- ``move_success``: a move uncovered the target (Stage 3's success).
-- ``target_left_workspace``: the target was pushed or knocked out of the workspace.
-- ``grasp_done``: Stage 4's one grasp was made and did not take the target.
-- ``motion_cap``: ``max_motions`` motions were used up (truncated).
-"""
 GraspScorer = Callable[[dict[str, np.ndarray]], float]
-
-
-@dataclass(frozen=True)
-class EnvConfig:
-    """Settings shared by every stage (the paper's values by default)."""
-
-    workspace: Workspace = Workspace()
-    robot: RobotConfig = RobotConfig()
-    physics: PhysicsConfig = PhysicsConfig()
-    primitives: PrimitiveConfig = PrimitiveConfig()
-    scene: SceneConfig = SceneConfig()
-    reward: RewardConfig = RewardConfig()
-    occlusion: OcclusionConfig = OcclusionConfig()
-    change: ChangeConfig = ChangeConfig()
-    scene_tries: int = 20  # whole-scene redraws allowed to make a valid scene, then InvalidSceneError
-    raycast_threads: int | None = None  # threads per env for the heightmap; None: up to 2 (set 1 with one env per core)
-    object_set_seed: int = 0
-
-
-def observation_space(workspace: Workspace = Workspace()) -> spaces.Dict:
-    """The observation space of every MPG env (ENV.md): colour, depth and mask heightmaps
-    and the occlusion flag."""
-    size = workspace.shape
-    return spaces.Dict(
-        {
-            "color": spaces.Box(0, 255, (*size, 3), np.uint8),
-            "depth": spaces.Box(0.0, workspace.z_max, size, np.float32),
-            "mask": spaces.Box(0, 1, size, np.uint8),
-            "occluded": spaces.MultiBinary(1),
-        }
-    )
 
 
 class MPGEnv(gym.Env):
@@ -216,19 +167,15 @@ class MPGEnv(gym.Env):
         reward = float(self.stage.reward(outcome, self.config.reward))
         objects_left = self._objects_left()
         is_success = objects_left == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
-        terminated = is_success or target_out or (self.stage.end_on_move_success and move_success)
-        truncated = not terminated and (
-            self.num_motions >= self.max_motions or (self.stage.end_after_grasp and primitive == "grasp")
+        terminated, truncated, end_reason = episode_end(
+            self.stage,
+            is_success=is_success,
+            target_out=target_out,
+            move_success=move_success,
+            primitive=primitive,
+            num_motions=self.num_motions,
+            max_motions=self.max_motions,
         )
-        end_reason = None
-        if is_success:
-            end_reason = "table_empty" if self.stage.mask_all_objects else "target_grasped"
-        elif target_out:
-            end_reason = "target_left_workspace"
-        elif terminated:
-            end_reason = "move_success"
-        elif truncated:
-            end_reason = "grasp_done" if self.stage.end_after_grasp and primitive == "grasp" else "motion_cap"
         info = {
             "primitive": primitive,
             "rotation": int(rotation),

@@ -16,6 +16,24 @@ from mpg_envs.rewards import (
 
 RewardFn = Callable[[StepOutcome, RewardConfig], float]
 
+END_REASONS = (
+    "target_grasped",
+    "table_empty",
+    "move_success",
+    "target_left_workspace",
+    "grasp_done",
+    "motion_cap",
+)
+"""Values of ``info["end_reason"]`` on the last step of an episode (``None`` before it):
+
+- ``target_grasped``: the target was grasped (success; Stages 2-5 and Occluded).
+- ``table_empty``: no object is left in the workspace (Stage 1's success).
+- ``move_success``: a move uncovered the target (Stage 3's success).
+- ``target_left_workspace``: the target was pushed or knocked out of the workspace.
+- ``grasp_done``: Stage 4's one grasp was made and did not take the target.
+- ``motion_cap``: ``max_motions`` motions were used up (truncated).
+"""
+
 
 @dataclass(frozen=True)
 class StageSpec:
@@ -51,3 +69,31 @@ STAGES: dict[str, StageSpec] = {
     )
 }
 """Stage name -> spec. Stage IV allows 5 pushes and then a grasp (6 motions)."""
+
+
+def episode_end(
+    stage: StageSpec,
+    *,
+    is_success: bool,
+    target_out: bool,
+    move_success: bool,
+    primitive: str,
+    num_motions: int,
+    max_motions: int,
+) -> tuple[bool, bool, str | None]:
+    """``(terminated, truncated, end_reason)`` after a step; ``end_reason`` is one of
+    :data:`END_REASONS` on the last step and ``None`` before it."""
+    terminated = is_success or target_out or (stage.end_on_move_success and move_success)
+    grasp_ends = stage.end_after_grasp and primitive == "grasp"
+    truncated = not terminated and (num_motions >= max_motions or grasp_ends)
+    if is_success:
+        reason: str | None = "table_empty" if stage.mask_all_objects else "target_grasped"
+    elif target_out:
+        reason = "target_left_workspace"
+    elif terminated:
+        reason = "move_success"
+    elif truncated:
+        reason = "grasp_done" if grasp_ends else "motion_cap"
+    else:
+        reason = None
+    return terminated, truncated, reason

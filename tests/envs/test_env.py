@@ -27,7 +27,7 @@ EXPECTED_PRIMITIVES = {
 INFO_KEYS = {
     "primitive", "rotation", "pixel", "position", "grasp_success", "target_grasped", "wrong_grasp",
     "change_detected", "occluded_before", "occluded", "move_success", "num_motions", "is_success",
-    "objects_left", "target_out_of_workspace",
+    "objects_left", "target_out_of_workspace", "end_reason",
 }
 
 

@@ -13,7 +13,7 @@ from conftest import flat_quat
 from mpg_envs.env import END_REASONS, EnvConfig, MPGEnv
 from mpg_envs.scene_io import SceneFile, SceneFileError, objects_outside, read_scene, save_scene
 from mpg_envs.scenes import InvalidSceneError, SceneConfig, SceneLayout, keep_inside
-from mpg_envs.stages import STAGES
+from mpg_envs.stages import STAGES, episode_end
 from mpg_envs.workspace import Workspace
 from mpg_envs.world import World
 
@@ -80,6 +80,27 @@ def test_reset_is_deterministic_with_redrops(make_env):
 
 
 # --------------------------------------------------------------------------- end_reason
+@pytest.mark.parametrize(
+    "stage, kwargs, expected",
+    [
+        ("Occluded", {}, (False, False, None)),
+        ("Occluded", {"is_success": True, "num_motions": 10}, (True, False, "target_grasped")),
+        ("Stage1", {"is_success": True}, (True, False, "table_empty")),
+        ("Stage3", {"move_success": True, "primitive": "move"}, (True, False, "move_success")),
+        ("Occluded", {"move_success": True, "primitive": "move"}, (False, False, None)),
+        ("Stage5", {"target_out": True, "num_motions": 10}, (True, False, "target_left_workspace")),
+        ("Stage4", {"num_motions": 6}, (False, True, "grasp_done")),
+        ("Stage4", {"primitive": "push", "num_motions": 6}, (False, True, "motion_cap")),
+        ("Stage5", {"num_motions": 10}, (False, True, "motion_cap")),
+    ],
+)
+def test_episode_end_table(stage, kwargs, expected):
+    args = {"is_success": False, "target_out": False, "move_success": False, "primitive": "grasp", "num_motions": 1}
+    args.update(kwargs)
+    assert episode_end(STAGES[stage], max_motions=STAGES[stage].max_motions, **args) == expected
+    assert expected[2] is None or expected[2] in END_REASONS
+
+
 def corner(env, primitive, rotation=0):
     """An action on an empty corner of the workspace: does nothing to the scene."""
     return env.action_space.encode(primitive, rotation, 2, 2)
