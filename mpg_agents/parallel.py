@@ -18,7 +18,6 @@ paths readable at the same absolute path.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import time
 from contextlib import contextmanager
@@ -182,11 +181,44 @@ def _check_workers(workers: int | None, address: str | None) -> None:
         raise ValueError(f"workers must be a positive integer, got {workers}")
 
 
+RecordHook = Callable[[EvalJob, EpisodeRecord], None]
+
+
+def _run_in_process(jobs: Sequence[EvalJob], on_record: RecordHook | None) -> tuple[list[list[ChunkResult]], list[float]]:
+    """Every job as one chunk, one after the other; the time each finished."""
+    start = time.perf_counter()
+    chunks, done_at = [], []
+    for job in jobs:
+        hook = None if on_record is None else (lambda r, job=job: on_record(job, r))
+        chunks.append([run_chunk(job, range(job.episodes), on_record=hook)])
+        done_at.append(time.perf_counter() - start)
+    return chunks, done_at
+
+
+def _run_on_ray(ray: Any, jobs: Sequence[EvalJob], chunks_per_job: int, on_record: RecordHook | None) -> tuple[list[list[ChunkResult]], list[float]]:
+    """Every chunk of every job submitted at once, gathered as they finish; when each job finished."""
+    start = time.perf_counter()
+    chunks: list[list[ChunkResult]] = [[] for _ in jobs]
+    done_at = [0.0] * len(jobs)
+    remote = ray.remote(num_cpus=1)(_ray_chunk)
+    pending = {remote.remote(job, indices): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, chunks_per_job)}
+    while pending:
+        ready, _ = ray.wait(list(pending), num_returns=1)
+        j = pending.pop(ready[0])
+        chunk = ray.get(ready[0])
+        chunks[j].append(chunk)
+        done_at[j] = time.perf_counter() - start
+        if on_record is not None:
+            for record in chunk.records:
+                on_record(jobs[j], record)
+    return chunks, done_at
+
+
 def evaluate_jobs(
     jobs: Sequence[EvalJob],
     workers: int | None = 1,
     ray_address: str | None = None,
-    on_record: Callable[[EvalJob, EpisodeRecord], None] | None = None,
+    on_record: RecordHook | None = None,
 ) -> tuple[list[EvalResult], RunTiming]:
     """Run every job (all their chunks at once on Ray) and summarise each; results in job order.
 
@@ -197,44 +229,23 @@ def evaluate_jobs(
     _check_workers(workers, ray_address)
     if not jobs:
         raise ValueError("no evaluation jobs given")
-    start = time.perf_counter()
     startup = 0.0
-    chunks: list[list[ChunkResult]] = [[] for _ in jobs]
-    done_at = [0.0] * len(jobs)
     if workers == 1 and ray_address is None:
-        for j, job in enumerate(jobs):
-            hook = None if on_record is None else (lambda r, job=job: on_record(job, r))
-            chunks[j].append(run_chunk(job, range(job.episodes), on_record=hook))
-            done_at[j] = time.perf_counter() - start
+        chunks, done_at = _run_in_process(jobs, on_record)
         used_workers = 1
     else:
+        start = time.perf_counter()
         with ray_session(workers, ray_address) as ray:
             startup = time.perf_counter() - start
-            start += startup
             used_workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-            remote = ray.remote(num_cpus=1)(_ray_chunk)
-            pending = {
-                remote.remote(job, indices): j
-                for j, job in enumerate(jobs)
-                for indices in chunk_indices(job.episodes, used_workers)
-            }
-            while pending:
-                ready, _ = ray.wait(list(pending), num_returns=1)
-                j = pending.pop(ready[0])
-                chunk = ray.get(ready[0])
-                chunks[j].append(chunk)
-                done_at[j] = time.perf_counter() - start
-                if on_record is not None:
-                    for record in chunk.records:
-                        on_record(jobs[j], record)
-    wall = max(done_at)  # ray.shutdown() is not part of the run
+            chunks, done_at = _run_on_ray(ray, jobs, used_workers, on_record)
     results = []
     for job, job_chunks, job_wall in zip(jobs, chunks, done_at):
         first = job_chunks[0]
         records = [r for c in job_chunks for r in c.records]
         results.append(summarise(records, first.policy_name, first.env_id, first.num_objects, job.seed, job_wall, used_workers))
     timing = RunTiming(
-        wall_seconds=wall,
+        wall_seconds=max(done_at),  # Ray's start-up and shutdown are not part of the run
         task_seconds=sum(c.seconds for job_chunks in chunks for c in job_chunks),
         workers=used_workers,
         tasks=sum(len(c) for c in chunks),
