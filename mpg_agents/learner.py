@@ -143,8 +143,6 @@ class Learner:
         torch.set_num_threads(config.torch_threads)
         # A young network's eval-mode activations go denormal and slow the CPU down 10x.
         torch.set_flush_denormal(True)
-        # Seeded before the network is built, so the seed fixes the initial weights too.
-        torch.manual_seed(config.seed)
         self.env = self._make_env(self._objects_now(0))
         env = self.env.unwrapped
         self.primitives: tuple[str, ...] = tuple(env.primitives)
@@ -177,6 +175,7 @@ class Learner:
         self.explorer = Explorer(
             self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q"
         )
+        torch.manual_seed(config.seed)
         self.counters = Counters()
         self._stop = False
         self._log: TrainingLog | None = None
