@@ -16,18 +16,48 @@ from mpg_envs.threads import use_passive_openmp_wait
 
 use_passive_openmp_wait()  # before torch loads OpenMP: idle threads sleep, not spin (issue 12)
 
-from mpg_agents.coordination import COORDINATIONS, choose_primitive  # noqa: E402
-from mpg_agents.dqn import MPGDQN  # noqa: E402
-from mpg_agents.grasp_scorer import GraspScorer  # noqa: E402
-from mpg_agents.mobilenet import MobileNetV3Features, load_torchvision_features  # noqa: E402
-from mpg_agents.mpgnet import MPGNet, flat_q, recompute_batch_norm_statistics  # noqa: E402
-from mpg_agents.mpgnet_config import MPGNetConfig  # noqa: E402
-from mpg_agents.policy import Decision, MPGNetPolicy, MPGQNetwork  # noqa: E402
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer  # noqa: E402
-from mpg_agents.td_step import TDStepConfig, td_step, td_targets  # noqa: E402
-from mpg_agents.training_stages import TRAINING_STAGES, TrainingStage  # noqa: E402
-from mpg_agents.visualize import save_qmap_png  # noqa: E402
-from mpg_agents.weights import load_mpgnet, save_mpgnet  # noqa: E402
+# The public names load on first use (PEP 562), so ``mpg-eval --help`` and argument errors do not
+# wait for torch and Stable-Baselines3 to import.
+_LAZY = {
+    'COORDINATIONS': 'mpg_agents.coordination',
+    'Decision': 'mpg_agents.policy',
+    'GraspScorer': 'mpg_agents.grasp_scorer',
+    'MPGDQN': 'mpg_agents.dqn',
+    'MPGNet': 'mpg_agents.mpgnet',
+    'MPGNetConfig': 'mpg_agents.mpgnet_config',
+    'MPGNetPolicy': 'mpg_agents.policy',
+    'MPGQNetwork': 'mpg_agents.policy',
+    'MobileNetV3Features': 'mpg_agents.mobilenet',
+    'PrioritizedHeightmapReplayBuffer': 'mpg_agents.replay',
+    'TDStepConfig': 'mpg_agents.td_step',
+    'TRAINING_STAGES': 'mpg_agents.training_stages',
+    'TrainingStage': 'mpg_agents.training_stages',
+    'choose_primitive': 'mpg_agents.coordination',
+    'flat_q': 'mpg_agents.mpgnet',
+    'load_mpgnet': 'mpg_agents.weights',
+    'load_torchvision_features': 'mpg_agents.mobilenet',
+    'recompute_batch_norm_statistics': 'mpg_agents.mpgnet',
+    'save_mpgnet': 'mpg_agents.weights',
+    'save_qmap_png': 'mpg_agents.visualize',
+    'td_step': 'mpg_agents.td_step',
+    'td_targets': 'mpg_agents.td_step',
+}
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'mpg_agents' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
     "COORDINATIONS",

@@ -8,16 +8,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import tomllib
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any, Sequence
-
-if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-    os.environ.setdefault("MUJOCO_GL", "egl")
-
 
 class UsageError(Exception):
     """Bad command-line input: reported on one line, exit status 2."""
@@ -87,6 +82,9 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: only Stage V, from scratch")
     parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")
     args = parser.parse_args(argv)
+    from mpg_envs.threads import set_torch_threads
+
+    set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
     try:
         from mpg_agents.learner import Learner, TrainConfig, json_safe
         from mpg_agents import training_stages as ts
