@@ -41,6 +41,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=int, help="CPUs of a local Ray and chunks per cell (1: in this process, no Ray); default 2, or the cluster's CPUs with --ray-address")
     parser.add_argument("--ray-address", help="join this Ray cluster instead of starting a local one")
+    parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="ray (default; local or --ray-address) or processes (a local process pool, no Ray start-up)")
     parser.add_argument("--max-motions", type=int, help="override the env's motion cap (paper: 10); for quick checks")
     parser.add_argument("--out", default="runs/table1", help="folder for table1.json and table1.md")
     parser.add_argument("--quiet", action="store_true", help="no line per finished episode")
@@ -76,7 +77,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"  [{job.policy}, {job.num_objects} obj.] {record.describe()}", flush=True)
 
     print(f"Table I: {len(cells)} cells x {args.episodes} episodes on {ENV_ID}, seeds {args.seed}..{args.seed + args.episodes - 1}, workers: {args.workers or 'the cluster CPUs'}", flush=True)
-    results, timing = evaluate_jobs(jobs, args.workers, args.ray_address, on_record=None if args.quiet else on_record)
+    results, timing = evaluate_jobs(jobs, args.workers, args.ray_address, on_record=None if args.quiet else on_record, backend=args.backend)
     by_cell = dict(zip(cells, results))
     header, body, paper_rows = table_rows(args.policies, args.objects, by_cell)
     print()

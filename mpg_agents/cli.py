@@ -141,6 +141,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--coordination", choices=("workflow", "max_q"), help="network policies: override the coordination")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
+    parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="with --workers > 1: Ray (default) or a local process pool (no Ray start-up)")
     parser.add_argument("--quiet", action="store_true", help="no line per episode")
     args = parser.parse_args(argv)
     try:
@@ -158,7 +159,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         extra = (("coordination", args.coordination),) if args.coordination else ()
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
-        result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record)
+        result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend)
     except (UsageError, FileNotFoundError, ValueError) as exc:
         return _fail(exc)
     print(result.table())

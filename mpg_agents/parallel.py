@@ -11,7 +11,9 @@ depend on the split. ``workers=1`` without a cluster address runs in this proces
 Every task runs on one torch/OpenMP thread (``OMP_NUM_THREADS=1`` in Ray's runtime env and
 :func:`mpg_envs.threads.worker_init` in the worker), so ``workers`` tasks use ``workers``
 cores; in-process, episodes run on one torch thread too, so their records are the same.
-On a cluster (``ray_address``) every node needs this package installed and checkpoint
+``backend="processes"`` runs the same chunks on a local process pool instead of Ray: no
+cluster, but no Ray start-up either (seconds on a small machine), and it works where Ray is
+not installed. On a cluster (``ray_address``) every node needs this package installed and checkpoint
 paths readable at the same absolute path.
 """
 
@@ -182,6 +184,7 @@ def _check_workers(workers: int | None, address: str | None) -> None:
 
 
 RecordHook = Callable[[EvalJob, EpisodeRecord], None]
+BACKENDS = ("ray", "processes")
 
 
 def _run_in_process(jobs: Sequence[EvalJob], on_record: RecordHook | None) -> tuple[list[list[ChunkResult]], list[float]]:
@@ -214,25 +217,68 @@ def _run_on_ray(ray: Any, jobs: Sequence[EvalJob], chunks_per_job: int, on_recor
     return chunks, done_at
 
 
+def _run_on_processes(jobs: Sequence[EvalJob], workers: int, on_record: RecordHook | None) -> tuple[list[list[ChunkResult]], list[float]]:
+    """:func:`_run_on_ray` on a local pool of ``workers`` fresh processes (one thread each)."""
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    from mpg_envs.threads import worker_init
+
+    saved = {k: os.environ.get(k) for k in THREAD_ENV}
+    os.environ.update(THREAD_ENV)  # inherited by the workers before they import torch
+    try:
+        start = time.perf_counter()
+        chunks: list[list[ChunkResult]] = [[] for _ in jobs]
+        done_at = [0.0] * len(jobs)
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("forkserver"), initializer=worker_init) as pool:
+            pending = {pool.submit(run_chunk, job, indices): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, workers)}
+            while pending:
+                finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+                for future in finished:
+                    j = pending.pop(future)
+                    chunk = future.result()
+                    chunks[j].append(chunk)
+                    done_at[j] = time.perf_counter() - start
+                    if on_record is not None:
+                        for record in chunk.records:
+                            on_record(jobs[j], record)
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+    return chunks, done_at
+
+
 def evaluate_jobs(
     jobs: Sequence[EvalJob],
     workers: int | None = 1,
     ray_address: str | None = None,
     on_record: RecordHook | None = None,
+    backend: str = "ray",
 ) -> tuple[list[EvalResult], RunTiming]:
     """Run every job (all their chunks at once on Ray) and summarise each; results in job order.
 
     ``workers`` is how many chunks each job is split into (and a local Ray's CPU count);
     with ``ray_address`` and ``workers=None`` it is the cluster's CPU count. ``on_record``
     sees records as they arrive (in index order in-process, a chunk at a time on Ray).
+    ``backend`` is ``"ray"`` or ``"processes"`` (a local pool; no ``ray_address``).
     """
     _check_workers(workers, ray_address)
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if backend == "processes" and ray_address is not None:
+        raise ValueError("a Ray address needs backend='ray'; the 'processes' backend is local")
     if not jobs:
         raise ValueError("no evaluation jobs given")
     startup = 0.0
     if workers == 1 and ray_address is None:
         chunks, done_at = _run_in_process(jobs, on_record)
         used_workers = 1
+    elif backend == "processes":
+        used_workers = int(workers)
+        chunks, done_at = _run_on_processes(jobs, used_workers, on_record)
     else:
         start = time.perf_counter()
         with ray_session(workers, ray_address) as ray:
@@ -260,8 +306,9 @@ def evaluate_parallel(
     workers: int | None = 1,
     ray_address: str | None = None,
     on_record: Callable[[EpisodeRecord], None] | None = None,
+    backend: str = "ray",
 ) -> EvalResult:
     """One job through :func:`evaluate_jobs`."""
     hook = None if on_record is None else (lambda _job, r: on_record(r))
-    (result,), _ = evaluate_jobs([job], workers, ray_address, on_record=hook)
+    (result,), _ = evaluate_jobs([job], workers, ray_address, on_record=hook, backend=backend)
     return result

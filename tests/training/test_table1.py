@@ -51,6 +51,18 @@ def test_two_workers_give_the_records_of_one(ray_two_cpus):
     assert one.primitive_counts["grasp"] == sum(r.motions for r in one.records)
 
 
+def test_a_local_process_pool_gives_the_records_of_one():
+    job = EvalJob("random", "MPG-Stage2-v0", episodes=3, seed=11, env_kwargs=(("max_motions", 2),))
+    (one,), _ = evaluate_jobs([job], workers=1)
+    (pool,), timing = evaluate_jobs([job], workers=2, backend="processes")
+    assert timing.workers == 2 and timing.tasks == 2
+    assert one.records == pool.records
+    with pytest.raises(ValueError, match="backend"):
+        evaluate_jobs([job], workers=2, backend="threads")
+    with pytest.raises(ValueError, match="address"):
+        evaluate_jobs([job], workers=2, ray_address="auto", backend="processes")
+
+
 def _result(policy: str, successes: int, motions: list[int]) -> object:
     records = [
         EpisodeRecord(i, i, i < successes, m, "target_grasped" if i < successes else "motion_cap", {"move": 0, "push": 0, "grasp": m}, m, int(i < successes), 0, 10)
