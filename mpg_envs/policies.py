@@ -32,6 +32,7 @@ from mpg_envs.grasp_geometry import (
     footprint_rect,
     jaw_strip_heights,
 )
+from mpg_envs.sim_trial import try_primitive
 from mpg_envs.workspace import NUM_ROTATIONS, world_to_pixel
 
 __all__ = ["ActionMemory", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect"]
@@ -75,6 +76,7 @@ class OracleConfig:
     repeat_pixels: int = 4  # an action this close to a tried one (same primitive and angle) ...
     repeat_window: int = 30  # ... on a heightmap unchanged within this many pixels around it ...
     repeat_height_change: float = 0.005  # ... (no pixel moved by more than this) repeats it
+    verify_grasps: int = 4  # target grasps tried in a copy of the simulation before acting (0: plan by geometry alone)
 
 
 class ActionMemory:
@@ -182,6 +184,10 @@ class OraclePolicy:
                 if step:
                     return (*step, {"kind": "grasp_any"})
             return self._last_resort(env, depth, "grasp")
+        if "grasp" in allowed and self.config.verify_grasps > 0:
+            step = self._verified_grasp(env, target, depth, ids)
+            if step:
+                return (*step, {"kind": "grasp_verified"})
         occluded = bool(self._obs["occluded"][0])
         if "move" in allowed and (occluded or "grasp" not in allowed):
             movers = self._occluders(env, target, depth, ids)
@@ -205,6 +211,22 @@ class OraclePolicy:
         if step:
             return (*step, {"kind": "grasp_blocked", "no_free_grasp": True})
         return self._last_resort(env, depth, "grasp" if "grasp" in allowed else allowed[0])
+
+    def _verified_grasp(self, env, target: int, depth: np.ndarray, ids: np.ndarray):
+        """The first of the best ``verify_grasps`` untried target grasps that holds the target
+        when tried in a copy of the simulation; the ones that did not are remembered as tried."""
+        tried = 0
+        for p in self._grasp_plans(env, target, depth, ids):
+            if tried >= self.config.verify_grasps:
+                break
+            if self.memory.repeats("grasp", p.rotation, p.row, p.col, depth):
+                continue
+            tried += 1
+            result = try_primitive(env._primitives, "grasp", p.rotation, p.row, p.col, depth, target)
+            if result.grasp_success and result.grasped_object == target:
+                return "grasp", p.rotation, p.row, p.col
+            self.memory.record("grasp", p.rotation, p.row, p.col, depth)
+        return None
 
     def _first_new(self, primitive: str, plans: list[GraspPlan], depth: np.ndarray):
         """The first plan (with small pixel shifts) that does not repeat a tried action."""

@@ -44,7 +44,9 @@ class PrimitiveConfig:
     waypoint_spacing: float = 0.04  # IK every this many metres along a straight motion
     close_max_steps: int = 300
     open_steps: int = 100
-    hold_steps: int = 40  # let the servos catch up at the end of a motion
+    hold_steps: int = 600  # at most this many steps for the servos to catch up at the end of a motion ...
+    hold_tolerance: float = 0.003  # ... until the TCP is this close to where it was sent ...
+    hold_stall_speed: float = 0.01  # ... or the arm stopped (every joint slower than this, rad/s: blocked or sagging)
     control_every: int = 5  # physics steps between servo set-point updates
     lifted_height: float = 0.05  # an object that rose this much with the gripper is grasped
     closed_margin: float = 0.05  # driver angle this far below fully closed = something between the pads
@@ -291,15 +293,24 @@ class Primitives:
                 world.data.ctrl[world.robot.arm_actuators] = q_prev + (q_next - q_prev) * c / chunks
                 world.step(cfg.control_every)
             q_prev = q_next
-        self._hold(q_prev)
+        self._hold(q_prev, end)
         return q_prev
 
-    def _hold(self, q: np.ndarray) -> None:
-        """Let the servos settle on ``q`` (bounded)."""
+    def _hold(self, q: np.ndarray, position: np.ndarray) -> None:
+        """Let the servos settle on ``q`` until the TCP is at ``position`` or the arm stops (bounded).
+
+        The arm's position servos lag a moving set-point by about their damping over their
+        stiffness (0.2 s on the UR5e: centimetres at the approach speed), so a motion is only
+        over when the arm has caught up; closing the fingers earlier closes them centimetres
+        above where the grasp was aimed.
+        """
         cfg, world = self.config, self.world
-        world.data.ctrl[world.robot.arm_actuators] = q
+        robot, data = world.robot, world.data
+        data.ctrl[robot.arm_actuators] = q
         for _ in range(max(1, cfg.hold_steps // cfg.control_every)):
-            if np.abs(world.robot.arm_qpos(world.data) - q).max() < 2e-3:
+            if np.linalg.norm(robot.tcp_position(data) - position) < cfg.hold_tolerance:
+                break
+            if np.abs(data.qvel[robot.arm_dof_adr]).max() < cfg.hold_stall_speed:
                 break
             world.step(cfg.control_every)
 

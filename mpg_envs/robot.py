@@ -74,6 +74,11 @@ def _loaded_robot_spec(config: RobotConfig) -> mujoco.MjSpec:
     arm.option.impratio = gripper.option.impratio
     arm.option.cone = gripper.option.cone
     arm.attach(gripper, site=arm.site("attachment_site"), prefix=GRIPPER_PREFIX)
+    # A UR5e's controller compensates gravity; the Menagerie's bare position servos would sag
+    # about 6 mm at the TCP under the arm's and gripper's weight, so every grasp would close
+    # lower than aimed (and pinch what a top object rests on).
+    for body in arm.bodies:
+        body.gravcomp = 1.0
     # Compile once so the meshes are read from disk once per process; later copies are cheap.
     arm.compile()
     return arm

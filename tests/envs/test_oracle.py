@@ -20,6 +20,7 @@ from mpg_envs.grasp_geometry import (
     region_max,
 )
 from mpg_envs.policies import ActionMemory, OracleConfig, OraclePolicy, Policy
+from mpg_envs.sim_trial import try_primitive
 from mpg_envs.workspace import Workspace
 
 # ----------------------------------------------------------------- geometry (hand-checked)
@@ -148,10 +149,38 @@ def test_oracle_forgets_at_reset(occluded_env) -> None:
     assert oracle.act(obs) == first  # same state, fresh memory: the same plan
 
 
-def test_oracle_moves_the_occluder_first(occluded_env) -> None:
+def test_oracle_moves_the_occluder_first_without_trials(occluded_env) -> None:
+    """Planning by geometry alone, an occluded target's occluder is moved before any grasp."""
     obs, info = occluded_env.reset(seed=90228)
     assert info["occluded"]
-    oracle = OraclePolicy(occluded_env)
+    oracle = OraclePolicy(occluded_env, OracleConfig(verify_grasps=0))
     action = occluded_env.action_space.decode(oracle.act(obs))
     assert action.primitive == "move"
     assert oracle.last_plan["kind"] == "move_occluder"
+
+
+def test_a_trial_leaves_the_world_as_it_was(occluded_env) -> None:
+    obs, _ = occluded_env.reset(seed=90000)
+    world = occluded_env.world
+    qpos, active, steps = world.data.qpos.copy(), world.active.copy(), world.counter.steps
+    target = occluded_env.target
+    row, col = np.argwhere(obs["mask"] > 0).mean(axis=0).astype(int)
+    result = try_primitive(occluded_env._primitives, "grasp", 0, int(row), int(col), obs["depth"], target)
+    assert result.physics_steps > 0
+    np.testing.assert_array_equal(world.data.qpos, qpos)
+    np.testing.assert_array_equal(world.active, active)
+    assert world.counter.steps == steps
+
+
+def test_a_verified_grasp_holds_the_target_when_taken(occluded_env) -> None:
+    """A grasp that held the target in the trial holds it in the env too (MuJoCo is deterministic)."""
+    for seed in (90000, 90003, 90006):
+        obs, _ = occluded_env.reset(seed=seed)
+        oracle = OraclePolicy(occluded_env)
+        action = oracle.act(obs)
+        if oracle.last_plan["kind"] != "grasp_verified":
+            continue
+        _, _, terminated, _, info = occluded_env.step(action)
+        assert info["target_grasped"] and terminated
+        return
+    pytest.fail("no seed gave a verified grasp at the first step")
