@@ -22,6 +22,7 @@ ray per pixel centre with ``mujoco.mj_multiRay`` and sees only the geom groups o
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -138,10 +139,17 @@ def _ray_directions(workspace: Workspace, source_height: float) -> tuple[np.ndar
 
 def _default_threads() -> int:
     """Up to 2, fewer when the cores are busy or a worker asked for one thread
-    (``MPG_NUM_THREADS`` / ``OMP_NUM_THREADS``, as ``mpg_envs.threads.worker_init`` sets):
-    two vector-env workers with 2 ray-cast threads each would fight over 2 cores."""
-    from mpg_envs.threads import num_threads
+    (``MPG_NUM_THREADS`` / ``OMP_NUM_THREADS``, as ``mpg_envs.threads.worker_init`` sets),
+    and 1 in a ``multiprocessing`` child (an ``AsyncVectorEnv``/``SubprocVecEnv`` worker)
+    unless those variables ask for more: two workers with 2 ray-cast threads each would
+    fight over 2 cores."""
+    import multiprocessing
 
+    from mpg_envs.threads import num_threads, requested_threads
+
+    explicit = requested_threads() is not None or os.environ.get("OMP_NUM_THREADS", "").strip()
+    if multiprocessing.parent_process() is not None and not explicit:
+        return 1
     return max(1, min(2, num_threads()))
 
 

@@ -188,3 +188,24 @@ def test_sb3_ppo_cnn_policy_under_5m_parameters():
     print(f"PPO CnnPolicy on MPG-Stage2-v0: {count:,} parameters")
     assert count < 5_000_000
     env.close()
+
+
+# ----------------------------------------------------------------------------- vector envs
+def _threads_in_a_child() -> int:
+    import concurrent.futures
+    import multiprocessing
+
+    from mpg_envs.heightmap import _default_threads
+
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(_default_threads).result(timeout=120)
+
+
+def test_vector_env_workers_ray_cast_on_one_thread_unless_asked(monkeypatch):
+    # AsyncVectorEnv/SubprocVecEnv workers are multiprocessing children: 2 workers x 2 ray-cast
+    # threads would oversubscribe 2 cores (issue 11.4).
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    monkeypatch.delenv("MPG_NUM_THREADS", raising=False)
+    assert _threads_in_a_child() == 1
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    assert _threads_in_a_child() == 2
