@@ -12,14 +12,18 @@ benchmark does about it:
   here runs one thread: ``raycast_threads=1`` and ``OMP_NUM_THREADS`` / ``MKL_NUM_THREADS``
   / ``OPENBLAS_NUM_THREADS`` = 1 set before numpy, MuJoCo or torch are imported (in this
   process, inherited by every worker), plus ``mpg_envs.threads.worker_init()`` in each
-  worker. (The ray-cast default, up to 2 threads, now drops to 1 under that setting too:
-  ``--raycast-threads 0`` checks it.)
+  worker. The env's own ray-cast default is 1 thread in any ``multiprocessing`` worker
+  (and whenever ``OMP_NUM_THREADS``/``MPG_NUM_THREADS`` say 1), so a plain
+  ``AsyncVectorEnv([lambda: gym.make(...)] * 2)`` is not oversubscribed either:
+  ``--raycast-threads 0`` (the env's default) checks it.
 - the start method: "forkserver" starts workers from a clean process (no copied thread
   pools or locks of the parent) at the cost of a slower start, which is not timed.
 - lockstep: ``AsyncVectorEnv.step`` waits for the slowest worker, so a worker that resets
   (or runs a long move) while the other runs a short push leaves a core idle. Each worker
   reports its busy seconds in ``info["worker_seconds"]``; the benchmark prints the share
   of worker time lost to that wait ("lockstep efficiency"), which bounds the speed-up.
+  It is the one loss a synchronous vector env cannot remove; more workers than cores
+  (``--workers 4`` on 2 cores) let the OS run one worker while another waits.
 - observation copies: with ``shared_memory=True`` (the default) each worker writes its
   224 x 224 observation (352 kB) to shared memory and the parent copies the batch once per
   step; the benchmark times that copy, to be set against a 100+ ms motion.
