@@ -31,14 +31,18 @@ THREADS_ENV = "MPG_NUM_THREADS"
 """Environment variable that fixes the thread count (a positive integer)."""
 
 
-def choose_threads(cores: int, load: float, max_threads: int | None = None) -> int:
-    """Threads for ``cores`` usable cores while the machine's 1-minute load is ``load``.
+def choose_threads(cores: int, load: float, max_threads: int | None = None, machine_cores: int | None = None) -> int:
+    """Threads for ``cores`` usable cores while the machine's load is ``load``.
 
-    The free cores are ``cores - load``, rounded to the nearest integer (half up); the result
-    is at least 1 and at most ``cores`` (and ``max_threads`` when given).
+    The free cores are ``machine_cores - load`` (``machine_cores`` defaults to ``cores``; the
+    load is machine-wide, so a process pinned to 2 of 16 cores counts the other 14 too),
+    rounded to the nearest integer (half up); the result is at least 1 and at most ``cores``
+    (and ``max_threads`` when given).
 
     >>> choose_threads(2, 0.1), choose_threads(2, 1.2), choose_threads(2, 7.0), choose_threads(16, 3.0)
     (2, 1, 1, 13)
+    >>> choose_threads(2, 12.0, machine_cores=16), choose_threads(2, 15.0, machine_cores=16)
+    (2, 1)
     """
     if cores < 1:
         raise ValueError(f"cores must be >= 1, got {cores!r}")
@@ -46,7 +50,9 @@ def choose_threads(cores: int, load: float, max_threads: int | None = None) -> i
         raise ValueError(f"load must be a finite number >= 0, got {load!r}")
     if max_threads is not None and max_threads < 1:
         raise ValueError(f"max_threads must be >= 1 or None, got {max_threads!r}")
-    free = math.floor(cores - load + 0.5)
+    if machine_cores is not None and machine_cores < cores:
+        raise ValueError(f"machine_cores ({machine_cores}) must be >= cores ({cores})")
+    free = math.floor((cores if machine_cores is None else machine_cores) - load + 0.5)
     upper = cores if max_threads is None else min(cores, max_threads)
     return max(1, min(upper, free))
 
@@ -118,7 +124,8 @@ def num_threads(requested: int | None = None) -> int:
     omp = os.environ.get("OMP_NUM_THREADS", "").strip()
     if omp.isdigit() and int(omp) >= 1:
         return int(omp)
-    return choose_threads(available_cores(), load_average())
+    cores = available_cores()
+    return choose_threads(cores, load_average(), machine_cores=max(cores, os.cpu_count() or cores))
 
 
 def set_torch_threads(requested: int | None = None) -> int:

@@ -98,3 +98,12 @@ def test_load_average_sees_the_machine():
     assert threads.load_average() >= 0
     now = threads.runnable_now(samples=2, interval_s=0.001)
     assert now is None or now >= 0  # None off Linux
+
+
+def test_a_process_pinned_to_few_cores_counts_the_load_of_the_whole_machine():
+    # pinned to 2 of 16 cores while 12 other threads run: 4 cores are free, use both of ours
+    assert choose_threads(2, 12.0, machine_cores=16) == 2
+    assert choose_threads(2, 14.6, machine_cores=16) == 1
+    assert choose_threads(4, 13.0, machine_cores=16) == 3
+    with pytest.raises(ValueError, match="machine_cores"):
+        choose_threads(4, 0.0, machine_cores=2)
