@@ -11,7 +11,8 @@ episodes for all, seeded ``--eval-seed + k`` (held out: training envs draw scene
 
 Prints one table: parameters, training env steps/s, peak memory (RSS of the trainer and
 all its worker processes, sampled every 0.2 s), task success with a Wilson 95% interval,
-mean motions per episode. Saves the trained models as ``<out>/ppo.zip`` and
+mean motions per episode; and, per algorithm, its learning curve (mean training return
+over successive fifths of its training episodes: does it learn?). Saves the trained models as ``<out>/ppo.zip`` and
 ``<out>/dqn.zip``. The last output line is one JSON object.
 
     python benchmarks/third_party.py [--steps 20000] [--envs N] [--episodes 50] [--out runs/third_party]
@@ -36,6 +37,7 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
 
 ENV_ID = "MPG-Stage2-v0"
 ALGOS = ("ppo", "dqn")
@@ -129,15 +131,46 @@ def build_model(algo: str, envs, steps: int, seed: int):
                seed=seed, device="cpu", verbose=0)
 
 
+def episode_recorder():
+    """An SB3 callback keeping ``(env steps so far, return)`` of every training episode."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class EpisodeRecorder(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.episodes: list[tuple[int, float]] = []
+
+        def _on_step(self) -> bool:
+            for info in self.locals["infos"]:
+                if "episode" in info:  # VecMonitor's summary of a finished episode
+                    self.episodes.append((self.num_timesteps, float(info["episode"]["r"])))
+            return True
+
+    return EpisodeRecorder()
+
+
+def learning_curve(episodes: list[tuple[int, float]], parts: int = 5) -> list[dict]:
+    """Mean training return in ``parts`` consecutive, equal shares of the episodes (on
+    Stage II the return is 1 for a grasped target: the share of successful episodes)."""
+    if not episodes:
+        return []
+    chunks = [c for c in np.array_split(np.arange(len(episodes)), min(parts, len(episodes))) if len(c)]
+    return [
+        {"until_step": episodes[c[-1]][0], "episodes": len(c), "mean_return": round(float(np.mean([episodes[i][1] for i in c])), 3)}
+        for c in chunks
+    ]
+
+
 def train(algo: str, args: argparse.Namespace) -> tuple[object, dict]:
     import torch
 
     torch.set_num_threads(1)
+    recorder = episode_recorder()
     with PeakMemory() as memory:
         envs = make_training_envs(args.envs, args.cell, args.size)
         model = build_model(algo, envs, args.steps, args.seed)
         start = time.perf_counter()
-        model.learn(total_timesteps=args.steps)
+        model.learn(total_timesteps=args.steps, callback=recorder)
         seconds = time.perf_counter() - start
         envs.close()
     params = sum(p.numel() for p in model.policy.parameters())
@@ -150,6 +183,7 @@ def train(algo: str, args: argparse.Namespace) -> tuple[object, dict]:
         "env_steps_per_s": round(model.num_timesteps / seconds, 2),
         "peak_rss_mb": round(memory.peak / 2**20),
         "model": str(path),
+        "learning_curve": learning_curve(recorder.episodes),
     }
 
 
@@ -227,6 +261,8 @@ def main(argv: list[str] | None = None) -> dict:
         model, row = train(algo, args)
         print(f"{algo}: trained {row['train_env_steps']} steps in {row['train_seconds']} s ({row['env_steps_per_s']} steps/s), "
               f"{row['parameters']:,} parameters, peak {row['peak_rss_mb']} MB; saved {row['model']}", flush=True)
+        curve = ", ".join(f"{p['mean_return']:.2f} (to step {p['until_step']})" for p in row["learning_curve"])
+        print(f"{algo}: mean training return over successive fifths of its episodes: {curve or 'no episode ended'}", flush=True)
         row.update(evaluate_row(SB3Policy(algo, model), wrapped, args))
         rows[algo] = row
     wrapped.close()
