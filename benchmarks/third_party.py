@@ -256,16 +256,16 @@ def main(argv: list[str] | None = None) -> dict:
     torch.set_num_threads(1)
     rows: dict[str, dict] = {}
     print(f"{ENV_ID}: {args.steps} training steps per algorithm on {args.envs} workers; {args.episodes} evaluation episodes from seed {args.eval_seed}", flush=True)
-    wrapped = make_wrapped_env(args.cell, args.size)
     for algo in algos:
         model, row = train(algo, args)
         print(f"{algo}: trained {row['train_env_steps']} steps in {row['train_seconds']} s ({row['env_steps_per_s']} steps/s), "
               f"{row['parameters']:,} parameters, peak {row['peak_rss_mb']} MB; saved {row['model']}", flush=True)
         curve = ", ".join(f"{p['mean_return']:.2f} (to step {p['until_step']})" for p in row["learning_curve"])
         print(f"{algo}: mean training return over successive fifths of its episodes: {curve or 'no episode ended'}", flush=True)
+        wrapped = make_wrapped_env(args.cell, args.size)  # after training: not in its peak memory
         row.update(evaluate_row(SB3Policy(algo, model), wrapped, args))
+        wrapped.close()
         rows[algo] = row
-    wrapped.close()
     raw = gym.make(ENV_ID, config=EnvConfig(raycast_threads=1))
     for name in baselines:
         policy = make_policy(name, raw, seed=args.eval_seed)
