@@ -130,15 +130,25 @@ def test_spaces_and_sizes():
     env.close()
 
 
+class _KeepObservation(gym.Wrapper):
+    """Keeps the raw observation the wrapper above it turns into an image."""
+
+    def step(self, action):
+        result = self.env.step(action)
+        self.last = result[0]
+        return result
+
+
 def test_grid_action_acts_at_the_cell_centre(stage2):
-    env = ImageObservation(GridAction(stage2), size=224)
+    keep = _KeepObservation(GridAction(stage2))
+    env = ImageObservation(keep, size=224)
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs) and "occluded" in info
     index = (5 * 28 + 10) * 28 + 3  # grasp, rotation 5, cell (10, 3)
     obs, _, _, _, info = env.step(index)
     assert (info["primitive"], info["rotation"], info["pixel"]) == ("grasp", 5, (84, 28))
     # The image is the Dict observation's planes, unresized at 224.
-    raw = stage2.unwrapped._obs
+    raw = keep.last
     np.testing.assert_array_equal(obs[:3], raw["color"].transpose(2, 0, 1))
     np.testing.assert_array_equal(obs[4], raw["mask"] * 255)
 
