@@ -47,7 +47,7 @@ BASELINES = ("random", "grasp-only", "shipped")
 # ----------------------------------------------------------------------------- envs
 def make_wrapped_env(cell: int, size: int) -> gym.Env:
     """``ImageObservation(GridAction(MPG-Stage2-v0))`` on one thread (picklable for workers)."""
-    from mpg_envs.env import EnvConfig
+    from mpg_envs.config import EnvConfig
     from mpg_envs.threads import worker_init
     from mpg_envs.wrappers import GridAction, ImageObservation
 
@@ -251,7 +251,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     import mpg_envs  # noqa: F401
     from mpg_agents.baselines import make_policy
-    from mpg_envs.env import EnvConfig
+    from mpg_envs.config import EnvConfig
 
     torch.set_num_threads(1)
     rows: dict[str, dict] = {}
