@@ -5,12 +5,21 @@ baselines and network policies of ``mpg_agents``): a name, ``reset()`` at each e
 start and ``act(obs) -> flat action``.
 
 :class:`OraclePolicy` reads the simulator's state (object poses and shapes, which object is
-the target, which object each heightmap pixel shows), never pixels alone. It proves the suite
-is solvable and is the upper baseline of evaluations. Each step it re-plans from the current
-state: move the objects lying on the target, topmost first; grasp the target across its
-short axis at an angle where both open fingers come down on free space; when no angle is
-free, push the neighbour that blocks the fingers away along the closing direction. It
-remembers every action it took with the heightmap it took it on and never repeats one whose
+the target, which object each heightmap pixel shows), never pixels alone, and, as a planner
+with a perfect model of the physics, tries candidate actions in a checkpointed copy of the
+simulation (:mod:`mpg_envs.sim_trial`) before taking one. It proves the suite is solvable
+and is the upper baseline of evaluations. Each step it re-plans from the current state:
+
+1. its best target grasps (across the short axis, where the open fingers come down on the
+   freest space; through partial cover too) are tried in the copy, and the first that holds
+   the target is taken;
+2. otherwise its candidate preparations -- moves of the objects seen on the target (topmost
+   first), moves of the objects in the fingers' way, pushes of those out along the closing
+   direction -- are each tried and followed by grasp trials; the first after which a grasp
+   holds is taken, else the one leaving the target least covered and least blocked.
+
+With ``OracleConfig(verify_grasps=0)`` it plans by geometry alone (no trials). It remembers
+every action it took or tried with the heightmap it was on and never repeats one whose
 surroundings did not change (:class:`ActionMemory`), so a failed action is never retried
 unchanged.
 """
@@ -24,6 +33,7 @@ from typing import Any, Protocol, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
+from mpg_envs.action_memory import ActionMemory
 from mpg_envs.grasp_geometry import (
     GRASP_ROTATIONS,
     angle_gap,
@@ -32,7 +42,7 @@ from mpg_envs.grasp_geometry import (
     footprint_rect,
     jaw_strip_heights,
 )
-from mpg_envs.sim_trial import try_primitive
+from mpg_envs.sim_trial import WorldCheckpoint, try_primitive
 from mpg_envs.workspace import NUM_ROTATIONS, world_to_pixel
 
 __all__ = ["ActionMemory", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect"]
@@ -77,45 +87,7 @@ class OracleConfig:
     repeat_window: int = 30  # ... on a heightmap unchanged within this many pixels around it ...
     repeat_height_change: float = 0.005  # ... (no pixel moved by more than this) repeats it
     verify_grasps: int = 4  # target grasps tried in a copy of the simulation before acting (0: plan by geometry alone)
-
-
-class ActionMemory:
-    """The actions taken in an episode, each with the depth heightmap it was taken on.
-
-    An action *repeats* a remembered one when it has the same primitive and angle (grasp and
-    move angles modulo 180 degrees), its pixel lies within ``repeat_pixels`` of it, and the
-    heightmap around that pixel has not changed since: doing it again would meet the same
-    scene that made it fail.
-    """
-
-    def __init__(self, config: OracleConfig = OracleConfig()):
-        self.config = config
-        self._tried: list[tuple[str, int, int, int, np.ndarray]] = []
-
-    def __len__(self) -> int:
-        return len(self._tried)
-
-    def clear(self) -> None:
-        self._tried = []
-
-    def record(self, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray) -> None:
-        self._tried.append((primitive, self._angle(primitive, rotation), int(row), int(col), np.array(depth, copy=True)))
-
-    def repeats(self, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray) -> bool:
-        c = self.config
-        angle = self._angle(primitive, rotation)
-        for p, k, r, col0, before in self._tried:
-            if p != primitive or k != angle or abs(r - row) > c.repeat_pixels or abs(col0 - col) > c.repeat_pixels:
-                continue
-            w = c.repeat_window
-            window = (slice(max(0, row - w), row + w + 1), slice(max(0, col - w), col + w + 1))
-            if float(np.abs(depth[window] - before[window]).max(initial=0.0)) <= c.repeat_height_change:
-                return True
-        return False
-
-    @staticmethod
-    def _angle(primitive: str, rotation: int) -> int:
-        return int(rotation) % GRASP_ROTATIONS if primitive in ("grasp", "move") else int(rotation)
+    verify_preparations: int = 5  # with trials: moves/pushes tried, each followed by verify_grasps grasp trials
 
 
 @dataclass(frozen=True)
@@ -184,33 +156,98 @@ class OraclePolicy:
                 if step:
                     return (*step, {"kind": "grasp_any"})
             return self._last_resort(env, depth, "grasp")
-        if "grasp" in allowed and self.config.verify_grasps > 0:
+        verify = "grasp" in allowed and self.config.verify_grasps > 0
+        if verify:
             step = self._verified_grasp(env, target, depth, ids)
             if step:
                 return (*step, {"kind": "grasp_verified"})
-        occluded = bool(self._obs["occluded"][0])
-        if "move" in allowed and (occluded or "grasp" not in allowed):
-            movers = self._occluders(env, target, depth, ids)
-            if not movers and "grasp" not in allowed:  # Stage III, nothing on top: clear the nearest
-                movers = self._neighbours(world, target)
-            for j in movers:
-                step = self._first_new("move", self._grasp_plans(env, j, depth, ids, require_fit=False), depth)
-                if step:
-                    return (*step, {"kind": "move_occluder", "object": j})
         plans = self._grasp_plans(env, target, depth, ids) if "grasp" in allowed else []
-        good = [p for p in plans if p.blocked <= self.config.grasp_tolerance]
-        step = self._first_new("grasp", good, depth)
-        if step:
-            return (*step, {"kind": "grasp_free" if good[0].free else "grasp_tolerated", "blocked": round(good[0].blocked, 4)})
-        if "push" in allowed:
-            for side, start, rotation in self._push_options(env, target, plans or self._grasp_plans(env, target, depth, ids)):
-                r, c = self._clip_pixel(world, start)
-                if not self.memory.repeats("push", rotation, r, c, depth):
-                    return "push", rotation, r, c, {"kind": "push", "no_free_grasp": True}
+        if not verify:
+            occluded = bool(self._obs["occluded"][0])
+            if "move" in allowed and (occluded or "grasp" not in allowed):
+                step = next(self._moves(env, target, depth, ids, plans, blockers=False), None)
+                if step:
+                    return step
+            good = [p for p in plans if p.blocked <= self.config.grasp_tolerance]
+            step = self._first_new("grasp", good, depth)
+            if step:
+                return (*step, {"kind": "grasp_free" if good[0].free else "grasp_tolerated", "blocked": round(good[0].blocked, 4)})
+            step = next(self._pushes(env, target, depth, plans), None)
+            if step:
+                return step
+        else:
+            step = self._look_ahead(env, target, depth, ids, plans)
+            if step:
+                return step
         step = self._first_new("grasp", plans, depth)
         if step:
             return (*step, {"kind": "grasp_blocked", "no_free_grasp": True})
         return self._last_resort(env, depth, "grasp" if "grasp" in allowed else allowed[0])
+
+    def _moves(self, env, target: int, depth: np.ndarray, ids: np.ndarray, plans: list[GraspPlan], blockers: bool = True):
+        """Untried moves, in order: the objects seen on the target (topmost first); with no
+        grasp allowed and none on top, the nearest neighbours; with ``blockers``, then the
+        objects in the open fingers' way of the least blocked target grasps."""
+        world, allowed = env.world, env.primitives
+        if "move" not in allowed:
+            return
+        movers = self._occluders(env, target, depth, ids)
+        if not movers and "grasp" not in allowed:  # Stage III, nothing on top: clear the nearest
+            movers = self._neighbours(world, target)
+        kinds = {j: "move_occluder" for j in movers}
+        if blockers:
+            for p in sorted(plans, key=lambda p: p.blocked):
+                for _, j in p.blockers:
+                    if j not in kinds:
+                        movers.append(j)
+                        kinds[j] = "move_blocker"
+        for j in movers:
+            step = self._first_new("move", self._grasp_plans(env, j, depth, ids, require_fit=False), depth)
+            if step:
+                yield (*step, {"kind": kinds[j], "object": j})
+
+    def _pushes(self, env, target: int, depth: np.ndarray, plans: list[GraspPlan]):
+        """Untried pushes that open a finger gap (see :meth:`_push_options`)."""
+        if "push" not in env.primitives or not plans:
+            return
+        seen = set()
+        for _, start, rotation in self._push_options(env, target, plans):
+            r, c = self._clip_pixel(env.world, start)
+            if (rotation, r, c) not in seen and not self.memory.repeats("push", rotation, r, c, depth):
+                seen.add((rotation, r, c))
+                yield "push", rotation, r, c, {"kind": "push", "no_free_grasp": True}
+
+    def _look_ahead(self, env, target: int, depth: np.ndarray, ids: np.ndarray, plans: list[GraspPlan]):
+        """Of the first ``verify_preparations`` untried moves and pushes, the first after which
+        a target grasp holds in the simulation; else the one leaving the target least covered
+        and its fingers least blocked; ``None`` when there is none."""
+        c = self.config
+        candidates = list(self._moves(env, target, depth, ids, plans))[: c.verify_preparations]
+        candidates += list(self._pushes(env, target, depth, plans))[: max(0, c.verify_preparations - len(candidates))]
+        best, best_score = None, None
+        obs = self._obs
+        for cand in candidates:
+            primitive, rotation, row, col, info = cand
+            checkpoint = WorldCheckpoint(env.world)
+            try:
+                env._primitives.execute(primitive, rotation, row, col, depth, target)
+                if not env.world.active[target] or target in set(env.world.objects_outside_workspace().tolist()):
+                    continue
+                after, ids_after = self._cast(env.world)
+                mask, occluded = env._target_view(after, target)
+                self._obs = {"depth": after, "mask": mask, "occluded": np.array([int(occluded)])}
+                plans_after = self._grasp_plans(env, target, after, ids_after)
+                for p in plans_after[: c.verify_grasps]:
+                    result = try_primitive(env._primitives, "grasp", p.rotation, p.row, p.col, after, target)
+                    if result.grasp_success and result.grasped_object == target:
+                        return primitive, rotation, row, col, {**info, "verified_next": True}
+                score = (len(self._occluders(env, target, after, ids_after)), min((p.blocked for p in plans_after), default=1.0))
+                if best_score is None or score < best_score:
+                    best, best_score = cand, score
+            finally:
+                self._obs = obs
+                checkpoint.restore()
+        return best
 
     def _verified_grasp(self, env, target: int, depth: np.ndarray, ids: np.ndarray):
         """The first of the best ``verify_grasps`` untried target grasps that holds the target
@@ -328,6 +365,11 @@ class OraclePolicy:
 
     def _object_ids(self, world) -> np.ndarray:
         """Which object each heightmap pixel shows (-1 for the table)."""
+        return self._cast(world)[1]
+
+    def _cast(self, world) -> tuple[np.ndarray, np.ndarray]:
+        """The oracle's own ray-cast view of the current state: depth heightmap and which
+        object each pixel shows (its own caster, so trials never touch the env's cameras or RNG)."""
         if self._ids_model is not world.model:
             from mpg_envs.heightmap import RaycastHeightmapper
 
@@ -335,8 +377,8 @@ class OraclePolicy:
                 self._ids_caster.close()
             self._ids_caster = RaycastHeightmapper(world.model, world.workspace, num_threads=1)
             self._ids_model = world.model
-        geom_id, _ = self._ids_caster.cast(world.data)
-        return world.object_of_geom(geom_id)
+        hm = self._ids_caster.heightmaps(world.data)
+        return hm.depth.astype(np.float32), world.object_of_geom(hm.geom_id)
 
     @staticmethod
     def _clip_pixel(world, xy: np.ndarray) -> tuple[int, int]:

@@ -129,7 +129,7 @@ def test_oracle_is_a_policy(occluded_env) -> None:
 def test_oracle_never_repeats_an_action_on_the_scene_it_failed_on(occluded_env) -> None:
     """Acting again on an unchanged scene (the last action did nothing) gives a new action every time."""
     obs, _ = occluded_env.reset(seed=90221)
-    oracle = OraclePolicy(occluded_env)
+    oracle = OraclePolicy(occluded_env, OracleConfig(verify_grasps=1, verify_preparations=1))
     oracle.reset()
     seen = []
     for _ in range(6):
@@ -142,7 +142,7 @@ def test_oracle_never_repeats_an_action_on_the_scene_it_failed_on(occluded_env) 
 
 def test_oracle_forgets_at_reset(occluded_env) -> None:
     obs, _ = occluded_env.reset(seed=90223)
-    oracle = OraclePolicy(occluded_env)
+    oracle = OraclePolicy(occluded_env, OracleConfig(verify_grasps=1, verify_preparations=1))
     first = oracle.act(obs)
     assert oracle.act(obs) != first
     oracle.reset()
@@ -184,3 +184,16 @@ def test_a_verified_grasp_holds_the_target_when_taken(occluded_env) -> None:
         assert info["target_grasped"] and terminated
         return
     pytest.fail("no seed gave a verified grasp at the first step")
+
+
+def test_oracle_prepares_with_a_tried_move_when_no_grasp_holds(occluded_env) -> None:
+    """Seed 90001 (15 objects): no grasp of the buried target holds, so the oracle moves an
+    object; the move it takes was tried, and it is the first of its candidates after which a
+    grasp holds or the best it found."""
+    obs, _ = occluded_env.reset(seed=90001)
+    oracle = OraclePolicy(occluded_env, OracleConfig(verify_grasps=2, verify_preparations=2))
+    action = occluded_env.action_space.decode(oracle.act(obs))
+    assert action.primitive in ("move", "push")
+    assert oracle.last_plan["kind"] in ("move_occluder", "move_blocker", "push")
+    # The tried grasps and the preparation were all remembered: the same state gives a new action.
+    assert occluded_env.action_space.decode(oracle.act(obs)) != action

@@ -1,0 +1,58 @@
+"""What a policy already did in an episode, so it never does it again on an unchanged scene."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from mpg_envs.grasp_geometry import GRASP_ROTATIONS
+
+__all__ = ["ActionMemory", "RepeatConfig"]
+
+
+class RepeatConfig(Protocol):
+    """When an action repeats a remembered one (e.g. :class:`mpg_envs.policies.OracleConfig`)."""
+
+    repeat_pixels: int  # an action this close to a tried one (same primitive and angle) ...
+    repeat_window: int  # ... on a heightmap unchanged within this many pixels around it ...
+    repeat_height_change: float  # ... (no pixel moved by more than this, metres) repeats it
+
+
+class ActionMemory:
+    """The actions taken in an episode, each with the depth heightmap it was taken on.
+
+    An action *repeats* a remembered one when it has the same primitive and angle (grasp and
+    move angles modulo 180 degrees), its pixel lies within ``repeat_pixels`` of it, and the
+    heightmap around that pixel has not changed since: doing it again would meet the same
+    scene that made it fail.
+    """
+
+    def __init__(self, config: RepeatConfig):
+        self.config = config
+        self._tried: list[tuple[str, int, int, int, np.ndarray]] = []
+
+    def __len__(self) -> int:
+        return len(self._tried)
+
+    def clear(self) -> None:
+        self._tried = []
+
+    def record(self, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray) -> None:
+        self._tried.append((primitive, self._angle(primitive, rotation), int(row), int(col), np.array(depth, copy=True)))
+
+    def repeats(self, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray) -> bool:
+        c = self.config
+        angle = self._angle(primitive, rotation)
+        for p, k, r, col0, before in self._tried:
+            if p != primitive or k != angle or abs(r - row) > c.repeat_pixels or abs(col0 - col) > c.repeat_pixels:
+                continue
+            w = c.repeat_window
+            window = (slice(max(0, row - w), row + w + 1), slice(max(0, col - w), col + w + 1))
+            if float(np.abs(depth[window] - before[window]).max(initial=0.0)) <= c.repeat_height_change:
+                return True
+        return False
+
+    @staticmethod
+    def _angle(primitive: str, rotation: int) -> int:
+        return int(rotation) % GRASP_ROTATIONS if primitive in ("grasp", "move") else int(rotation)
