@@ -143,6 +143,7 @@ class Learner:
         torch.set_num_threads(config.torch_threads)
         # A young network's eval-mode activations go denormal and slow the CPU down 10x.
         torch.set_flush_denormal(True)
+        torch.manual_seed(config.seed)  # before the networks are built: the seed fixes their initial weights
         self.env = self._make_env(self._objects_now(0))
         env = self.env.unwrapped
         self.primitives: tuple[str, ...] = tuple(env.primitives)
@@ -175,7 +176,6 @@ class Learner:
         self.explorer = Explorer(
             self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q"
         )
-        torch.manual_seed(config.seed)
         self.counters = Counters()
         self._stop = False
         self._log: TrainingLog | None = None
