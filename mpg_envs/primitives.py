@@ -91,6 +91,12 @@ class Primitives:
         self.ik = ik if ik is not None else ArmIK(world.robot.config)
         self.gripper = gripper_states(world.robot.config)
         self._footprint_offsets = _disc_offsets(config.footprint_radius, world.workspace.resolution)
+        # A position servo (force kp (ctrl - q) - kv qdot) follows a set-point moving at v
+        # kv/kp * v behind it; the set-point is led by that much so the arm is where the
+        # motion says (velocity feed-forward, as an arm's own controller does).
+        arm = world.robot.arm_actuators
+        kp, kv = world.model.actuator_gainprm[arm, 0], -world.model.actuator_biasprm[arm, 2]
+        self._servo_lag = np.where(kp > 0, kv / np.where(kp > 0, kp, 1.0), 0.0)
 
     # ------------------------------------------------------------------ API
     def execute(
@@ -289,8 +295,9 @@ class Primitives:
         for k in range(1, n_wp + 1):
             q_next = self.ik.solve(start + (end - start) * k / n_wp, theta, q_prev)
             chunks = max(1, math.ceil(length / n_wp / speed / dt))
+            lead = self._servo_lag * (q_next - q_prev) / (chunks * dt)
             for c in range(1, chunks + 1):
-                world.data.ctrl[world.robot.arm_actuators] = q_prev + (q_next - q_prev) * c / chunks
+                world.data.ctrl[world.robot.arm_actuators] = q_prev + (q_next - q_prev) * c / chunks + lead
                 world.step(cfg.control_every)
             q_prev = q_next
         self._hold(q_prev, end)
