@@ -65,5 +65,17 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
             discriminator = weights
     summary["q_star"] = None if math.isnan(q_star) else q_star
     summary["final_weights"] = weights
-    (out / "pipeline.json").write_text(json.dumps(json_safe(summary), indent=1))
+    # The record ships beside its weights: paths inside the run are written relative to it.
+    record = {**summary, "final_weights": _relative_to(weights, out)}
+    (out / "pipeline.json").write_text(json.dumps(json_safe(record), indent=1))
     return summary
+
+
+def _relative_to(path: str | None, root: Path) -> str | None:
+    """``path`` relative to ``root`` when it lies inside it, else unchanged."""
+    if path is None:
+        return None
+    try:
+        return Path(path).resolve().relative_to(root.resolve()).as_posix()
+    except ValueError:
+        return path

@@ -33,6 +33,8 @@ def test_tiny_pipeline_runs_stages_one_to_five(tmp_path):
         assert (stage / "weights.safetensors").is_file() and (stage / "done.json").is_file()
         assert summary[f"Stage{i}"]["iteration"] == 2
     assert summary["final_weights"].endswith("Stage5/weights.safetensors")
+    # the record on disk names no machine path: it ships beside its weights
+    assert json.loads((tmp_path / "pipeline.json").read_text())["final_weights"] == "Stage5/weights.safetensors"
     # A re-run skips finished stages.
     again = run_pipeline(cfg, tmp_path, log=lambda s: None)
     assert again["Stage5"] == summary["Stage5"]
