@@ -165,7 +165,11 @@ class World:
         """Place object ``i`` (making it active) at rest at a pose."""
         adr, dof = self.object_qpos_adr[i], self.object_dof_adr[i]
         self.data.qpos[adr : adr + 3] = position
-        self.data.qpos[adr + 3 : adr + 7] = np.asarray(quat, dtype=float) / np.linalg.norm(quat)
+        quat = np.asarray(quat, dtype=float)
+        norm = np.linalg.norm(quat)
+        # A quaternion read from the simulation is unit to rounding: keep its bits, so a saved
+        # scene restores bit-identical observations; anything else is normalised.
+        self.data.qpos[adr + 3 : adr + 7] = quat if abs(norm - 1.0) < 1e-12 else quat / norm
         self.data.qvel[dof : dof + 6] = 0.0
         self._set_active(i, True)
 
