@@ -79,7 +79,11 @@ def run_episode(env: gym.Env, oracle: OraclePolicy, seed: int) -> Episode:
         obs, _, terminated, truncated, info = env.step(action)
         steps.append((info["primitive"], info))
     success = bool(info.get("is_success"))
-    actions = [f"{k}{'+' if i.get('target_grasped') or i.get('move_success') else ''}" for k, (_, i) in zip(plans, steps)]
+    # "+": it uncovered or took the target; "!why": the grasp or move held nothing (info grasp_failure).
+    actions = [
+        f"{k}{'+' if i.get('target_grasped') or i.get('move_success') else ''}{'!' + i['grasp_failure'] if i.get('grasp_failure') else ''}"
+        for k, (_, i) in zip(plans, steps)
+    ]
     category = None if success else classify(info, oracle, steps)
     return Episode(seed, success, len(steps), category, str(info.get("end_reason", "unreported")), actions)
 

@@ -184,6 +184,7 @@ class MPGEnv(gym.Env):
             "grasp_success": bool(result.grasp_success),
             "target_grasped": bool(target_grasped),
             "wrong_grasp": bool(primitive == "grasp" and result.grasp_success and not target_grasped),
+            "grasp_failure": result.grasp_failure,  # why a grasp or move held nothing (GRASP_FAILURES), else None
             "change_detected": bool(changed),
             "occluded_before": occluded_before,
             "occluded": occluded,
