@@ -165,7 +165,8 @@ class OraclePolicy:
         if not verify:
             occluded = bool(self._obs["occluded"][0])
             if "move" in allowed and (occluded or "grasp" not in allowed):
-                step = next(self._moves(env, target, depth, ids, plans, blockers=False), None)
+                moves = list(self._moves(env, target, depth, ids, plans, blockers=False))[: max(1, self.config.verify_preparations)]
+                step = self._tried_move(env, target, depth, ids, moves)
                 if step:
                     return step
             good = [p for p in plans if p.blocked <= self.config.grasp_tolerance]
@@ -183,6 +184,25 @@ class OraclePolicy:
         if step:
             return (*step, {"kind": "grasp_blocked", "no_free_grasp": True})
         return self._last_resort(env, depth, "grasp" if "grasp" in allowed else allowed[0])
+
+    def _tried_move(self, env, target: int, depth: np.ndarray, ids: np.ndarray, moves: list):
+        """With trials (Stage III, no grasp to verify), the first move, over the movers' angles
+        (up to ``2 * verify_grasps`` trials), that lifts the object it aims at and leaves the
+        target in place (going 4 cm below a thin occluder's top can pinch the target under it);
+        without trials, or if none does, the first move."""
+        budget = 2 * self.config.verify_grasps
+        for move in moves:
+            j = move[4]["object"]
+            for p in self._grasp_plans(env, j, depth, ids, require_fit=False):
+                if budget <= 0:
+                    return moves[0]
+                if self.memory.repeats("move", p.rotation, p.row, p.col, depth):
+                    continue
+                budget -= 1
+                result = try_primitive(env._primitives, "move", p.rotation, p.row, p.col, depth, target)
+                if result.grasp_success and result.grasped_object == j and not result.target_moved:
+                    return "move", p.rotation, p.row, p.col, move[4]
+        return moves[0] if moves else None
 
     def _moves(self, env, target: int, depth: np.ndarray, ids: np.ndarray, plans: list[GraspPlan], blockers: bool = True):
         """Untried moves, in order: the objects seen on the target (topmost first); with no
