@@ -12,6 +12,23 @@ import pytest  # noqa: E402
 from mpg_envs.objects import blocks_object_set  # noqa: E402
 
 
+EXPECTED_PRIMITIVES = {
+    "MPG-Stage1-v0": ("grasp",),
+    "MPG-Stage2-v0": ("grasp",),
+    "MPG-Stage3-v0": ("move",),
+    "MPG-Stage4-v0": ("push", "grasp"),
+    "MPG-Stage5-v0": ("move", "push", "grasp"),
+    "MPG-Occluded-v0": ("move", "push", "grasp"),
+}
+"""The contract (ENV.md): each registered id and its primitives in action order."""
+
+
+@pytest.fixture(scope="session")
+def expected_primitives() -> dict[str, tuple[str, ...]]:
+    """Env id -> the primitives ENV.md gives it, in action order (stated once for all tests)."""
+    return EXPECTED_PRIMITIVES
+
+
 @pytest.fixture(scope="session")
 def blocks():
     """The blocks object set, by name."""

@@ -18,14 +18,6 @@ from mpg_envs.actions import decode_action  # noqa: E402
 
 from .conftest import TINY  # noqa: E402
 
-EXPECTED = {
-    "MPG-Stage1-v0": ("grasp",),
-    "MPG-Stage2-v0": ("grasp",),
-    "MPG-Stage3-v0": ("move",),
-    "MPG-Stage4-v0": ("push", "grasp"),
-    "MPG-Stage5-v0": ("move", "push", "grasp"),
-    "MPG-Occluded-v0": ("move", "push", "grasp"),
-}
 
 
 def make(env_id: str, **kwargs) -> gym.Env:
@@ -37,13 +29,13 @@ def make(env_id: str, **kwargs) -> gym.Env:
         pytest.skip(f"{env_id} cannot be built yet: {exc!r}")
 
 
-@pytest.mark.parametrize("env_id", list(EXPECTED))
-def test_policy_acts_on_every_env(env_id, build_policy):
+@pytest.mark.parametrize("env_id", mpg_envs.ENV_IDS)
+def test_policy_acts_on_every_env(env_id, build_policy, expected_primitives):
     env = make(env_id)
     try:
         obs, _ = env.reset(seed=0)
         policy = build_policy(env.observation_space, env.action_space)
-        assert policy.action_primitives == EXPECTED[env_id]
+        assert policy.action_primitives == expected_primitives[env_id]
         action, _ = policy.predict(obs, deterministic=True)
         assert env.action_space.contains(int(action))
         a = decode_action(policy.action_primitives, int(action))

@@ -16,14 +16,6 @@ from mpg_envs.rewards import StepOutcome, reward_grasp_any, reward_grasp_target,
 from mpg_envs.scene_io import save_scene
 
 ALL_IDS = mpg_envs.ENV_IDS
-EXPECTED_PRIMITIVES = {
-    "MPG-Stage1-v0": ("grasp",),
-    "MPG-Stage2-v0": ("grasp",),
-    "MPG-Stage3-v0": ("move",),
-    "MPG-Stage4-v0": ("push", "grasp"),
-    "MPG-Stage5-v0": ("move", "push", "grasp"),
-    "MPG-Occluded-v0": ("move", "push", "grasp"),
-}
 INFO_KEYS = {
     "primitive", "rotation", "pixel", "position", "grasp_success", "target_grasped", "wrong_grasp",
     "change_detected", "occluded_before", "occluded", "move_success", "num_motions", "is_success",
@@ -31,9 +23,9 @@ INFO_KEYS = {
 }
 
 
-def test_six_ids_registered_with_their_primitives():
-    assert set(ALL_IDS) == set(EXPECTED_PRIMITIVES)
-    for env_id, prims in EXPECTED_PRIMITIVES.items():
+def test_six_ids_registered_with_their_primitives(expected_primitives):
+    assert set(ALL_IDS) == set(expected_primitives)
+    for env_id, prims in expected_primitives.items():
         env = gym.make(env_id)
         assert mpg_envs.env_primitives(env) == prims
         assert env.action_space.n == len(prims) * 16 * 224 * 224
