@@ -131,19 +131,31 @@ def build_model(algo: str, envs, steps: int, seed: int):
                seed=seed, device="cpu", verbose=0)
 
 
-def episode_recorder():
-    """An SB3 callback keeping ``(env steps so far, return)`` of every training episode."""
+def episode_recorder(name: str = "", total_steps: int = 0, reports: int = 10):
+    """An SB3 callback keeping ``(env steps so far, return)`` of every training episode, and
+    printing progress ``reports`` times over ``total_steps`` (steps/s, recent return), so a
+    long run that is stopped still says how far it got."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     class EpisodeRecorder(BaseCallback):
         def __init__(self):
             super().__init__()
             self.episodes: list[tuple[int, float]] = []
+            self._every = max(1, total_steps // reports) if total_steps else 0
+            self._next = self._every
+            self._start = time.perf_counter()
 
         def _on_step(self) -> bool:
             for info in self.locals["infos"]:
                 if "episode" in info:  # VecMonitor's summary of a finished episode
                     self.episodes.append((self.num_timesteps, float(info["episode"]["r"])))
+            if self._every and self.num_timesteps >= self._next:
+                self._next += self._every
+                rate = self.num_timesteps / (time.perf_counter() - self._start)
+                recent = [r for _, r in self.episodes[-20:]]
+                mean = f"{np.mean(recent):.2f}" if recent else "-"
+                print(f"{name}: {self.num_timesteps}/{total_steps} steps, {rate:.2f} steps/s, "
+                      f"{len(self.episodes)} episodes, mean return of the last 20: {mean}", flush=True)
             return True
 
     return EpisodeRecorder()
@@ -165,7 +177,7 @@ def train(algo: str, args: argparse.Namespace) -> tuple[object, dict]:
     import torch
 
     torch.set_num_threads(1)
-    recorder = episode_recorder()
+    recorder = episode_recorder(algo, args.steps)
     with PeakMemory() as memory:
         envs = make_training_envs(args.envs, args.cell, args.size)
         model = build_model(algo, envs, args.steps, args.seed)
