@@ -261,7 +261,7 @@ class Primitives:
         z_carry = p_tcp[2]
         z_release = hang + cfg.place_drop
         gripper_qpos = world.robot.gripper_qpos(data)
-        q = self.ik.solve((spot[0], spot[1], z_carry), theta, world.robot.arm_qpos(data))
+        z_carry, q = self._carry_pose(spot, theta, z_carry, z_release)
         world.robot.teleport_arm(data, q)
         world.robot.set_gripper(data, gripper_qpos, world.robot.config.gripper_closed_ctrl)
         mujoco.mj_kinematics(world.model, data)
@@ -273,6 +273,20 @@ class Primitives:
         q = self._linear((spot[0], spot[1], z_carry), (spot[0], spot[1], z_release), theta, q, cfg.approach_speed)
         self._actuate_gripper(closed=False)
         self._linear((spot[0], spot[1], z_release), (spot[0], spot[1], z_carry), theta, q, cfg.lift_speed)
+
+    def _carry_pose(self, spot: tuple[float, float], theta: float, z_carry: float, z_release: float) -> tuple[float, np.ndarray]:
+        """The carry height above ``spot`` and its joint angles: the height the object was lifted
+        to, or lower (5 cm at a time, not below 5 cm above the release height) where that is
+        out of the arm's reach (a high lift over a far corner of the workspace)."""
+        seed = self.world.robot.arm_qpos(self.world.data)
+        z = z_carry
+        while True:
+            try:
+                return z, self.ik.solve((spot[0], spot[1], z), theta, seed)
+            except RuntimeError:
+                if z - 0.05 < z_release + 0.05:
+                    raise
+                z -= 0.05
 
     def _teleport(self, position, theta: float, closed: bool) -> np.ndarray:
         world = self.world

@@ -158,3 +158,15 @@ def test_a_user_menagerie_folder_builds_the_same_robot(blocks, tmp_path):
     assert world.model.nu == World([blocks["cube"]]).model.nu == 7
     with pytest.raises(FileNotFoundError, match="ur5e.xml"):
         World([blocks["cube"]], robot=RobotConfig(menagerie_dir=str(tmp_path / "nowhere")))
+
+
+def test_a_high_carry_over_a_far_spot_is_lowered_into_reach(blocks, ik):
+    # Seen in a 30-object scene: a move lifted its object to 0.53 m and chose a free spot at
+    # the far edge, where the arm cannot hold the gripper that high (the step then raised).
+    world, primitives, _ = make([blocks["cube"]], ik)
+    with pytest.raises(RuntimeError, match="out of the arm's reach"):
+        ik.solve((0.639, -0.113, 0.53), np.pi / 2)
+    z, q = primitives._carry_pose((0.639, -0.113), np.pi / 2, 0.53, 0.05)
+    assert 0.1 <= z < 0.53 and q.shape == (6,)
+    with pytest.raises(RuntimeError, match="out of the arm's reach"):  # nothing reachable: still an error
+        primitives._carry_pose((2.0, 2.0), np.pi / 2, 0.53, 0.05)
