@@ -21,12 +21,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
-if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-    os.environ.setdefault("MUJOCO_GL", "egl")
 
 from mpg_agents.baselines import BUILTIN  # noqa: E402
 from mpg_agents.parallel import EvalJob, evaluate_jobs  # noqa: E402
