@@ -37,6 +37,17 @@ def _read_config(path: str | None) -> dict[str, Any]:
         raise UsageError(f"config file {path!r} is not valid {p.suffix[1:] or 'JSON'}: {exc}") from exc
 
 
+def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
+    """The ``TrainConfig`` and the stage table a ``--config`` file (TOML or JSON) describes:
+    ``TrainConfig`` fields at the top level, ``[stages.StageN]`` tables of stage fields."""
+    from mpg_agents import training_stages as ts
+    from mpg_agents.learner import TrainConfig
+
+    settings = _read_config(path)
+    stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
+    return TrainConfig.from_dict(settings), stages
+
+
 def _check_env_id(env_id: str) -> None:
     import gymnasium as gym
 
@@ -89,9 +100,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.learner import Learner, TrainConfig, json_safe
         from mpg_agents import training_stages as ts
 
-        settings = _read_config(args.config)
-        stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
-        base = TrainConfig.from_dict(settings)
+        base, stages = training_settings(args.config)
         flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name, None) is not None}
         base = replace(base, **flags)
         _check_checkpoint(args.init)

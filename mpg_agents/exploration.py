@@ -2,8 +2,8 @@
 
 - epsilon-greedy with epsilon annealed linearly from ``start`` to ``end``;
 - an exploratory action is a random rotation at a random pixel where the primitive can
-  matter: move and grasp inside the target's bounding rectangle, push within 25 pixels
-  (5 cm) of it; with the ``max_q`` coordination the primitive is random too;
+  matter: move and grasp inside the target's bounding rectangle (grasp on the target's own
+  pixels for a network that grasps only there), push within 25 pixels (5 cm) of it; with the ``max_q`` coordination the primitive is random too;
 - after ``heuristic_after_failed_grasps`` failed grasps in a row the next grasp is the
   pixel-only heuristic grasp (:mod:`mpg_agents.heuristics`), a training aid of the paper.
 
@@ -50,6 +50,8 @@ class Explorer:
         rng: the run's generator.
         heuristic_after_failed_grasps: failed grasps in a row before the heuristic grasp (0: never).
         random_primitive: explore the primitive too (the ``max_q`` coordination).
+        grasp_on_target: explore grasps on visible target pixels only (for a network whose
+            ``grasp_region`` is ``"target"``: it may only grasp there greedily either).
     """
 
     def __init__(
@@ -58,11 +60,13 @@ class Explorer:
         rng: np.random.Generator,
         heuristic_after_failed_grasps: int = 2,
         random_primitive: bool = False,
+        grasp_on_target: bool = False,
     ) -> None:
         self.primitives = tuple(primitives)
         self.rng = rng
         self.heuristic_after_failed_grasps = heuristic_after_failed_grasps
         self.random_primitive = random_primitive
+        self.grasp_on_target = grasp_on_target
 
     def choose(self, obs: Mapping[str, np.ndarray], decision: Decision, epsilon: float, failed_grasps_in_a_row: int) -> Choice:
         """The action for ``obs`` given the policy's greedy ``decision`` (its primitive is kept
@@ -82,12 +86,16 @@ class Explorer:
     def explore_pixel(self, obs: Mapping[str, np.ndarray], primitive: str) -> tuple[int, int, int]:
         """A random ``(rotation, row, col)`` where ``primitive`` can matter.
 
-        Move and grasp: inside the target's bounding rectangle (the rough mask). Push: within
-        :data:`PUSH_REACH_PX` of it. An empty mask falls back to any occupied pixel, then to any pixel.
+        Move and grasp: inside the target's bounding rectangle (the rough mask); grasp on a
+        visible target pixel with :attr:`grasp_on_target`. Push: within :data:`PUSH_REACH_PX` of
+        the rectangle. An empty mask falls back to any occupied pixel, then to any pixel.
         """
         mask = obs["mask"] > 0
         size = mask.shape[0]
-        if mask.any():
+        if primitive == "grasp" and self.grasp_on_target and mask.any():
+            on_target = np.argwhere(mask)
+            row, col = (int(v) for v in on_target[self.rng.integers(len(on_target))])
+        elif mask.any():
             rows, cols = np.nonzero(mask)
             pad = PUSH_REACH_PX if primitive == "push" else 0
             r0, r1 = max(rows.min() - pad, 0), min(rows.max() + pad, size - 1)

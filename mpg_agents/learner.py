@@ -164,9 +164,11 @@ class Learner:
         self.optimizer = self.policy.optimizer
         if init is not None:
             header = load_mpgnet_weights(self.net, init, strict_branches=False)
-            self.target.load_state_dict(self.net.state_dict())
             if math.isnan(config.q_star) and header.get("q_star") is not None:
                 self.policy.set_q_star(float(header["q_star"]))
+        for to, source in self.stage.branch_init:
+            self.net.branches[to].load_state_dict(self.net.branches[source].state_dict())
+        self.target.load_state_dict(self.net.state_dict())
         if not math.isnan(config.q_star):
             self.policy.set_q_star(config.q_star)
         self.replay = PrioritizedHeightmapReplayBuffer(
@@ -174,7 +176,8 @@ class Learner:
         )
         self.rng = np.random.default_rng(config.seed)
         self.explorer = Explorer(
-            self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q"
+            self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q",
+            grasp_on_target=self.policy.net_config.grasp_region == "target",
         )
         self.counters = Counters()
         self._stop = False

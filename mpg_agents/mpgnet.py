@@ -38,7 +38,7 @@ from torch.nn import functional as F
 from mpg_agents.inputs import normalize_inputs
 from mpg_agents.mobilenet import MobileNetV3Features, load_torchvision_features
 from mpg_agents.mpgnet_config import ROUGH_MASKED, MPGNetConfig
-from mpg_agents.regions import region_max, target_region
+from mpg_agents.regions import region_max, target_pixels, target_region
 from mpg_agents.rotations import rotation_grids
 
 # The input planes, stacked on channels and rotated together; each trunk's stem reads its own
@@ -96,6 +96,7 @@ class PreparedObs:
     planes: Tensor  # (B, 5, H, W): colour, depth, mask as in PLANES
     region: Tensor  # (B, H, W) bool: the rough target mask (bounding rectangle)
     occluded: Tensor | None = field(default=None)  # (B,) bool when the observation had it
+    grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
 
 
 @dataclass
@@ -112,6 +113,13 @@ class EncodedObs:
     batch_size: int
     region: Tensor  # (B, H, W) bool: the rough target mask (bounding rectangle)
     occluded: Tensor | None = field(default=None)  # (B,) bool when the observation had it
+    grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
+
+    def region_of(self, primitive: str) -> Tensor:
+        """``(B, H, W)`` bool: where ``primitive`` may act (before ``rough_mask`` is consulted)."""
+        if primitive == "grasp" and self.grasp_region is not None:
+            return self.grasp_region
+        return self.region
 
 
 class MPGNet(nn.Module):
@@ -208,7 +216,8 @@ class MPGNet(nn.Module):
     def prepare(self, obs: Mapping[str, Any]) -> PreparedObs:
         """Normalise a raw batch and stack it into input planes (done once per observation)."""
         color, depth, mask, binary, occluded = self.normalize(obs)
-        return PreparedObs(torch.cat([color, depth, mask], dim=1), target_region(binary), occluded)
+        grasp_region = target_pixels(binary, self.config.target_margin_px) if self.config.grasp_region == "target" else None
+        return PreparedObs(torch.cat([color, depth, mask], dim=1), target_region(binary), occluded, grasp_region)
 
     def encode(self, obs: Mapping[str, Any] | PreparedObs, rotations: Tensor | None = None) -> EncodedObs:
         """Pad and rotate a batch and run the shared mask trunk once.
@@ -239,6 +248,7 @@ class MPGNet(nn.Module):
             batch_size=b,
             region=prep.region,
             occluded=prep.occluded,
+            grasp_region=prep.grasp_region,
         )
 
     def branch_q(self, enc: EncodedObs, primitive: str, subset: Tensor | None = None) -> Tensor:
@@ -253,7 +263,7 @@ class MPGNet(nn.Module):
             planes, feats, rot = planes[subset], feats[subset], rot[subset]
         q = self._unrotate(self.branches[primitive](planes, feats), rot)
         if self.config.rough_mask and primitive in ROUGH_MASKED:
-            q = q * enc.region[_sample_of(enc, subset)]
+            q = q * enc.region_of(primitive)[_sample_of(enc, subset)]
         return q
 
     def forward(self, obs: Mapping[str, Any], primitives: Sequence[str] | None = None) -> dict[str, Tensor]:
@@ -298,10 +308,10 @@ class MPGNet(nn.Module):
 
     # ------------------------------------------------------------- utilities
     def grasp_score(self, obs: Mapping[str, Any]) -> Tensor:
-        """Best grasp Q inside the target region, per sample ``(B,)`` (the discriminator score)."""
+        """Best grasp Q where a grasp may act, per sample ``(B,)`` (the discriminator score)."""
         enc = self.encode(obs)
         q = self.maps_from(enc, ("grasp",))["grasp"]
-        return region_max(q, enc.region)
+        return region_max(q, enc.region_of("grasp"))
 
     def load_imagenet(self, path: str | Path) -> None:
         """Initialise every trunk from a torchvision MobileNetV3 checkpoint of the same variant."""

@@ -16,6 +16,9 @@ IMAGENET_STD: tuple[float, float, float] = (0.229, 0.224, 0.225)
 # Primitives whose Q maps the rough target mask restricts (paper, Training Details).
 ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
 
+# Where a grasp may act: the paper's bounding rectangle, or the target's own pixels (dilated).
+GRASP_REGIONS: tuple[str, ...] = ("rectangle", "target")
+
 # Trunk depth of the CPU-friendly variant: features.0-3 of MobileNetV3-small, output stride 8
 # (24 channels). The whole trunk (stride 32) maps the 320-pixel padded input to 10 x 10 cells
 # of 6.4 cm, coarser than the blocks themselves: trained from scratch on a CPU, its greedy
@@ -47,6 +50,10 @@ class MPGNetConfig:
             are table at 0 m, objects a few cm high).
         color_mean, color_std: ImageNet statistics applied to colour / 255.
         rough_mask: zero move and grasp Q outside the target's bounding rectangle.
+        grasp_region: where grasp Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
+            (the paper's rough mask) or ``"target"`` (the visible target pixels grown by
+            ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object).
+        target_margin_px: growth of the target pixels for ``grasp_region="target"`` (2 mm pixels).
         bn_momentum: batch-norm momentum of the trunks (see ``mobilenet.DEFAULT_BN_MOMENTUM``).
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
@@ -72,6 +79,8 @@ class MPGNetConfig:
     color_mean: tuple[float, float, float] = IMAGENET_MEAN
     color_std: tuple[float, float, float] = IMAGENET_STD
     rough_mask: bool = True
+    grasp_region: str = "rectangle"
+    target_margin_px: int = 2
     bn_momentum: float = DEFAULT_BN_MOMENTUM
     channels_last: bool = True
     trunk_batch: int | None = 4
@@ -93,6 +102,10 @@ class MPGNetConfig:
             raise ValueError(f"num_rotations must be positive, got {self.num_rotations}")
         if self.depth_std <= 0 or self.depth_max <= 0:
             raise ValueError("depth_std and depth_max must be positive")
+        if self.grasp_region not in GRASP_REGIONS:
+            raise ValueError(f"grasp_region must be one of {GRASP_REGIONS}, got {self.grasp_region!r}")
+        if self.target_margin_px < 0:
+            raise ValueError(f"target_margin_px must be >= 0, got {self.target_margin_px}")
         if self.trunk_batch is not None and self.trunk_batch < 1:
             raise ValueError(f"trunk_batch must be None or positive, got {self.trunk_batch}")
 

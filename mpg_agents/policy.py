@@ -129,13 +129,16 @@ class MPGQNetwork(QNetwork):
         b = torch.arange(q.shape[0], device=q.device)
         return q[b, row.to(q.device), col.to(q.device)].unsqueeze(1)
 
-    def masked_flat_q(self, maps: Mapping[str, Tensor], region: Tensor) -> Tensor:
-        """Flat Q for choosing actions: move/grasp set to -inf outside the target region, and
-        primitives without a branch -inf everywhere."""
-        return flat_q(self._with_missing({p: self._actable(maps[p], p, region[:, None]) for p in maps}), self.action_primitives)
+    def masked_flat_q(self, maps: Mapping[str, Tensor], enc: EncodedObs) -> Tensor:
+        """Flat Q for choosing actions: move/grasp set to -inf outside their regions (see
+        :meth:`EncodedObs.region_of`), and primitives without a branch -inf everywhere."""
+        return flat_q(
+            self._with_missing({p: self._actable(maps[p], p, enc.region_of(p)[:, None]) for p in maps}),
+            self.action_primitives,
+        )
 
     def _actable(self, q: Tensor, primitive: str, region: Tensor) -> Tensor:
-        """``q`` with -inf where ``primitive`` may not act (move/grasp: outside the target region)."""
+        """``q`` with -inf where ``primitive`` may not act (move/grasp: outside ``region``)."""
         if self.net_config.rough_mask and primitive in ROUGH_MASKED:
             return q.masked_fill(~region, float("-inf"))
         return q
@@ -144,7 +147,7 @@ class MPGQNetwork(QNetwork):
         """Max-Q actions ``(B,)`` over all allowed primitives (region-restricted for move/grasp)."""
         enc = self.mpgnet.encode(obs)
         maps = self.mpgnet.maps_from(enc, self.usable_primitives)
-        return self.masked_flat_q(maps, enc.region).argmax(dim=1)
+        return self.masked_flat_q(maps, enc).argmax(dim=1)
 
     # ---------------------------------------------------------- decisions
     def decide(self, obs: PyTorchObs, primitive: str | None = None) -> list[Decision]:
@@ -165,7 +168,7 @@ class MPGQNetwork(QNetwork):
             """``p``'s ``(R, H, W)`` Q maps, -inf where it may not act (each branch run once)."""
             if p not in maps:
                 maps[p] = self.mpgnet.maps_from(enc, (p,))[p][0]
-                actable[p] = self._actable(maps[p], p, enc.region[0][None])
+                actable[p] = self._actable(maps[p], p, enc.region_of(p)[0][None])
             return actable[p]
 
         if primitive is not None:
@@ -180,7 +183,7 @@ class MPGQNetwork(QNetwork):
         value = float(q.flatten()[flat])
         rot, rest = divmod(flat, q.shape[1] * q.shape[2])
         row, col = divmod(rest, q.shape[2])
-        grasp_score = float(region_max(maps["grasp"][None], enc.region)[0]) if "grasp" in maps else float("nan")
+        grasp_score = float(region_max(maps["grasp"][None], enc.region_of("grasp"))[0]) if "grasp" in maps else float("nan")
         action = encode_action(self.action_primitives, primitive, rot, row, col, size=self.net_config.heightmap_size)
         return Decision(action, primitive, rot, row, col, value, grasp_score, maps)
 

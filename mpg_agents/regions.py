@@ -1,13 +1,17 @@
-"""The rough target region (paper, Training Details): where move and grasp may act.
+"""Where move and grasp may act: the rough target region (paper, Training Details).
 
-Move and grasp Q maps are restricted to the axis-aligned bounding rectangle of the target mask;
-:func:`region_max` is the best Q inside it (the grasp score compared with Q*_g).
+Move and grasp Q maps are restricted to the axis-aligned bounding rectangle of the target mask
+(:func:`target_region`). A grasp may further be kept on the target itself
+(:func:`target_pixels`: the visible target pixels, dilated by a margin): inside the rectangle
+of an L-shaped or partly covered target lie other objects, and a grasp there lifts the wrong
+one. :func:`region_max` is the best Q inside a region (the grasp score compared with Q*_g).
 """
 
 from __future__ import annotations
 
 import torch
 from torch import Tensor
+from torch.nn import functional as F
 
 
 def target_region(mask: Tensor) -> Tensor:
@@ -32,6 +36,23 @@ def target_region(mask: Tensor) -> Tensor:
         return inside | empty
 
     return span(rows, ar_h, h)[:, :, None] & span(cols, ar_w, w)[:, None, :]
+
+
+def target_pixels(mask: Tensor, margin: int) -> Tensor:
+    """The target's visible pixels grown by ``margin`` pixels (square neighbourhood), ``(B, H, W)`` bool.
+
+    An empty mask gives an all-true region, as :func:`target_region` does.
+    """
+    if margin < 0:
+        raise ValueError(f"margin must be >= 0 pixels, got {margin}")
+    if mask.dim() == 4:
+        mask = mask[:, 0]
+    mask = mask > 0.5 if mask.dtype != torch.bool else mask
+    grown = mask
+    if margin:
+        grown = F.max_pool2d(mask[:, None].float(), 2 * margin + 1, stride=1, padding=margin)[:, 0] > 0.5
+    empty = ~mask.flatten(1).any(dim=1)
+    return grown | empty[:, None, None]
 
 
 def region_max(q: Tensor, region: Tensor) -> Tensor:

@@ -36,6 +36,9 @@ class TrainingStage:
         uses_discriminator: the envs score states with the calibrated stage's grasp net.
         push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
         iterations: default number of training iterations.
+        branch_init: ``((to, from), ...)``: at the stage's start, branch ``to`` is copied from
+            branch ``from`` of the starting weights, e.g. ``(("move", "grasp"),)``: a move is a
+            grasp of the occluder, carried away, so the move net starts as the grasp net.
     """
 
     name: str
@@ -48,8 +51,16 @@ class TrainingStage:
     uses_discriminator: bool = False
     push_budget: int | None = None
     iterations: int = 1000
+    branch_init: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
+        pairs = tuple(tuple(pair) for pair in self.branch_init)
+        for pair in pairs:
+            if len(pair) != 2 or pair[0] == pair[1]:
+                raise ValueError(f"stage {self.name}: branch_init takes (to, from) pairs of two primitives, got {pair}")
+            for primitive in pair:
+                check_primitives((primitive,))
+        object.__setattr__(self, "branch_init", pairs)
         if self.trainable is not None:
             object.__setattr__(self, "trainable", check_primitives(self.trainable))
         if self.objects is not None:
@@ -72,6 +83,7 @@ class TrainingStage:
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
+        data["branch_init"] = [list(pair) for pair in self.branch_init]
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
     @classmethod

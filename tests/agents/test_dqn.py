@@ -56,7 +56,7 @@ def test_td_targets_are_double_dqn(model):
     with torch.no_grad():
         enc = q_net.mpgnet.encode(data.next_observations)
         maps = q_net.mpgnet.maps_from(enc, q_net.action_primitives)
-        best = q_net.masked_flat_q(maps, enc.region).argmax(dim=1)  # online net chooses
+        best = q_net.masked_flat_q(maps, enc).argmax(dim=1)  # online net chooses
         evaluated = q_target(data.next_observations).gather(1, best[:, None])  # target net evaluates
     expected = data.rewards + (1 - data.dones) * 0.5 * evaluated
     assert torch.allclose(y, expected, atol=1e-4)

@@ -40,6 +40,16 @@ def test_tiny_pipeline_runs_stages_one_to_five(tmp_path):
     assert again["Stage5"] == summary["Stage5"]
 
 
+def test_branch_init_starts_the_move_net_as_the_grasp_net(tmp_path):
+    stage = with_overrides(TRAINING_STAGES, {"Stage3": {"branch_init": [["move", "grasp"]], "objects": [2, 2]}})[2]
+    learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
+    move, grasp = learner.net.branches["move"].state_dict(), learner.net.branches["grasp"].state_dict()
+    assert move.keys() == grasp.keys() and all(torch.equal(move[k], grasp[k]) for k in move)
+    target_move = learner.target.branches["move"].state_dict()
+    assert all(torch.equal(target_move[k], move[k]) for k in move)
+    learner.env.close()
+
+
 def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
     cfg = TrainConfig(steps=5, **TINY)
     learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
@@ -144,3 +154,16 @@ def test_stage4_grasps_after_five_pushes(tmp_path):
     assert learner.env.unwrapped.action_space.decode(choice.action).primitive == "grasp"
     with pytest.raises(ValueError, match="not allowed"):
         learner.policy.decide(obs, "move")
+
+
+@pytest.mark.parametrize("name", ["stage12_train.toml", "mpgnet_train.toml"])
+def test_shipped_training_configs_load(name):
+    from importlib.resources import files
+
+    from mpg_agents.cli import training_settings
+    from mpg_agents.mpgnet_config import MPGNetConfig
+
+    path = files("mpg_agents") / "checkpoints" / name
+    base, stages = training_settings(str(path))
+    assert base.variant == "small" and [s.name for s in stages] == [s.name for s in TRAINING_STAGES]
+    MPGNetConfig.for_variant(base.variant, **base.net_config)  # the net it describes builds

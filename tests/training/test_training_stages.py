@@ -50,3 +50,14 @@ def test_lookup_selection_and_overrides():
         with_overrides(TRAINING_STAGES, {"Stage3": {"objetcs": [2, 3]}})
     with pytest.raises(ValueError, match="coordination"):
         TrainingStage("s", "MPG-Stage5-v0", coordination="vote")
+
+
+def test_branch_init_pairs_are_checked_and_round_trip():
+    stage = TrainingStage("s", "MPG-Stage3-v0", branch_init=[["move", "grasp"]])
+    assert stage.branch_init == (("move", "grasp"),)
+    assert TrainingStage.from_dict(stage.to_dict()) == stage
+    changed = with_overrides(TRAINING_STAGES, {"Stage3": {"branch_init": [["move", "grasp"]]}})
+    assert changed[2].branch_init == (("move", "grasp"),) and TRAINING_STAGES[2].branch_init == ()
+    for bad in ([["move", "move"]], [["move", "lift"]], [["move"]]):
+        with pytest.raises(ValueError):
+            TrainingStage("s", "MPG-Stage3-v0", branch_init=bad)

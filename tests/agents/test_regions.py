@@ -1,0 +1,77 @@
+"""Where move and grasp may act: hand-checked cases of the region functions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from mpg_agents.mpgnet import MPGNet
+from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.regions import region_max, target_pixels, target_region
+
+from .conftest import calibrate_bn
+
+
+def _mask(*pixels: tuple[int, int], size: int = 8) -> torch.Tensor:
+    m = torch.zeros((1, size, size), dtype=torch.uint8)
+    for r, c in pixels:
+        m[0, r, c] = 1
+    return m
+
+
+def test_target_region_is_the_bounding_rectangle():
+    region = target_region(_mask((2, 1), (4, 3)))[0]
+    expected = torch.zeros((8, 8), dtype=torch.bool)
+    expected[2:5, 1:4] = True
+    assert torch.equal(region, expected)
+
+
+def test_target_pixels_grow_by_the_margin_only():
+    # An L of three pixels: its rectangle has a fourth corner (2, 3) that is not the target.
+    mask = _mask((2, 1), (3, 1), (3, 3), (3, 2))
+    assert torch.equal(target_pixels(mask, 0)[0], mask[0].bool())
+    assert not target_pixels(mask, 0)[0, 2, 3]
+    grown = target_pixels(mask, 1)[0]
+    expected = torch.zeros((8, 8), dtype=torch.bool)
+    expected[1:5, 0:3] = True  # around (2,1) and (3,1)
+    expected[2:5, 1:5] = True  # around (3,2) and (3,3)
+    assert torch.equal(grown, expected)
+    # Growth stops at the image border (no wrap-around).
+    corner = target_pixels(_mask((0, 0)), 2)[0]
+    assert corner[:3, :3].all() and corner.sum() == 9
+
+
+def test_empty_mask_leaves_everything_actable():
+    empty = _mask()
+    assert target_pixels(empty, 3).all() and target_region(empty).all()
+    with pytest.raises(ValueError, match="margin"):
+        target_pixels(empty, -1)
+
+
+def test_region_max_ignores_pixels_outside():
+    q = torch.zeros((1, 2, 8, 8))
+    q[0, 1, 0, 0] = 9.0  # outside
+    q[0, 0, 3, 2] = 0.5  # inside
+    assert float(region_max(q, target_pixels(_mask((3, 2)), 0))[0]) == 0.5
+
+
+def test_grasp_region_target_zeroes_grasp_off_the_target(scene):
+    mask = np.zeros((224, 224), np.uint8)
+    mask[100:140, 90:100] = 1  # an L: its rectangle's far corner is not the target
+    mask[130:140, 90:130] = 1
+    scene = dict(scene, mask=mask)
+    torch.manual_seed(0)
+    net = MPGNet(MPGNetConfig.small(grasp_region="target", target_margin_px=1))
+    calibrate_bn(net, scene)
+    with torch.inference_mode():
+        maps = net(scene)
+    allowed = target_pixels(torch.as_tensor(scene["mask"])[None], 1)[0].numpy()
+    rectangle = target_region(torch.as_tensor(scene["mask"])[None])[0].numpy()
+    assert (rectangle & ~allowed).any(), "the scene's target fills its rectangle; the test would be vacuous"
+    grasp, move = maps["grasp"][0].numpy(), maps["move"][0].numpy()
+    assert np.all(grasp[:, ~allowed] == 0) and np.count_nonzero(grasp[:, allowed]) > 0.9 * grasp[:, allowed].size
+    # Move keeps the paper's rectangle: it acts on what covers the target.
+    assert np.count_nonzero(move[:, rectangle & ~allowed]) > 0
+    with pytest.raises(ValueError, match="grasp_region"):
+        MPGNetConfig.small(grasp_region="disc")
