@@ -92,6 +92,10 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--stages", help="pipeline: which stages, by name or position, e.g. 1,2")
     parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: only Stage V, from scratch")
     parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")
+    parser.add_argument(
+        "--baseline", choices=("grasp-only", "to-vpg", "push-grasp"),
+        help="pipeline: train a learned baseline of Table I at the same total iterations instead of MPGNet",
+    )
     args = parser.parse_args(argv)
     from mpg_envs.threads import set_torch_threads
 
@@ -114,6 +118,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
                 stages = ts.without_multistage(stages)
             if args.no_alternating:
                 stages = ts.without_alternation(stages)
+            if args.baseline:
+                stages = ts.BASELINES[args.baseline](stages)
             summary = run_pipeline(PipelineConfig(base=base, stages=stages), args.out, init=args.init)
             print(json.dumps(summary, indent=1))
             return 0
@@ -182,14 +188,25 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
 # ----------------------------------------------------------------------------- plot
 def plot_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="mpg-plot", description="Learning curves of a run (or pipeline) directory to PNG.")
-    parser.add_argument("run", help="a run directory (holding progress.csv) or a pipeline directory (Stage*/progress.csv)")
-    parser.add_argument("--out", help="PNG path (default: RUN/curves.png)")
+    parser.add_argument("run", nargs="+", help="a run directory (holding progress.csv) or a pipeline directory (Stage*/progress.csv); "
+                        "several with --stage: that stage of each on one axis")
+    parser.add_argument("--out", help="PNG path (default: RUN/curves.png; required with several runs)")
     parser.add_argument("--window", type=int, default=200, help="iterations per grasp-success point (paper: 200)")
+    parser.add_argument("--stage", help="compare this stage (e.g. Stage5) of the runs given")
+    parser.add_argument("--labels", help="comma-separated legend labels, one per run (default: the folder names)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.plotting import plot_run
+        from mpg_agents.plotting import plot_compare, plot_run
 
-        out = plot_run(args.run, args.out, args.window)
+        if args.stage or len(args.run) > 1:
+            if not args.stage or not args.out:
+                raise ValueError("comparing runs needs --stage and --out")
+            labels = args.labels.split(",") if args.labels else [Path(r).name for r in args.run]
+            if len(labels) != len(args.run):
+                raise ValueError(f"--labels names {len(labels)} runs, {len(args.run)} given")
+            out = plot_compare(list(zip(labels, args.run)), args.stage, args.out, args.window)
+        else:
+            out = plot_run(args.run[0], args.out, args.window)
     except (FileNotFoundError, ValueError) as exc:
         return _fail(exc)
     print(f"learning curves written to {out}")

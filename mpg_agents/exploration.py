@@ -52,6 +52,8 @@ class Explorer:
         random_primitive: explore the primitive too (the ``max_q`` coordination).
         grasp_on_target: explore grasps on visible target pixels only (for a network whose
             ``grasp_region`` is ``"target"``: it may only grasp there greedily either).
+        usable: the primitives a random primitive is drawn from (default: ``primitives``; a
+            network without a move branch never explores a move).
     """
 
     def __init__(
@@ -61,8 +63,12 @@ class Explorer:
         heuristic_after_failed_grasps: int = 2,
         random_primitive: bool = False,
         grasp_on_target: bool = False,
+        usable: Sequence[str] | None = None,
     ) -> None:
         self.primitives = tuple(primitives)
+        self.usable = tuple(usable) if usable is not None else self.primitives
+        if not set(self.usable) <= set(self.primitives):
+            raise ValueError(f"usable primitives {self.usable} must be among the env's {self.primitives}")
         self.rng = rng
         self.heuristic_after_failed_grasps = heuristic_after_failed_grasps
         self.random_primitive = random_primitive
@@ -78,7 +84,7 @@ class Explorer:
             return Choice(encode_action(self.primitives, "grasp", rot, row, col), "grasp", "heuristic")
         if self.rng.random() < epsilon:
             if self.random_primitive:
-                primitive = self.primitives[int(self.rng.integers(len(self.primitives)))]
+                primitive = self.usable[int(self.rng.integers(len(self.usable)))]
             rot, row, col = self.explore_pixel(obs, primitive)
             return Choice(encode_action(self.primitives, primitive, rot, row, col), primitive, "explore")
         return Choice(int(decision.action), primitive, "greedy", float(decision.q_value))

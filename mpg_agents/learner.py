@@ -147,18 +147,19 @@ class Learner:
         self.env = self._make_env(self._objects_now(0))
         env = self.env.unwrapped
         self.primitives: tuple[str, ...] = tuple(env.primitives)
-        self.trainable = self.stage.trainable if self.stage.trainable is not None else self.primitives
         self.policy = MPGNetPolicy(
             env.observation_space,
             env.action_space,
             lambda _: config.learning_rate,
             variant=config.variant,
-            branches=PRIMITIVES,
+            branches=self.stage.branches or PRIMITIVES,
             coordination=self.stage.coordination,
             q_star=config.q_star,
             net_config=config.net_config,
             optimizer_kwargs={"weight_decay": config.weight_decay, "betas": tuple(config.betas)},
         )
+        # What the agent acts with: the env's primitives it has a branch for.
+        self.trainable = self.stage.trainable if self.stage.trainable is not None else self.policy.usable_primitives
         self.net = self.policy.q_net.mpgnet
         self.target = self.policy.q_net_target.mpgnet
         self.optimizer = self.policy.optimizer
@@ -177,7 +178,7 @@ class Learner:
         self.rng = np.random.default_rng(config.seed)
         self.explorer = Explorer(
             self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q",
-            grasp_on_target=self.policy.net_config.grasp_region == "target",
+            grasp_on_target=self.policy.net_config.grasp_region == "target", usable=self.policy.usable_primitives,
         )
         self.counters = Counters()
         self._stop = False

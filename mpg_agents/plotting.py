@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -103,6 +104,39 @@ def plot_run(run: str | Path, out: str | Path | None = None, window: int = 200) 
             ax.legend(fontsize=8)
     fig.tight_layout()
     out = Path(out) if out is not None else run / "curves.png"
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return out
+
+
+def plot_compare(runs: Sequence[tuple[str, str | Path]], stage: str, out: str | Path, window: int = 200) -> Path:
+    """One stage's target grasp success per ``window`` iterations for several runs, on one axis
+    (the paper's ablation figure: MPGNet's Stage V beside its ablations at equal iterations).
+
+    ``runs`` are ``(label, pipeline or run directory)``; a pipeline contributes ``stage``'s
+    folder, a single run its own ``progress.csv``.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not runs:
+        raise ValueError("plot_compare needs at least one run")
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for label, run in runs:
+        run = Path(run)
+        path = run / stage / "progress.csv" if (run / stage / "progress.csv").is_file() else run / "progress.csv"
+        if not path.is_file():
+            raise FileNotFoundError(f"no {stage}/progress.csv or progress.csv in {run}")
+        x, y = window_success(read_progress(path), window)
+        ax.plot(x, y, marker="o", label=label)
+    ax.set(title=f"{stage}: target grasp success per {window} iterations", xlabel="iteration", ylabel="success rate",
+           ylim=(-0.02, 1.02))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    out = Path(out)
     fig.savefig(out, dpi=100)
     plt.close(fig)
     return out

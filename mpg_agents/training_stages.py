@@ -13,7 +13,7 @@ table holds only how the agent trains on them.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from mpg_agents.coordination import check_coordination
 from mpg_envs.actions import check_primitives
@@ -36,6 +36,8 @@ class TrainingStage:
         uses_discriminator: the envs score states with the calibrated stage's grasp net.
         push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
         iterations: default number of training iterations.
+        branches: the nets the agent has and acts with (``None``: all three); a baseline
+            without move is ``("push", "grasp")``. Its checkpoint holds only these.
         branch_init: ``((to, from), ...)``: at the stage's start, branch ``to`` is copied from
             branch ``from`` of the starting weights, e.g. ``(("move", "grasp"),)``: a move is a
             grasp of the occluder, carried away, so the move net starts as the grasp net.
@@ -52,8 +54,14 @@ class TrainingStage:
     push_budget: int | None = None
     iterations: int = 1000
     branch_init: tuple[tuple[str, str], ...] = ()
+    branches: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
+        if self.branches is not None:
+            object.__setattr__(self, "branches", check_primitives(self.branches))
+            outside = sorted(set(self.trainable or ()) - set(self.branches))
+            if outside:
+                raise ValueError(f"stage {self.name}: trains {outside}, which are not among its branches {self.branches}")
         pairs = tuple(tuple(pair) for pair in self.branch_init)
         for pair in pairs:
             if len(pair) != 2 or pair[0] == pair[1]:
@@ -138,6 +146,49 @@ def without_alternation(stages: Sequence[TrainingStage]) -> tuple[TrainingStage,
     """Ablation "w/o alternating training": stages that alternate train all their nets at once
     and choose actions by the largest Q."""
     return tuple(replace(s, alternate_every=0, coordination="max_q") if s.alternate_every else s for s in stages)
+
+
+def at_budget(stages: Sequence[TrainingStage], iterations: int) -> tuple[TrainingStage, ...]:
+    """``stages`` with the last one's iterations set so that all together do ``iterations``."""
+    before = sum(s.iterations for s in stages[:-1])
+    if iterations <= before:
+        raise ValueError(f"a budget of {iterations} iterations leaves none for {stages[-1].name} (the others take {before})")
+    return (*stages[:-1], replace(stages[-1], iterations=iterations - before))
+
+
+def grasp_only_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter,
+    for the whole budget of ``stages``."""
+    grasp = tuple(s for s in stages if s.trainable == ("grasp",))
+    last = replace(stages[-1], trainable=("grasp",), branches=("grasp",), alternate_every=0, branch_init=())
+    return at_budget((*grasp, last), sum(s.iterations for s in stages))
+
+
+def target_vpg_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Baseline "Target-Oriented VPG": after the grasp stages, push and grasp nets trained
+    together in the joint stage's clutter, the action by the larger Q (no move, no Q*_g rule),
+    for the whole budget of ``stages``."""
+    grasp = tuple(s for s in stages if s.trainable == ("grasp",))
+    last = replace(stages[-1], trainable=("push", "grasp"), branches=("push", "grasp"), alternate_every=0,
+                   coordination="max_q", branch_init=())
+    return at_budget((*grasp, last), sum(s.iterations for s in stages))
+
+
+def push_grasp_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Baseline "Efficient Push-Grasping" style: the grasp stages and Q*_g, the push stage, then
+    push and grasp trained in turn in the joint stage's clutter, grasping when grasp Q >= Q*_g
+    (no move), for the whole budget of ``stages``."""
+    kept = tuple(s for s in stages[:-1] if s.trainable in (("grasp",), ("push",)))
+    last = replace(stages[-1], trainable=("push", "grasp"), branches=("push", "grasp"), branch_init=())
+    return at_budget((*kept, last), sum(s.iterations for s in stages))
+
+
+BASELINES: dict[str, Callable[[Sequence[TrainingStage]], tuple[TrainingStage, ...]]] = {
+    "grasp-only": grasp_only_baseline,
+    "to-vpg": target_vpg_baseline,
+    "push-grasp": push_grasp_baseline,
+}
+"""The learned baselines of Table I, each a change of the stage table at MPGNet's budget."""
 
 
 def with_overrides(stages: Sequence[TrainingStage], overrides: Mapping[str, Mapping[str, Any]]) -> tuple[TrainingStage, ...]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from mpg_agents.exploration import PUSH_REACH_PX, Explorer, linear_epsilon
 from mpg_agents.policy import Decision
@@ -59,3 +60,12 @@ def test_greedy_and_heuristic_choices():
     forced = explorer.choose(obs, _decision("grasp"), epsilon=0.0, failed_grasps_in_a_row=2)
     a = decode_action(PRIMS, forced.action)
     assert forced.how == "heuristic" and obs["mask"][a.row, a.col] == 1
+
+
+def test_a_random_primitive_is_one_the_network_has():
+    obs = _obs()
+    explorer = Explorer(PRIMS, np.random.default_rng(0), random_primitive=True, usable=("push", "grasp"))
+    drawn = {explorer.choose(obs, _decision("grasp"), epsilon=1.0, failed_grasps_in_a_row=0).primitive for _ in range(100)}
+    assert drawn == {"push", "grasp"}
+    with pytest.raises(ValueError, match="usable"):
+        Explorer(("grasp",), np.random.default_rng(0), usable=("push",))

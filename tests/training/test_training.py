@@ -50,6 +50,24 @@ def test_branch_init_starts_the_move_net_as_the_grasp_net(tmp_path):
     learner.env.close()
 
 
+def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
+    from mpg_agents.baselines import make_policy
+    from mpg_agents.training_stages import target_vpg_baseline
+    from mpg_agents.weights import read_checkpoint_header
+
+    stages = with_overrides(TRAINING_STAGES, {s.name: {"iterations": 2} for s in TRAINING_STAGES})
+    table = target_vpg_baseline(stages)
+    summary = run_pipeline(PipelineConfig(base=TrainConfig(**TINY), stages=table), tmp_path, log=lambda s: None)
+    final = summary["final_weights"]
+    assert read_checkpoint_header(final)["primitives"] == ["push", "grasp"]
+    import gymnasium as gym
+
+    env = gym.make("MPG-Occluded-v0", num_objects=6)
+    policy = make_policy(final, env)
+    assert policy.primitives == ("push", "grasp") and policy.name.endswith("(push+grasp net)")
+    env.close()
+
+
 def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
     cfg = TrainConfig(steps=5, **TINY)
     learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
@@ -141,6 +159,15 @@ def test_mpg_plot_draws_curves(tmp_path):
     assert plot_main([str(tmp_path), "--window", "2"]) == 0
     png = tmp_path / "curves.png"
     assert png.is_file() and png.read_bytes()[:4] == b"\x89PNG"
+    # Several runs, one stage each, on one axis (the ablation figure).
+    pipeline = tmp_path / "pipe"
+    (pipeline / "Stage1").mkdir(parents=True)
+    (pipeline / "Stage1" / "progress.csv").write_bytes((tmp_path / "progress.csv").read_bytes())
+    both = tmp_path / "both.png"
+    argv = [str(tmp_path), str(pipeline), "--stage", "Stage1", "--window", "2", "--out", str(both)]
+    assert plot_main(argv + ["--labels", "run,pipeline"]) == 0 and both.read_bytes()[:4] == b"\x89PNG"
+    assert plot_main(argv[:-2]) == 2  # comparing needs --out
+    assert plot_main(argv + ["--labels", "one"]) == 2
 
 
 def test_stage4_grasps_after_five_pushes(tmp_path):

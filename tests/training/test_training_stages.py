@@ -61,3 +61,25 @@ def test_branch_init_pairs_are_checked_and_round_trip():
     for bad in ([["move", "move"]], [["move", "lift"]], [["move"]]):
         with pytest.raises(ValueError):
             TrainingStage("s", "MPG-Stage3-v0", branch_init=bad)
+
+
+def test_learned_baselines_are_table_changes_at_the_same_budget():
+    from mpg_agents.training_stages import BASELINES, at_budget
+
+    total = sum(s.iterations for s in TRAINING_STAGES)
+    for name, make in BASELINES.items():
+        table = make(TRAINING_STAGES)
+        assert sum(s.iterations for s in table) == total, name
+        assert "move" not in (table[-1].branches or ()) and table[-1].env_id == TRAINING_STAGES[-1].env_id
+        assert all(s.uses_discriminator or s.trainable == ("grasp",) for s in table)
+    grasp_only = BASELINES["grasp-only"](TRAINING_STAGES)
+    assert [s.name for s in grasp_only] == ["Stage1", "Stage2", "Stage5"] and grasp_only[-1].branches == ("grasp",)
+    vpg = BASELINES["to-vpg"](TRAINING_STAGES)
+    assert vpg[-1].coordination == "max_q" and vpg[-1].alternate_every == 0 and vpg[-1].trainable == ("push", "grasp")
+    epg = BASELINES["push-grasp"](TRAINING_STAGES)
+    assert [s.name for s in epg] == ["Stage1", "Stage2", "Stage4", "Stage5"]
+    assert epg[-1].coordination == "workflow" and epg[-1].alternate_every > 0
+    with pytest.raises(ValueError, match="budget"):
+        at_budget(TRAINING_STAGES, 10)
+    with pytest.raises(ValueError, match="branches"):
+        TrainingStage("s", "MPG-Stage5-v0", trainable=("move",), branches=("push", "grasp"))
