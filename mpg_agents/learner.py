@@ -68,6 +68,7 @@ class TrainConfig:
     target_update_every: int = 100
     grasp_symmetry: bool = True
     max_grad_norm: float | None = None  # the paper clips nothing (see td_step.TDStepConfig)
+    q_bounds: tuple[float, float] | None = None  # clamp TD targets to the feasible returns (see td_step.TDStepConfig)
     # Training aids (paper, Simulation Experiments).
     heuristic_after_failed_grasps: int = 2
     q_star: float = float("nan")
@@ -82,18 +83,22 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         data["betas"] = list(self.betas)
+        data["q_bounds"] = list(self.q_bounds) if self.q_bounds is not None else None
         return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "TrainConfig":
         check_fields(cls, data, "training")
         data = dict(data)
-        if "betas" in data:
-            data["betas"] = tuple(data["betas"])
+        for key in ("betas", "q_bounds"):
+            if data.get(key) is not None:
+                data[key] = tuple(data[key])
         return cls(**data)
 
     def step_config(self) -> TDStepConfig:
-        return TDStepConfig(gamma=self.gamma, grasp_symmetry=self.grasp_symmetry, max_grad_norm=self.max_grad_norm)
+        return TDStepConfig(
+            gamma=self.gamma, grasp_symmetry=self.grasp_symmetry, max_grad_norm=self.max_grad_norm, target_bounds=self.q_bounds
+        )
 
 
 @dataclass

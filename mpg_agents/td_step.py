@@ -4,7 +4,7 @@ On a sampled batch (paper, Sections III-C and Training Details):
 
 1. double-DQN target ``y = r + gamma * (1 - done) * Q_target(s', argmax_a Q(s', a))``
    (:func:`td_targets`: the online net picks ``a'`` among the allowed actions, the target net
-   evaluates it);
+   evaluates it), optionally clamped to the returns the rewards allow (:attr:`TDStepConfig.target_bounds`);
 2. transitions whose primitive is frozen (not in ``active``) are left out of the loss;
 3. grasp symmetry: a parallel-jaw grasp at rotation ``r`` is the grasp at ``r + 8``, so each
    grasp sample also trains the turned rotation with the same target;
@@ -38,13 +38,24 @@ class TDStepConfig:
             paper and ``AGENT.md`` name no clipping, so none is the default; SB3's ``DQN``
             clips at 10 (its ``max_grad_norm`` default), which this project's SB3 path used
             before both paths shared this step.
+        target_bounds: ``(low, high)``: clamp the TD targets to this range; ``None`` = no
+            clamp (the paper). With rewards in ``[r_min, r_max]`` every return lies in
+            ``[r_min, r_max] / (1 - gamma)`` (``[-1, 2]`` for MPG's rewards at gamma 0.5); a
+            target outside it is the max-over-800k-actions bias of a young network
+            bootstrapping from itself, which inflated Q*_g to 6.3 after Stage I.
     """
 
     gamma: float = 0.5
     grasp_symmetry: bool = True
     max_grad_norm: float | None = None
+    target_bounds: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.target_bounds is not None:
+            low, high = (float(v) for v in self.target_bounds)
+            if not low < high:
+                raise ValueError(f"target_bounds must be (low, high) with low < high, got {self.target_bounds}")
+            object.__setattr__(self, "target_bounds", (low, high))
         if self.max_grad_norm is not None and not self.max_grad_norm > 0:
             raise ValueError(f"max_grad_norm must be positive or None, got {self.max_grad_norm}")
 
@@ -68,6 +79,7 @@ def td_targets(
     rewards: Tensor,
     dones: Tensor,
     gamma: float | Tensor,
+    bounds: tuple[float, float] | None = None,
 ) -> Tensor:
     """Double-DQN targets ``(B, 1)``: the online net picks ``a'``, the target net evaluates it.
 
@@ -83,7 +95,8 @@ def td_targets(
         finally:
             q_net.set_training_mode(was_training)
         next_q = q_net_target.q_values_at(next_observations, next_actions)
-        return rewards.reshape(-1, 1) + (1.0 - dones.reshape(-1, 1)) * gamma * next_q
+        targets = rewards.reshape(-1, 1) + (1.0 - dones.reshape(-1, 1)) * gamma * next_q
+        return targets if bounds is None else targets.clamp(*bounds)
 
 
 def td_step(
@@ -111,7 +124,7 @@ def td_step(
     actions = batch.actions.reshape(-1).long()
     discounts = getattr(batch, "discounts", None)
     gamma = discounts if discounts is not None else config.gamma
-    targets = td_targets(q_net, q_net_target, batch.next_observations, batch.rewards, batch.dones, gamma)
+    targets = td_targets(q_net, q_net_target, batch.next_observations, batch.rewards, batch.dones, gamma, config.target_bounds)
     prim, rot, _, _ = q_net.split_actions(actions)
     surprise = np.zeros(len(actions))
     keep = [i for i, p in enumerate(prim.tolist()) if active is None or primitives[p] in active]

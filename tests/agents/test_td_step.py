@@ -85,3 +85,18 @@ def test_priorities_written_when_a_buffer_is_given(setup):
     batch = replay.sample(2)
     result = td_step(policy.q_net, policy.q_net_target, policy.optimizer, batch, TDStepConfig(grasp_symmetry=False), replay=replay)
     np.testing.assert_allclose(replay.priorities[batch.indices, 0], result.surprise + replay.priority_eps, rtol=1e-6)
+
+
+def test_target_bounds_clamp_the_td_targets(setup):
+    from mpg_agents.td_step import td_targets
+
+    policy, replay = setup
+    batch = replay.sample(3)
+    rewards = torch.tensor([5.0, -3.0, 0.5])  # outside, outside, inside [-1, 2]
+    free = td_targets(policy.q_net, policy.q_net_target, batch.next_observations, rewards, torch.ones(3), 0.5)
+    clamped = td_targets(policy.q_net, policy.q_net_target, batch.next_observations, rewards, torch.ones(3), 0.5, (-1.0, 2.0))
+    assert free.reshape(-1).tolist() == [5.0, -3.0, 0.5]  # done: the target is the reward
+    assert clamped.reshape(-1).tolist() == [2.0, -1.0, 0.5]
+    assert TDStepConfig(target_bounds=[-1, 2]).target_bounds == (-1.0, 2.0)
+    with pytest.raises(ValueError, match="target_bounds"):
+        TDStepConfig(target_bounds=(2.0, -1.0))
