@@ -12,6 +12,10 @@ process is asked to stop (SIGINT/SIGTERM) (:mod:`mpg_agents.run_state`): a kille
 with the same counters, replay, weights, optimiser and random generators. An episode
 interrupted by the kill is started afresh (its scene comes from the episode counter, so it is
 the same scene). The log (:mod:`mpg_agents.train_log`) goes to TensorBoard and ``progress.csv``.
+
+Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
+fresh run first fills the replay with the oracle's transitions
+(:mod:`mpg_agents.demonstrations`); they are no iterations or episodes of the run.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.demonstrations import collect_demonstrations
 from mpg_agents.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.grasp_scorer import GraspScorer
 from mpg_agents.policy import MPGNetPolicy
@@ -72,6 +77,8 @@ class TrainConfig:
     # Training aids (paper, Simulation Experiments).
     heuristic_after_failed_grasps: int = 2
     q_star: float = float("nan")
+    # Not the paper's (pure RL): oracle episodes whose transitions seed the replay of a fresh run (0: none).
+    demonstration_episodes: int = 0
     # The fixed Stage II grasp net that scores states for the move/push rewards.
     discriminator: str | None = None
     # Bookkeeping.
@@ -188,6 +195,7 @@ class Learner:
         self.counters = Counters()
         self._stop = False
         self._log: TrainingLog | None = None
+        self.resumed = False
         self._resume()
 
     # ----------------------------------------------------------------- setup
@@ -219,6 +227,7 @@ class Learner:
                 f"{self.out} holds a run of {saved_env} ({saved['variant']}); "
                 f"asked for {self.stage.env_id} ({self.config.variant}): use another --out"
             )
+        self.resumed = True
         counters, saved = load_run_state(
             folder, online=self.net, target=self.target, optimizer=self.optimizer, replay=self.replay, rng=self.rng
         )
@@ -240,6 +249,8 @@ class Learner:
         """Train until the configured iterations are done; returns the final summary."""
         from tqdm import tqdm
 
+        if self.config.demonstration_episodes and not self.resumed and self.counters.iteration == 0 and self.replay.size() == 0:
+            self.add_demonstrations()
         handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)
         try:
@@ -258,6 +269,17 @@ class Learner:
             for s, h in handlers.items():
                 signal.signal(s, h)
         return {"iteration": self.counters.iteration, "episodes": self.counters.episode, "q_star": self.calibrated_q_star()}
+
+    def add_demonstrations(self) -> None:
+        """Fill the replay with the oracle's transitions on this stage's env and save the state
+        (a resumed run keeps them and collects none). Every primitive the net has a branch for
+        is kept, frozen ones too (:func:`td_step` leaves them out); the counters stay at 0."""
+        stats = collect_demonstrations(
+            self.env, self.config.demonstration_episodes, self.config.seed * 1_000_003 + 500_000,  # not a training episode's seed
+            self.policy.branches, self.store,
+        )
+        self.log(f"{self.stage.name}: {stats.summary()}")
+        self.save_state()
 
     def _request_stop(self, signum, frame) -> None:
         self._stop = True
@@ -291,14 +313,7 @@ class Learner:
         t_decide = time.perf_counter() - start
         next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
         t_act = time.perf_counter() - start - t_decide
-        self.replay.add(
-            {k: v[None] for k, v in obs.items()},
-            {k: v[None] for k, v in next_obs.items()},
-            np.array([[choice.action]]),
-            np.array([reward], dtype=np.float32),
-            np.array([terminated], dtype=np.float32),
-            [{}],
-        )
+        self.store(obs, next_obs, choice.action, float(reward), bool(terminated))
         loss = self.learn()
         c.iteration += 1
         c.episode_motions += 1
@@ -324,6 +339,17 @@ class Learner:
             c.episode += 1
             return self._reset_episode()
         return next_obs
+
+    def store(self, obs: dict[str, np.ndarray], next_obs: dict[str, np.ndarray], action: int, reward: float, terminated: bool) -> None:
+        """Add one transition to the replay (batch of one; a truncation is no terminal state)."""
+        self.replay.add(
+            {k: v[None] for k, v in obs.items()},
+            {k: v[None] for k, v in next_obs.items()},
+            np.array([[action]]),
+            np.array([reward], dtype=np.float32),
+            np.array([terminated], dtype=np.float32),
+            [{}],
+        )
 
     def act(self, obs: dict[str, np.ndarray]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""
