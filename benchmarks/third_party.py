@@ -45,21 +45,24 @@ BASELINES = ("random", "grasp-only", "shipped")
 
 
 # ----------------------------------------------------------------------------- envs
-def make_wrapped_env(cell: int, size: int) -> gym.Env:
-    """``ImageObservation(GridAction(MPG-Stage2-v0))`` on one thread (picklable for workers)."""
+def make_wrapped_env(cell: int, size: int, action: str = "grid") -> gym.Env:
+    """``ImageObservation(GridAction(MPG-Stage2-v0))`` (or ``ContinuousAction`` for
+    ``action="continuous"``) on one thread (picklable for workers)."""
     from mpg_envs.config import EnvConfig
     from mpg_envs.threads import worker_init
-    from mpg_envs.wrappers import GridAction, ImageObservation
+    from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
 
     worker_init()  # one thread: the workers' parallelism is their number
-    return ImageObservation(GridAction(gym.make(ENV_ID, config=EnvConfig(raycast_threads=1)), cell=cell), size=size)
+    env = gym.make(ENV_ID, config=EnvConfig(raycast_threads=1))
+    env = GridAction(env, cell=cell) if action == "grid" else ContinuousAction(env)
+    return ImageObservation(env, size=size)
 
 
-def make_training_envs(n: int, cell: int, size: int):
+def make_training_envs(n: int, cell: int, size: int, action: str = "grid"):
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
 
     # forkserver: workers start clean, not as copies of a trainer that has torch loaded.
-    envs = SubprocVecEnv([functools.partial(make_wrapped_env, cell, size)] * n, start_method="forkserver")
+    envs = SubprocVecEnv([functools.partial(make_wrapped_env, cell, size, action)] * n, start_method="forkserver")
     return VecMonitor(envs)
 
 
@@ -179,14 +182,14 @@ def train(algo: str, args: argparse.Namespace) -> tuple[object, dict]:
     torch.set_num_threads(1)
     recorder = episode_recorder(algo, args.steps)
     with PeakMemory() as memory:
-        envs = make_training_envs(args.envs, args.cell, args.size)
+        envs = make_training_envs(args.envs, args.cell, args.size, args.action)
         model = build_model(algo, envs, args.steps, args.seed)
         start = time.perf_counter()
         model.learn(total_timesteps=args.steps, callback=recorder)
         seconds = time.perf_counter() - start
         envs.close()
     params = sum(p.numel() for p in model.policy.parameters())
-    path = Path(args.out) / f"{algo}.zip"
+    path = Path(args.out) / (f"{algo}.zip" if args.action == "grid" else f"{algo}_{args.action}.zip")
     model.save(path)
     return model, {
         "parameters": int(params),
@@ -205,8 +208,8 @@ class SB3Policy:
     def __init__(self, name: str, model):
         self.name, self.model = name, model
 
-    def act(self, obs) -> int:
-        return int(self.model.predict(obs, deterministic=True)[0])
+    def act(self, obs):
+        return self.model.predict(obs, deterministic=True)[0]
 
 
 # ----------------------------------------------------------------------------- evaluation
@@ -248,6 +251,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--baselines", default=",".join(BASELINES), help=f"comma-separated, of {BASELINES} (empty: none)")
     parser.add_argument("--cell", type=int, default=8, help="GridAction cell in pixels")
     parser.add_argument("--size", type=int, default=84, help="ImageObservation side in pixels")
+    parser.add_argument("--action", choices=("grid", "continuous"), default="grid",
+                        help="GridAction (PPO, DQN) or ContinuousAction (PPO only: x, y, angle, primitive scores)")
     parser.add_argument("--seed", type=int, default=0, help="training seed")
     parser.add_argument("--eval-seed", type=int, default=100_000, help="first evaluation episode's seed (held out)")
     parser.add_argument("--out", default="runs/third_party", help="folder for the trained models")
@@ -257,6 +262,8 @@ def main(argv: list[str] | None = None) -> dict:
     bad = [a for a in algos if a not in ALGOS] + [b for b in baselines if b not in BASELINES]
     if bad or args.steps < 1 or args.envs < 1 or args.episodes < 1:
         parser.error(f"--steps, --envs, --episodes must be >= 1; algorithms from {ALGOS}, baselines from {BASELINES} (got {bad})")
+    if args.action == "continuous" and "dqn" in algos:
+        parser.error("DQN needs a discrete action space: --action continuous takes --algos ppo")
     Path(args.out).mkdir(parents=True, exist_ok=True)
 
     import torch
@@ -274,10 +281,10 @@ def main(argv: list[str] | None = None) -> dict:
               f"{row['parameters']:,} parameters, peak {row['peak_rss_mb']} MB; saved {row['model']}", flush=True)
         curve = ", ".join(f"{p['mean_return']:.2f} (to step {p['until_step']})" for p in row["learning_curve"])
         print(f"{algo}: mean training return over successive fifths of its episodes: {curve or 'no episode ended'}", flush=True)
-        wrapped = make_wrapped_env(args.cell, args.size)  # after training: not in its peak memory
+        wrapped = make_wrapped_env(args.cell, args.size, args.action)  # after training: not in its peak memory
         row.update(evaluate_row(SB3Policy(algo, model), wrapped, args))
         wrapped.close()
-        rows[algo] = row
+        rows[algo if args.action == "grid" else f"{algo}-{args.action}"] = row
     raw = gym.make(ENV_ID, config=EnvConfig(raycast_threads=1))
     for name in baselines:
         policy = make_policy(name, raw, seed=args.eval_seed)
@@ -287,7 +294,7 @@ def main(argv: list[str] | None = None) -> dict:
         rows[name] = {"parameters": params, "env_steps_per_s": None, "peak_rss_mb": None, **evaluate_row(policy, raw, args)}
     raw.close()
     print(table(rows))
-    summary = {"env": ENV_ID, "steps": args.steps, "envs": args.envs, "episodes": args.episodes, "eval_seed": args.eval_seed, "rows": rows}
+    summary = {"env": ENV_ID, "action": args.action, "steps": args.steps, "envs": args.envs, "episodes": args.episodes, "eval_seed": args.eval_seed, "rows": rows}
     print(json.dumps(summary))
     return summary
 

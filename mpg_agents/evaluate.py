@@ -37,7 +37,9 @@ class EpisodeRecord:
     target_grasps: int  # grasps that lifted the target
     wrong_grasps: int  # grasps that lifted another object
     objects_left: int | None
-    actions: tuple[int, ...] = ()  # the flat actions taken, to replay or compare an episode
+    # The actions taken, to replay or compare an episode: flat indices, or for a wrapped env
+    # with a continuous action space (mpg_envs.wrappers.ContinuousAction) tuples of floats.
+    actions: tuple[int | tuple[float, ...], ...] = ()
     seconds: float = field(default=0.0, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -126,6 +128,14 @@ def start_episode(policy, env: gym.Env, episode_seed: int) -> tuple[dict, dict]:
     return env.reset(seed=episode_seed)
 
 
+def _recorded(action: Any) -> int | tuple[float, ...]:
+    """An action as the record keeps it: an int for a discrete action, floats for a vector."""
+    arr = np.asarray(action)
+    if arr.ndim == 0:
+        return int(arr)
+    return tuple(float(v) for v in arr.reshape(-1))
+
+
 def run_episode(
     policy,
     env: gym.Env,
@@ -144,7 +154,7 @@ def run_episode(
     grasps = target_grasps = wrong_grasps = 0
     actions = []
     while True:
-        actions.append(int(policy.act(obs)))
+        actions.append(_recorded(policy.act(obs)))
         obs, reward, terminated, truncated, info = env.step(actions[-1])
         if on_step is not None:
             on_step(index, reward, info)

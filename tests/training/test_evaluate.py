@@ -144,3 +144,22 @@ def test_mpg_eval_writes_json_only_when_asked_and_reports_end_reasons(tmp_path, 
 def test_mpg_eval_rejects_bad_counts(extra, message, capsys):
     assert eval_main(["--policy", "random", "--env", "MPG-Stage2-v0"] + extra) == 2
     assert message in capsys.readouterr().err
+
+
+def test_an_episode_of_a_continuous_action_wrapper_is_recorded():
+    import gymnasium as gym
+
+    from mpg_agents.evaluate import run_episode
+    from mpg_envs.wrappers import ContinuousAction
+
+    env = ContinuousAction(gym.make("MPG-Stage2-v0", num_objects=2, max_motions=2))
+
+    class Corner:  # always the workspace's corner: an empty grasp
+        def act(self, obs):
+            return np.array([-1.0, -1.0, 0.0, 1.0], np.float32)
+
+    record = run_episode(Corner(), env, index=0, seed=3)
+    assert record.motions == 2 and not record.success
+    assert record.actions == ((-1.0, -1.0, 0.0, 1.0),) * 2
+    json.dumps(record.to_dict())  # the JSON record holds them
+    env.close()
