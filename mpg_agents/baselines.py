@@ -83,7 +83,10 @@ class NetworkPolicy:
     than the env allows, ``name`` ends with e.g. ``(grasp-only net)``.
     """
 
-    def __init__(self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None):
+    def __init__(
+        self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
+        grasp_region: str | None = None,
+    ):
         import torch
 
         from mpg_agents.policy import MPGNetPolicy
@@ -92,11 +95,14 @@ class NetworkPolicy:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"checkpoint {str(path)!r} does not exist")
-        self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space)
+        overrides = {"grasp_region": grasp_region} if grasp_region is not None else {}
+        self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
         if coordination is not None:
             self.policy.set_coordination(coordination)
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
         self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
+        if grasp_region is not None:
+            self.name += f" [grasp region: {grasp_region}]"
 
     def reset(self) -> None:
         """The network keeps no per-episode memory."""

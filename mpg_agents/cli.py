@@ -154,6 +154,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
     parser.add_argument("--json", help="also write the metrics and every episode's record to this JSON file")
     parser.add_argument("--coordination", choices=("workflow", "max_q"), help="network policies: override the coordination")
+    parser.add_argument("--grasp-region", choices=("rectangle", "target"),
+                        help="network policies: where a grasp may act (override the checkpoint's: the target's rectangle or its own pixels)")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
     parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="with --workers > 1: Ray (default) or a local process pool (no Ray start-up)")
@@ -172,6 +174,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             raise UsageError(f"--workers must be >= 1, got {args.workers}")
         workers = 1 if args.workers is None and args.ray_address is None else args.workers
         extra = (("coordination", args.coordination),) if args.coordination else ()
+        if args.grasp_region:
+            extra += (("grasp_region", args.grasp_region),)
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
         result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend)

@@ -382,11 +382,13 @@ class MPGNetPolicy(DQNPolicy):
         path: str | Path,
         observation_space: spaces.Dict,
         action_space: spaces.Discrete,
+        net_overrides: Mapping[str, Any] | None = None,
         **kwargs: Any,
     ) -> "MPGNetPolicy":
-        """A policy built with the checkpoint's own configuration (variant, head, trunk depth)."""
+        """A policy built with the checkpoint's own configuration (variant, head, trunk depth),
+        with ``net_overrides`` of settings that change no weight (e.g. ``grasp_region``)."""
         header = read_checkpoint_header(path)
-        cfg = MPGNetConfig.from_checkpoint(header["config"])
+        cfg = MPGNetConfig.from_checkpoint(header["config"], **dict(net_overrides or {}))
         # Build the branches the file has that the env can use (an error names none usable).
         kwargs.setdefault("branches", usable_primitives(resolve_primitives(action_space), header["primitives"]))
         policy = cls(observation_space, action_space, lambda _: 1e-4, variant=cfg.variant, net_config=cfg, **kwargs)

@@ -39,3 +39,20 @@ def test_demo_without_opengl_says_so_and_writes_the_heightmaps(tmp_path, capsys,
     scene = cv2.imread(str(tmp_path / "scene.png"))
     assert scene.shape == (TITLE_PX + PANEL_PX, 2 * PANEL_PX, 3)
     assert not (tmp_path / "qmaps.png").exists()  # a random policy has no Q maps
+
+
+def test_shipped_policy_with_grasps_kept_on_the_target():
+    import gymnasium as gym
+
+    from mpg_agents.baselines import make_policy
+    from mpg_envs.actions import decode_action
+
+    env = gym.make("MPG-Occluded-v0", num_objects=15)
+    policy = make_policy("shipped", env, grasp_region="target")
+    assert policy.policy.q_net.mpgnet.config.grasp_region == "target" and policy.name.endswith("[grasp region: target]")
+    obs, _ = env.reset(seed=700_003)
+    a = decode_action(env.unwrapped.primitives, policy.act(obs))
+    rows, cols = (obs["mask"] > 0).nonzero()
+    near = (abs(rows - a.row) <= 2) & (abs(cols - a.col) <= 2)  # within the 2-pixel margin of a target pixel
+    assert a.primitive == "grasp" and near.any()
+    env.close()
