@@ -18,6 +18,7 @@ name, e.g. ``shipped:stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -76,16 +77,33 @@ class GraspOnlyBaseline:
         return heuristic_grasp_action(obs, self.primitives)
 
 
+@dataclass(frozen=True)
+class RepeatRule:
+    """When a network policy's action repeats one it took (``avoid_repeats``): same primitive
+    and angle, within ``repeat_pixels``, on a heightmap unchanged (by more than
+    ``repeat_height_change`` metres) within ``repeat_window`` pixels of it."""
+
+    repeat_pixels: int = 4
+    repeat_window: int = 30
+    repeat_height_change: float = 0.005
+
+
 class NetworkPolicy:
     """An MPGNet checkpoint with the paper's coordination (greedy, no exploration).
 
     ``primitives`` are the env's primitives the network has branches for; when that is fewer
     than the env allows, ``name`` ends with e.g. ``(grasp-only net)``.
+
+    A greedy Q policy is a function of the observation: when an action changes nothing (a
+    grasp that closes on air), it meets the same observation and takes the same action until
+    the motion cap. With ``avoid_repeats`` it remembers its actions in the episode
+    (:class:`mpg_envs.action_memory.ActionMemory`, as the oracle does) and takes the best one
+    that would not repeat an action on an unchanged scene; the name ends with ``[no repeats]``.
     """
 
     def __init__(
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
-        grasp_region: str | None = None,
+        grasp_region: str | None = None, avoid_repeats: bool = False,
     ):
         import torch
 
@@ -103,12 +121,27 @@ class NetworkPolicy:
         self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
         if grasp_region is not None:
             self.name += f" [grasp region: {grasp_region}]"
+        self.memory = None
+        if avoid_repeats:
+            from mpg_envs.action_memory import ActionMemory
+
+            self.memory = ActionMemory(RepeatRule())
+            self.name += " [no repeats]"
 
     def reset(self) -> None:
-        """The network keeps no per-episode memory."""
+        """Forget the episode's actions (only ``avoid_repeats`` keeps any)."""
+        if self.memory is not None:
+            self.memory.clear()
 
     def act(self, obs: Mapping[str, np.ndarray]) -> int:
-        return int(self.policy.decide(obs).action)
+        if self.memory is None:
+            return int(self.policy.decide(obs).action)
+        depth = np.asarray(obs["depth"])
+        rotations = self.policy.net_config.num_rotations
+        forbidden = {p: self.memory.forbidden(p, depth, rotations) for p in self.primitives} if len(self.memory) else None
+        decision = self.policy.decide(obs, forbidden=forbidden)
+        self.memory.record(decision.primitive, decision.rotation, decision.row, decision.col, depth)
+        return int(decision.action)
 
     def save_qmaps(self, path: str | Path, obs: Mapping[str, np.ndarray]) -> None:
         from mpg_agents.visualize import save_policy_qmaps

@@ -156,6 +156,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--coordination", choices=("workflow", "max_q"), help="network policies: override the coordination")
     parser.add_argument("--grasp-region", choices=("rectangle", "target"),
                         help="network policies: where a grasp may act (override the checkpoint's: the target's rectangle or its own pixels)")
+    parser.add_argument("--avoid-repeats", action="store_true",
+                        help="network policies: never repeat an action on an unchanged scene (take the best other one)")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
     parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="with --workers > 1: Ray (default) or a local process pool (no Ray start-up)")
@@ -176,6 +178,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         extra = (("coordination", args.coordination),) if args.coordination else ()
         if args.grasp_region:
             extra += (("grasp_region", args.grasp_region),)
+        if args.avoid_repeats:
+            extra += (("avoid_repeats", True),)
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
         result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend)

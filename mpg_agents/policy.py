@@ -150,17 +150,25 @@ class MPGQNetwork(QNetwork):
         return self.masked_flat_q(maps, enc).argmax(dim=1)
 
     # ---------------------------------------------------------- decisions
-    def decide(self, obs: PyTorchObs, primitive: str | None = None) -> list[Decision]:
+    def decide(
+        self, obs: PyTorchObs, primitive: str | None = None, forbidden: Mapping[str, Tensor] | None = None
+    ) -> list[Decision]:
         """Coordinated decisions for a batch (one :class:`Decision` per sample); ``primitive``
-        overrides the coordination's choice of primitive (e.g. Stage IV's final grasp)."""
+        overrides the coordination's choice of primitive (e.g. Stage IV's final grasp);
+        ``forbidden`` maps a primitive to ``(R, H, W)`` bool actions it may not take (one
+        sample only; e.g. actions that already failed on this unchanged scene)."""
         batch = _batch_size(obs)
+        if forbidden and batch != 1:
+            raise ValueError(f"forbidden actions apply to one observation, got a batch of {batch}")
         decisions = []
         for i in range(batch):
             single = {k: v[i : i + 1] for k, v in obs.items()}
-            decisions.append(self._decide_one(self.mpgnet.encode(single), primitive))
+            decisions.append(self._decide_one(self.mpgnet.encode(single), primitive, forbidden))
         return decisions
 
-    def _decide_one(self, enc: EncodedObs, primitive: str | None = None) -> Decision:
+    def _decide_one(
+        self, enc: EncodedObs, primitive: str | None = None, forbidden: Mapping[str, Tensor] | None = None
+    ) -> Decision:
         maps: dict[str, Tensor] = {}
         actable: dict[str, Tensor] = {}
 
@@ -169,6 +177,10 @@ class MPGQNetwork(QNetwork):
             if p not in maps:
                 maps[p] = self.mpgnet.maps_from(enc, (p,))[p][0]
                 actable[p] = self._actable(maps[p], p, enc.region_of(p)[0][None])
+                if forbidden is not None and p in forbidden:
+                    barred = torch.as_tensor(forbidden[p], dtype=torch.bool, device=actable[p].device)
+                    if not bool(barred.all()):  # never bar every action: the best of them is still an action
+                        actable[p] = actable[p].masked_fill(barred, float("-inf"))
             return actable[p]
 
         if primitive is not None:
@@ -344,14 +356,17 @@ class MPGNetPolicy(DQNPolicy):
         self.q_net_target.coordination = coordination
 
     # ------------------------------------------------------- convenience
-    def decide(self, observation: Mapping[str, Any], primitive: str | None = None) -> Decision:
-        """The coordinated decision for one raw env observation, with the Q maps it used."""
+    def decide(
+        self, observation: Mapping[str, Any], primitive: str | None = None, forbidden: Mapping[str, Any] | None = None
+    ) -> Decision:
+        """The coordinated decision for one raw env observation, with the Q maps it used;
+        ``forbidden``: ``{primitive: (R, H, W) bool}`` actions not to take."""
         self.set_training_mode(False)
         obs_tensor, vectorized = self.obs_to_tensor(dict(observation))
         if vectorized and _batch_size(obs_tensor) != 1:
             raise ValueError("decide() takes one observation; use predict() for a batch")
         with torch.inference_mode():
-            return self.q_net.decide(obs_tensor, primitive)[0]
+            return self.q_net.decide(obs_tensor, primitive, forbidden)[0]
 
     def grasp_scorer(self) -> "GraspScorer":
         """A ``callable(obs) -> float`` for the envs' ``grasp_scorer`` (uses the online grasp net)."""

@@ -53,6 +53,26 @@ class ActionMemory:
                 return True
         return False
 
+    def forbidden(self, primitive: str, depth: np.ndarray, num_rotations: int) -> np.ndarray:
+        """``(num_rotations, H, W)`` bool: the actions of ``primitive`` that would repeat a
+        remembered one on ``depth`` (the map form of :meth:`repeats`, for a Q-map policy; the
+        heightmap is compared around the remembered pixel)."""
+        c = self.config
+        h, w = depth.shape
+        out = np.zeros((num_rotations, h, w), dtype=bool)
+        for p, angle, r, col, before in self._tried:
+            if p != primitive:
+                continue
+            win = c.repeat_window
+            window = (slice(max(0, r - win), r + win + 1), slice(max(0, col - win), col + win + 1))
+            if float(np.abs(depth[window] - before[window]).max(initial=0.0)) > c.repeat_height_change:
+                continue  # the scene changed there: trying again is a new action
+            rotations = [k for k in range(num_rotations) if self._angle(primitive, k) == angle]
+            near = (slice(max(0, r - c.repeat_pixels), r + c.repeat_pixels + 1),
+                    slice(max(0, col - c.repeat_pixels), col + c.repeat_pixels + 1))
+            out[(rotations, *near)] = True
+        return out
+
     @staticmethod
     def _angle(primitive: str, rotation: int) -> int:
         return int(rotation) % GRASP_ROTATIONS if primitive in ("grasp", "move") else int(rotation)

@@ -197,3 +197,29 @@ def test_oracle_prepares_with_a_tried_move_when_no_grasp_holds(occluded_env) -> 
     assert oracle.last_plan["kind"] in ("move_occluder", "move_blocker", "push")
     # The tried grasps and the preparation were all remembered: the same state gives a new action.
     assert occluded_env.action_space.decode(oracle.act(obs)) != action
+
+
+def test_action_memory_forbids_a_tried_action_until_its_surroundings_change():
+    from dataclasses import dataclass
+
+    from mpg_envs.action_memory import ActionMemory
+
+    @dataclass
+    class Rule:
+        repeat_pixels: int = 1
+        repeat_window: int = 3
+        repeat_height_change: float = 0.005
+
+    memory = ActionMemory(Rule())
+    depth = np.zeros((10, 10), np.float32)
+    memory.record("grasp", 3, 5, 5, depth)
+    barred = memory.forbidden("grasp", depth, 16)
+    # rotations 3 and 11 (a grasp is symmetric), pixels within 1 of (5, 5): 2 x 9 actions
+    assert barred.sum() == 18 and barred[[3, 11], 4:7, 4:7].all()
+    assert not memory.forbidden("push", depth, 16).any()
+    moved = depth.copy()
+    moved[7, 8] = 0.02  # inside the 3-pixel window: the scene there changed
+    assert not memory.forbidden("grasp", moved, 16).any()
+    far = depth.copy()
+    far[0, 0] = 0.02  # outside the window: still the same scene there
+    assert memory.forbidden("grasp", far, 16).sum() == 18

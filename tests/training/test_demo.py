@@ -56,3 +56,30 @@ def test_shipped_policy_with_grasps_kept_on_the_target():
     near = (abs(rows - a.row) <= 2) & (abs(cols - a.col) <= 2)  # within the 2-pixel margin of a target pixel
     assert a.primitive == "grasp" and near.any()
     env.close()
+
+
+def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
+    import gymnasium as gym
+
+    from mpg_agents.baselines import make_policy
+    from mpg_envs.actions import decode_action
+
+    env = gym.make("MPG-Occluded-v0", num_objects=15)
+    obs, _ = env.reset(seed=700_003)
+    plain = make_policy("shipped", env)
+    policy = make_policy("shipped", env, avoid_repeats=True)
+    assert policy.name.endswith("[no repeats]")
+    prims = env.unwrapped.primitives
+    first = decode_action(prims, policy.act(obs))
+    assert plain.act(obs) == plain.act(obs) == encode(prims, first)  # memoryless: the same action forever
+    second = decode_action(prims, policy.act(obs))  # the same observation: the scene did not change
+    assert (second.rotation % 8 != first.rotation % 8) or max(abs(second.row - first.row), abs(second.col - first.col)) > 4
+    policy.reset()  # a new episode forgets
+    assert decode_action(prims, policy.act(obs)) == first
+    env.close()
+
+
+def encode(prims, a):
+    from mpg_envs.actions import encode_action
+
+    return encode_action(prims, a.primitive, a.rotation, a.row, a.col)
