@@ -18,7 +18,6 @@ name, e.g. ``shipped:stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -77,17 +76,6 @@ class GraspOnlyBaseline:
         return heuristic_grasp_action(obs, self.primitives)
 
 
-@dataclass(frozen=True)
-class RepeatRule:
-    """When a network policy's action repeats one it took (``avoid_repeats``): same primitive
-    and angle, within ``repeat_pixels``, on a heightmap unchanged (by more than
-    ``repeat_height_change`` metres) within ``repeat_window`` pixels of it."""
-
-    repeat_pixels: int = 4
-    repeat_window: int = 30
-    repeat_height_change: float = 0.005
-
-
 class NetworkPolicy:
     """An MPGNet checkpoint with the paper's coordination (greedy, no exploration).
 
@@ -123,7 +111,7 @@ class NetworkPolicy:
             self.name += f" [grasp region: {grasp_region}]"
         self.memory = None
         if avoid_repeats:
-            from mpg_envs.action_memory import ActionMemory
+            from mpg_envs.action_memory import ActionMemory, RepeatRule
 
             self.memory = ActionMemory(RepeatRule())
             self.name += " [no repeats]"

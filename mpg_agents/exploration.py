@@ -3,7 +3,8 @@
 - epsilon-greedy with epsilon annealed linearly from ``start`` to ``end``;
 - an exploratory action is a random rotation at a random pixel where the primitive can
   matter: move and grasp inside the target's bounding rectangle (grasp on the target's own
-  pixels for a network that grasps only there), push within 25 pixels (5 cm) of it; with the ``max_q`` coordination the primitive is random too;
+  pixels for a network that grasps only there), push within 25 pixels (5 cm) of it; with the
+  ``max_q`` coordination the primitive is random too;
 - after ``heuristic_after_failed_grasps`` failed grasps in a row the next grasp is the
   pixel-only heuristic grasp (:mod:`mpg_agents.heuristics`), a training aid of the paper.
 

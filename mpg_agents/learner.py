@@ -249,7 +249,7 @@ class Learner:
         """Train until the configured iterations are done; returns the final summary."""
         from tqdm import tqdm
 
-        if self.config.demonstration_episodes and not self.resumed and self.counters.iteration == 0 and self.replay.size() == 0:
+        if self.config.demonstration_episodes and not self.resumed:  # a fresh run: iteration 0, empty replay
             self.add_demonstrations()
         handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)

@@ -156,31 +156,31 @@ def at_budget(stages: Sequence[TrainingStage], iterations: int) -> tuple[Trainin
     return (*stages[:-1], replace(stages[-1], iterations=iterations - before))
 
 
+def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str, ...]], **last: Any) -> tuple[TrainingStage, ...]:
+    """The earlier stages that train only ``keep``'s branch sets, then the last stage changed by
+    ``last`` (no branch initialisation), with the whole budget of ``stages``."""
+    kept = tuple(s for s in stages[:-1] if s.trainable in keep)
+    final = replace(stages[-1], branch_init=(), **last)
+    return at_budget((*kept, final), sum(s.iterations for s in stages))
+
+
 def grasp_only_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
-    """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter,
-    for the whole budget of ``stages``."""
-    grasp = tuple(s for s in stages if s.trainable == ("grasp",))
-    last = replace(stages[-1], trainable=("grasp",), branches=("grasp",), alternate_every=0, branch_init=())
-    return at_budget((*grasp, last), sum(s.iterations for s in stages))
+    """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter."""
+    return _learned_baseline(stages, [("grasp",)], trainable=("grasp",), branches=("grasp",), alternate_every=0)
 
 
 def target_vpg_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
     """Baseline "Target-Oriented VPG": after the grasp stages, push and grasp nets trained
-    together in the joint stage's clutter, the action by the larger Q (no move, no Q*_g rule),
-    for the whole budget of ``stages``."""
-    grasp = tuple(s for s in stages if s.trainable == ("grasp",))
-    last = replace(stages[-1], trainable=("push", "grasp"), branches=("push", "grasp"), alternate_every=0,
-                   coordination="max_q", branch_init=())
-    return at_budget((*grasp, last), sum(s.iterations for s in stages))
+    together in the joint stage's clutter, the action by the larger Q (no move, no Q*_g rule)."""
+    return _learned_baseline(
+        stages, [("grasp",)], trainable=("push", "grasp"), branches=("push", "grasp"), alternate_every=0, coordination="max_q"
+    )
 
 
 def push_grasp_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
     """Baseline "Efficient Push-Grasping" style: the grasp stages and Q*_g, the push stage, then
-    push and grasp trained in turn in the joint stage's clutter, grasping when grasp Q >= Q*_g
-    (no move), for the whole budget of ``stages``."""
-    kept = tuple(s for s in stages[:-1] if s.trainable in (("grasp",), ("push",)))
-    last = replace(stages[-1], trainable=("push", "grasp"), branches=("push", "grasp"), branch_init=())
-    return at_budget((*kept, last), sum(s.iterations for s in stages))
+    push and grasp trained in turn in the joint stage's clutter, grasping when grasp Q >= Q*_g (no move)."""
+    return _learned_baseline(stages, [("grasp",), ("push",)], trainable=("push", "grasp"), branches=("push", "grasp"))
 
 
 BASELINES: dict[str, Callable[[Sequence[TrainingStage]], tuple[TrainingStage, ...]]] = {

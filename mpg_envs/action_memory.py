@@ -2,21 +2,31 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 
 from mpg_envs.grasp_geometry import GRASP_ROTATIONS
 
-__all__ = ["ActionMemory", "RepeatConfig"]
+__all__ = ["ActionMemory", "RepeatConfig", "RepeatRule"]
 
 
 class RepeatConfig(Protocol):
-    """When an action repeats a remembered one (e.g. :class:`mpg_envs.policies.OracleConfig`)."""
+    """When an action repeats a remembered one (e.g. :class:`RepeatRule`, :class:`mpg_envs.policies.OracleConfig`)."""
 
     repeat_pixels: int  # an action this close to a tried one (same primitive and angle) ...
     repeat_window: int  # ... on a heightmap unchanged within this many pixels around it ...
     repeat_height_change: float  # ... (no pixel moved by more than this, metres) repeats it
+
+
+@dataclass(frozen=True)
+class RepeatRule:
+    """The default :class:`RepeatConfig` (the oracle's, and a network policy's ``avoid_repeats``)."""
+
+    repeat_pixels: int = 4
+    repeat_window: int = 30
+    repeat_height_change: float = 0.005
 
 
 class ActionMemory:

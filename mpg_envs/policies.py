@@ -33,7 +33,7 @@ from typing import Any, Protocol, runtime_checkable
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.action_memory import ActionMemory
+from mpg_envs.action_memory import ActionMemory, RepeatRule
 from mpg_envs.grasp_geometry import (
     GRASP_ROTATIONS,
     angle_gap,
@@ -83,9 +83,10 @@ class OracleConfig:
     grasp_tolerance: float = 0.02  # a grasp this little blocked is tried before any push (the pads push small things aside)
     push_start_gap: float = 0.012  # a push starts this far outside the target's edge
     occluder_tolerance: float = 0.01  # as the env's occlusion test: higher than the target's top by this
-    repeat_pixels: int = 4  # an action this close to a tried one (same primitive and angle) ...
-    repeat_window: int = 30  # ... on a heightmap unchanged within this many pixels around it ...
-    repeat_height_change: float = 0.005  # ... (no pixel moved by more than this) repeats it
+    # When an action repeats a tried one (mpg_envs.action_memory.RepeatRule's defaults).
+    repeat_pixels: int = RepeatRule.repeat_pixels
+    repeat_window: int = RepeatRule.repeat_window
+    repeat_height_change: float = RepeatRule.repeat_height_change
     verify_grasps: int = 4  # target grasps tried in a copy of the simulation before acting (0: plan by geometry alone)
     verify_preparations: int = 5  # with trials: moves/pushes tried, each followed by verify_grasps grasp trials
 
