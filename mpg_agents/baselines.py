@@ -91,7 +91,7 @@ class NetworkPolicy:
 
     def __init__(
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
-        grasp_region: str | None = None, avoid_repeats: bool = False,
+        grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
     ):
         import torch
 
@@ -101,7 +101,9 @@ class NetworkPolicy:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"checkpoint {str(path)!r} does not exist")
-        overrides = {"grasp_region": grasp_region} if grasp_region is not None else {}
+        overrides: dict[str, Any] = {"grasp_region": grasp_region} if grasp_region is not None else {}
+        if target_margin_px is not None:
+            overrides["target_margin_px"] = int(target_margin_px)
         self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
         if coordination is not None:
             self.policy.set_coordination(coordination)
@@ -109,6 +111,8 @@ class NetworkPolicy:
         self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
         if grasp_region is not None:
             self.name += f" [grasp region: {grasp_region}]"
+        if target_margin_px is not None:
+            self.name += f" [target margin: {target_margin_px} px]"
         self.memory = None
         if avoid_repeats:
             from mpg_envs.action_memory import ActionMemory, RepeatRule

@@ -53,7 +53,8 @@ class MPGNetConfig:
         grasp_region: where grasp Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
             (the paper's rough mask) or ``"target"`` (the visible target pixels grown by
             ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object).
-        target_margin_px: growth of the target pixels for ``grasp_region="target"`` (2 mm pixels).
+        target_margin_px: growth (> 0) or shrinking (< 0) of the target pixels for
+            ``grasp_region="target"``, in 2 mm pixels (see :func:`mpg_agents.regions.target_pixels`).
         bn_momentum: batch-norm momentum of the trunks (see ``mobilenet.DEFAULT_BN_MOMENTUM``).
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
@@ -104,8 +105,6 @@ class MPGNetConfig:
             raise ValueError("depth_std and depth_max must be positive")
         if self.grasp_region not in GRASP_REGIONS:
             raise ValueError(f"grasp_region must be one of {GRASP_REGIONS}, got {self.grasp_region!r}")
-        if self.target_margin_px < 0:
-            raise ValueError(f"target_margin_px must be >= 0, got {self.target_margin_px}")
         if self.trunk_batch is not None and self.trunk_batch < 1:
             raise ValueError(f"trunk_batch must be None or positive, got {self.trunk_batch}")
 

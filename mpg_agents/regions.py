@@ -39,20 +39,29 @@ def target_region(mask: Tensor) -> Tensor:
 
 
 def target_pixels(mask: Tensor, margin: int) -> Tensor:
-    """The target's visible pixels grown by ``margin`` pixels (square neighbourhood), ``(B, H, W)`` bool.
+    """The target's visible pixels grown (``margin > 0``) or shrunk (``margin < 0``) by
+    ``|margin|`` pixels (square neighbourhood), ``(B, H, W)`` bool.
 
-    An empty mask gives an all-true region, as :func:`target_region` does.
+    Shrinking keeps a grasp off the target's rim: a grasp whose fingers close on an edge
+    slips. A target too thin to shrink that far keeps its deepest non-empty erosion (at
+    least one pixel). An empty mask gives an all-true region, as :func:`target_region` does.
     """
-    if margin < 0:
-        raise ValueError(f"margin must be >= 0 pixels, got {margin}")
     if mask.dim() == 4:
         mask = mask[:, 0]
     mask = mask > 0.5 if mask.dtype != torch.bool else mask
-    grown = mask
-    if margin:
-        grown = F.max_pool2d(mask[:, None].float(), 2 * margin + 1, stride=1, padding=margin)[:, 0] > 0.5
     empty = ~mask.flatten(1).any(dim=1)
-    return grown | empty[:, None, None]
+    if margin >= 0:
+        grown = mask
+        if margin:
+            grown = F.max_pool2d(mask[:, None].float(), 2 * margin + 1, stride=1, padding=margin)[:, 0] > 0.5
+        return grown | empty[:, None, None]
+    region = mask
+    for _ in range(-margin):
+        # One pixel of erosion: a pixel stays if its 3 x 3 neighbourhood is all target.
+        eroded = -F.max_pool2d(-region[:, None].float(), 3, stride=1, padding=1)[:, 0] > 0.5
+        keep = eroded.flatten(1).any(dim=1)
+        region = torch.where(keep[:, None, None], eroded, region)
+    return region | empty[:, None, None]
 
 
 def region_max(q: Tensor, region: Tensor) -> Tensor:

@@ -4,7 +4,8 @@ On a sampled batch (paper, Sections III-C and Training Details):
 
 1. double-DQN target ``y = r + gamma * (1 - done) * Q_target(s', argmax_a Q(s', a))``
    (:func:`td_targets`: the online net picks ``a'`` among the allowed actions, the target net
-   evaluates it), optionally clamped to the returns the rewards allow (:attr:`TDStepConfig.target_bounds`);
+   evaluates it; terminal samples skip the next-state passes), optionally clamped to the
+   returns the rewards allow (:attr:`TDStepConfig.target_bounds`);
 2. transitions whose primitive is frozen (not in ``active``) are left out of the loss;
 3. grasp symmetry: a parallel-jaw grasp at rotation ``r`` is the grasp at ``r + 8``, so each
    grasp sample also trains the turned rotation with the same target;
@@ -85,17 +86,24 @@ def td_targets(
 
     The online net picks the max-Q action over all allowed primitives (move/grasp inside the
     target region) in eval mode, so the next-state pass neither uses nor updates batch-norm
-    batch statistics; only the chosen rotation goes through the target net.
+    batch statistics; only the chosen rotation goes through the target net. Terminal samples
+    (``done = 1``) skip both passes: the all-rotation greedy pass is most of a gradient step's
+    cost, and Stage II ends on every success.
     """
     with torch.no_grad():
-        was_training = q_net.training
-        q_net.set_training_mode(False)
-        try:
-            next_actions = q_net.greedy_actions(next_observations)
-        finally:
-            q_net.set_training_mode(was_training)
-        next_q = q_net_target.q_values_at(next_observations, next_actions)
-        targets = rewards.reshape(-1, 1) + (1.0 - dones.reshape(-1, 1)) * gamma * next_q
+        rewards, dones = rewards.reshape(-1, 1), dones.reshape(-1, 1)
+        next_q = torch.zeros_like(rewards)
+        live = torch.nonzero(dones[:, 0] < 1).flatten()
+        if live.numel():
+            live_obs = {k: v[live] for k, v in next_observations.items()}
+            was_training = q_net.training
+            q_net.set_training_mode(False)
+            try:
+                next_actions = q_net.greedy_actions(live_obs)
+            finally:
+                q_net.set_training_mode(was_training)
+            next_q[live] = q_net_target.q_values_at(live_obs, next_actions).to(next_q.dtype)
+        targets = rewards + (1.0 - dones) * gamma * next_q
         return targets if bounds is None else targets.clamp(*bounds)
 
 

@@ -44,9 +44,23 @@ def test_target_pixels_grow_by_the_margin_only():
 
 def test_empty_mask_leaves_everything_actable():
     empty = _mask()
-    assert target_pixels(empty, 3).all() and target_region(empty).all()
-    with pytest.raises(ValueError, match="margin"):
-        target_pixels(empty, -1)
+    assert target_pixels(empty, 3).all() and target_region(empty).all() and target_pixels(empty, -2).all()
+
+
+def test_negative_margin_keeps_the_interior():
+    block = _mask(*[(r, c) for r in range(1, 6) for c in range(1, 7)])  # rows 1-5, cols 1-6
+    one = target_pixels(block, -1)[0]
+    expected = torch.zeros((8, 8), dtype=torch.bool)
+    expected[2:5, 2:6] = True
+    assert torch.equal(one, expected)
+    two = target_pixels(block, -2)[0]
+    expected = torch.zeros((8, 8), dtype=torch.bool)
+    expected[3, 3:5] = True  # a 1 x 2 core
+    assert torch.equal(two, expected)
+    # Too thin to shrink further: the deepest non-empty erosion stays.
+    assert torch.equal(target_pixels(block, -5)[0], two)
+    line = _mask((4, 2), (4, 3), (4, 4))
+    assert torch.equal(target_pixels(line, -3)[0], line[0].bool())
 
 
 def test_region_max_ignores_pixels_outside():

@@ -100,3 +100,20 @@ def test_target_bounds_clamp_the_td_targets(setup):
     assert TDStepConfig(target_bounds=[-1, 2]).target_bounds == (-1.0, 2.0)
     with pytest.raises(ValueError, match="target_bounds"):
         TDStepConfig(target_bounds=(2.0, -1.0))
+
+
+def test_terminal_samples_take_the_reward_and_live_ones_their_own_bootstrap(setup):
+    from mpg_agents.td_step import td_targets
+
+    policy, replay = setup
+    batch = replay.sample(3)
+    rewards = torch.tensor([0.25, 1.0, -0.5])
+    dones = torch.tensor([0.0, 1.0, 0.0])  # the terminal one skips the next-state passes
+    mixed = td_targets(policy.q_net, policy.q_net_target, batch.next_observations, rewards, dones, 0.5)
+    assert mixed[1, 0].item() == 1.0
+    for i in (0, 2):  # a live sample's target does not depend on what else is in the batch
+        alone = td_targets(
+            policy.q_net, policy.q_net_target, {k: v[i : i + 1] for k, v in batch.next_observations.items()},
+            rewards[i : i + 1], dones[i : i + 1], 0.5,
+        )
+        assert torch.allclose(mixed[i], alone[0], atol=1e-5)
