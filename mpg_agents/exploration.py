@@ -17,9 +17,11 @@ from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
+import torch
 
 from mpg_agents.heuristics import heuristic_grasp
 from mpg_agents.policy import Decision
+from mpg_agents.regions import target_pixels
 from mpg_envs.actions import encode_action
 from mpg_envs.workspace import NUM_ROTATIONS
 
@@ -53,6 +55,9 @@ class Explorer:
         random_primitive: explore the primitive too (the ``max_q`` coordination).
         grasp_on_target: explore grasps on visible target pixels only (for a network whose
             ``grasp_region`` is ``"target"``: it may only grasp there greedily either).
+        target_margin_px: with ``grasp_on_target``, those pixels grown or shrunk as the
+            network's (:func:`mpg_agents.regions.target_pixels`), so exploration grasps where a
+            greedy grasp may.
         usable: the primitives a random primitive is drawn from (default: ``primitives``; a
             network without a move branch never explores a move).
     """
@@ -65,6 +70,7 @@ class Explorer:
         random_primitive: bool = False,
         grasp_on_target: bool = False,
         usable: Sequence[str] | None = None,
+        target_margin_px: int = 0,
     ) -> None:
         self.primitives = tuple(primitives)
         self.usable = tuple(usable) if usable is not None else self.primitives
@@ -74,6 +80,7 @@ class Explorer:
         self.heuristic_after_failed_grasps = heuristic_after_failed_grasps
         self.random_primitive = random_primitive
         self.grasp_on_target = grasp_on_target
+        self.target_margin_px = int(target_margin_px)
 
     def choose(self, obs: Mapping[str, np.ndarray], decision: Decision, epsilon: float, failed_grasps_in_a_row: int) -> Choice:
         """The action for ``obs`` given the policy's greedy ``decision`` (its primitive is kept
@@ -94,13 +101,15 @@ class Explorer:
         """A random ``(rotation, row, col)`` where ``primitive`` can matter.
 
         Move and grasp: inside the target's bounding rectangle (the rough mask); grasp on a
-        visible target pixel with :attr:`grasp_on_target`. Push: within :data:`PUSH_REACH_PX` of
+        visible target pixel with :attr:`grasp_on_target` (grown or shrunk by
+        :attr:`target_margin_px`). Push: within :data:`PUSH_REACH_PX` of
         the rectangle. An empty mask falls back to any occupied pixel, then to any pixel.
         """
         mask = obs["mask"] > 0
         size = mask.shape[0]
         if primitive == "grasp" and self.grasp_on_target and mask.any():
-            on_target = np.argwhere(mask)
+            region = target_pixels(torch.from_numpy(mask[None]), self.target_margin_px)[0].numpy() if self.target_margin_px else mask
+            on_target = np.argwhere(region)
             row, col = (int(v) for v in on_target[self.rng.integers(len(on_target))])
         elif mask.any():
             rows, cols = np.nonzero(mask)

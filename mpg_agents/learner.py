@@ -191,6 +191,7 @@ class Learner:
         self.explorer = Explorer(
             self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q",
             grasp_on_target=self.policy.net_config.grasp_region == "target", usable=self.policy.usable_primitives,
+            target_margin_px=self.policy.net_config.target_margin_px,
         )
         self.counters = Counters()
         self._stop = False

@@ -9,6 +9,8 @@ one. :func:`region_max` is the best Q inside a region (the grasp score compared 
 
 from __future__ import annotations
 
+import cv2
+import numpy as np
 import torch
 from torch import Tensor
 from torch.nn import functional as F
@@ -42,9 +44,10 @@ def target_pixels(mask: Tensor, margin: int) -> Tensor:
     """The target's visible pixels grown (``margin > 0``) or shrunk (``margin < 0``) by
     ``|margin|`` pixels (square neighbourhood), ``(B, H, W)`` bool.
 
-    Shrinking keeps a grasp off the target's rim: a grasp whose fingers close on an edge
-    slips. A target too thin to shrink that far keeps its deepest non-empty erosion (at
-    least one pixel). An empty mask gives an all-true region, as :func:`target_region` does.
+    Shrinking keeps a grasp off the rim, where closing fingers slip. It is done per connected
+    part of the mask (a partly covered target shows several; Stage I's mask holds every
+    object): a part too thin to shrink that far keeps its deepest pixels, so no part
+    vanishes. An empty mask gives an all-true region, as :func:`target_region` does.
     """
     if mask.dim() == 4:
         mask = mask[:, 0]
@@ -55,13 +58,20 @@ def target_pixels(mask: Tensor, margin: int) -> Tensor:
         if margin:
             grown = F.max_pool2d(mask[:, None].float(), 2 * margin + 1, stride=1, padding=margin)[:, 0] > 0.5
         return grown | empty[:, None, None]
-    region = mask
-    for _ in range(-margin):
-        # One pixel of erosion: a pixel stays if its 3 x 3 neighbourhood is all target.
-        eroded = -F.max_pool2d(-region[:, None].float(), 3, stride=1, padding=1)[:, 0] > 0.5
-        keep = eroded.flatten(1).any(dim=1)
-        region = torch.where(keep[:, None, None], eroded, region)
-    return region | empty[:, None, None]
+    shrunk = torch.stack([torch.from_numpy(_interior(m, -margin)) for m in mask.cpu().numpy()]).to(mask.device)
+    return shrunk | empty[:, None, None]
+
+
+def _interior(mask: np.ndarray, depth: int) -> np.ndarray:
+    """Pixels of ``mask (H, W)`` bool that survive ``depth`` square erosions, per connected part
+    (8-connected); a part that would vanish keeps its deepest pixels."""
+    binary = np.pad(mask.astype(np.uint8), 1)  # the image border counts as background
+    # Chessboard distance to the background: a pixel at distance d survives d - 1 erosions.
+    distance = cv2.distanceTransform(binary, cv2.DIST_C, 3)[1:-1, 1:-1]
+    parts, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    deepest = np.zeros(parts, dtype=np.float32)
+    np.maximum.at(deepest, labels.ravel(), distance.ravel())
+    return mask & (distance >= np.minimum(depth + 1, deepest[labels]))
 
 
 def region_max(q: Tensor, region: Tensor) -> Tensor:

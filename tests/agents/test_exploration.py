@@ -6,9 +6,11 @@ import math
 
 import numpy as np
 import pytest
+import torch
 
 from mpg_agents.exploration import PUSH_REACH_PX, Explorer, linear_epsilon
 from mpg_agents.policy import Decision
+from mpg_agents.regions import target_pixels
 from mpg_envs.actions import decode_action
 
 PRIMS = ("move", "push", "grasp")
@@ -50,6 +52,16 @@ def test_exploratory_pixels_stay_where_the_primitive_can_matter():
                 assert off_target == 0
             elif primitive != "push":
                 assert off_target > 0  # the rectangle's empty corner is explored too
+
+
+def test_exploratory_grasps_keep_to_the_shrunk_target_like_the_network():
+    obs = _obs()
+    explorer = Explorer(PRIMS, np.random.default_rng(0), grasp_on_target=True, target_margin_px=-3)
+    core = target_pixels(torch.from_numpy(obs["mask"][None] > 0), -3)[0].numpy()
+    assert 0 < core.sum() < (obs["mask"] > 0).sum()
+    for _ in range(100):
+        a = decode_action(PRIMS, explorer.choose(obs, _decision("grasp"), epsilon=1.0, failed_grasps_in_a_row=0).action)
+        assert core[a.row, a.col]
 
 
 def test_greedy_and_heuristic_choices():

@@ -63,6 +63,17 @@ def test_negative_margin_keeps_the_interior():
     assert torch.equal(target_pixels(line, -3)[0], line[0].bool())
 
 
+def test_each_part_of_the_mask_shrinks_on_its_own():
+    # A 5 x 5 block and, apart from it, a 1-pixel-wide bar: shrinking by 1 keeps the block's
+    # 3 x 3 centre and the whole bar (its deepest pixels), not the block alone.
+    pixels = [(r, c) for r in range(1, 6) for c in range(1, 6)] + [(r, 8) for r in range(1, 6)]
+    shrunk = target_pixels(_mask(*pixels, size=10), -1)[0]
+    expected = torch.zeros((10, 10), dtype=torch.bool)
+    expected[2:5, 2:5] = True
+    expected[1:6, 8] = True
+    assert torch.equal(shrunk, expected)
+
+
 def test_region_max_ignores_pixels_outside():
     q = torch.zeros((1, 2, 8, 8))
     q[0, 1, 0, 0] = 9.0  # outside
