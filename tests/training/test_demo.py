@@ -58,6 +58,24 @@ def test_shipped_policy_with_grasps_kept_on_the_target():
     env.close()
 
 
+def test_shipped_policy_keeps_grasps_off_the_target_rim():
+    import gymnasium as gym
+    import torch
+
+    from mpg_agents.baselines import make_policy
+    from mpg_agents.regions import target_pixels
+    from mpg_envs.actions import decode_action
+
+    env = gym.make("MPG-Stage2-v0")
+    policy = make_policy("shipped", env, grasp_region="target", target_margin_px=-8)
+    assert policy.name.endswith("[grasp region: target] [target margin: -8 px]")
+    obs, _ = env.reset(seed=900_000)
+    a = decode_action(env.unwrapped.primitives, policy.act(obs))
+    interior = target_pixels(torch.from_numpy(obs["mask"][None] > 0), -8)[0].numpy()
+    assert interior[a.row, a.col] and interior.sum() < (obs["mask"] > 0).sum()
+    env.close()
+
+
 def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
     import gymnasium as gym
 
