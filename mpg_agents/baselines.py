@@ -7,12 +7,12 @@ start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(p
 - ``oracle``: :class:`mpg_envs.policies.OraclePolicy` (reads the simulator: upper baseline).
 - ``random``: uniform over the whole action space (seeded).
 - ``grasp-only``: the pixel-only heuristic grasp at the target mask, every step.
-- ``shipped``: the checkpoint trained on this project's CPU (Stages I-II) that ships in
-  ``mpg_agents/checkpoints/``.
+- ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V) that
+  ships in ``mpg_agents/checkpoints/`` (:data:`SHIPPED_CHECKPOINT`).
 - a path: an MPGNet safetensors checkpoint (``mpg-train``'s ``weights.safetensors``).
 
 A checkpoint lacking some of the env's primitives acts with those it has and says so in its
-name, e.g. ``shipped:stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded-v0``
+name, e.g. ``stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded-v0``
 (the paper's Grasping-Only baseline).
 """
 
@@ -28,7 +28,7 @@ import numpy as np
 from mpg_agents.heuristics import heuristic_grasp_action
 
 BUILTIN = ("oracle", "random", "grasp-only", "shipped")
-SHIPPED_CHECKPOINT = "stage2_grasp_small.safetensors"
+SHIPPED_CHECKPOINT = "mpgnet_small.safetensors"
 
 
 def shipped_checkpoint() -> Path:

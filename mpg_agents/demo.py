@@ -1,6 +1,6 @@
 """The short demo: build a scene, run a policy, print metrics, write pictures.
 
-    python -m mpg_agents.demo [--policy shipped|oracle|random|CKPT] [--env MPG-Stage2-v0]
+    python -m mpg_agents.demo [--policy shipped|oracle|random|CKPT] [--env MPG-Occluded-v0]
                               [--episodes 3] [--seed 0] [--out demo_out]
 
 Runs ``--episodes`` seeded episodes, prints each step and a summary (task success,
@@ -68,7 +68,7 @@ def scene_picture(env: gym.Env, obs: dict[str, np.ndarray]) -> np.ndarray:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="MPG demo: a policy on a few seeded scenes.")
     parser.add_argument("--policy", default="shipped", help="shipped (the trained checkpoint), oracle, random, grasp-only or a checkpoint path")
-    parser.add_argument("--env", default="MPG-Stage2-v0", help="a registered env id (default: MPG-Stage2-v0, where the shipped grasp net was trained)")
+    parser.add_argument("--env", default="MPG-Occluded-v0", help="a registered env id (default: MPG-Occluded-v0, the paper's test scenes, 15 objects)")
     parser.add_argument("--episodes", type=int, default=3, help="episodes to run (default 3)")
     parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i (default 0)")
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps.png (default demo_out)")

@@ -6,6 +6,10 @@ import mpg_envs.render as render_module
 from mpg_agents.baselines import shipped_checkpoint
 from mpg_agents.demo import PANEL_PX, TITLE_PX, main
 
+# The Stage I-II grasp net (the learned Grasping-Only of the earlier release), kept beside
+# the shipped MPGNet: its first action on an occluded scene is a grasp.
+GRASP_NET = str(shipped_checkpoint().parent / "stage2_grasp_small.safetensors")
+
 
 def test_shipped_checkpoint_is_small_and_loads():
     path = shipped_checkpoint()
@@ -13,8 +17,9 @@ def test_shipped_checkpoint_is_small_and_loads():
     from mpg_agents.weights import read_checkpoint_header
 
     header = read_checkpoint_header(path)
-    assert header["primitives"] == ["grasp"] and header["variant"] == "small"
+    assert header["primitives"] == ["move", "push", "grasp"] and header["variant"] == "small"
     assert header["q_star"] is not None  # calibrated after Stage II
+    assert header["config"]["grasp_region"] == "target" and header["config"]["target_margin_px"] == -8
 
 
 def test_demo_runs_the_shipped_policy(tmp_path, capsys):
@@ -41,14 +46,14 @@ def test_demo_without_opengl_says_so_and_writes_the_heightmaps(tmp_path, capsys,
     assert not (tmp_path / "qmaps.png").exists()  # a random policy has no Q maps
 
 
-def test_shipped_policy_with_grasps_kept_on_the_target():
+def test_grasp_net_with_grasps_kept_on_the_target():
     import gymnasium as gym
 
     from mpg_agents.baselines import make_policy
     from mpg_envs.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
-    policy = make_policy("shipped", env, grasp_region="target")
+    policy = make_policy(GRASP_NET, env, grasp_region="target")
     assert policy.policy.q_net.mpgnet.config.grasp_region == "target" and policy.name.endswith("[grasp region: target]")
     obs, _ = env.reset(seed=700_003)
     a = decode_action(env.unwrapped.primitives, policy.act(obs))
@@ -58,7 +63,7 @@ def test_shipped_policy_with_grasps_kept_on_the_target():
     env.close()
 
 
-def test_shipped_policy_keeps_grasps_off_the_target_rim():
+def test_grasps_kept_off_the_target_rim():
     import gymnasium as gym
     import torch
 
@@ -67,7 +72,7 @@ def test_shipped_policy_keeps_grasps_off_the_target_rim():
     from mpg_envs.actions import decode_action
 
     env = gym.make("MPG-Stage2-v0")
-    policy = make_policy("shipped", env, grasp_region="target", target_margin_px=-8)
+    policy = make_policy(GRASP_NET, env, grasp_region="target", target_margin_px=-8)
     assert policy.name.endswith("[grasp region: target] [target margin: -8 px]")
     obs, _ = env.reset(seed=900_000)
     a = decode_action(env.unwrapped.primitives, policy.act(obs))
@@ -84,8 +89,8 @@ def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     obs, _ = env.reset(seed=700_003)
-    plain = make_policy("shipped", env)
-    policy = make_policy("shipped", env, avoid_repeats=True)
+    plain = make_policy(GRASP_NET, env)
+    policy = make_policy(GRASP_NET, env, avoid_repeats=True)
     assert policy.name.endswith("[no repeats]")
     prims = env.unwrapped.primitives
     first = decode_action(prims, policy.act(obs))
