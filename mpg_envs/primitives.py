@@ -57,9 +57,10 @@ class PrimitiveConfig:
     target_moved_angle: float = 0.25  # ... or it turned more than this (radians)
 
 
-GRASP_FAILURES = ("closed_empty", "not_lifted")
+GRASP_FAILURES = ("closed_empty", "not_lifted", "unreachable")
 """Why a grasp held nothing: the fingers closed fully on nothing (missed), or something was
-between the pads but did not rise with them (slipped out, or pinned under another object)."""
+between the pads but did not rise with them (slipped out, or pinned under another object),
+or the arm could not reach the pose (nothing moved; see :meth:`Primitives.unreachable`)."""
 
 
 @dataclass
@@ -80,6 +81,7 @@ class PrimitiveResult:
     physics_seconds: float = 0.0
     seconds: float = 0.0
     ik_solves: int = 0
+    unreachable: bool = False  # the arm could not reach a pose of this motion: nothing moved
 
 
 class Primitives:
@@ -126,6 +128,14 @@ class Primitives:
         result.ik_solves = self.ik.solves - solves0
         result.seconds = time.perf_counter() - start
         return result
+
+    def unreachable(self, primitive: str, rotation: int, row: int, col: int) -> PrimitiveResult:
+        """The result of a motion the arm could not reach (the caller put the world back)."""
+        x, y = pixel_to_world(self.world.workspace, row, col)
+        return PrimitiveResult(
+            primitive, int(rotation), (int(row), int(col)), (float(x), float(y), 0.0),
+            grasp_failure="unreachable" if primitive in ("grasp", "move") else None, unreachable=True,
+        )
 
     # ----------------------------------------------------------- primitives
     def _grasp(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:

@@ -30,6 +30,11 @@ TCP_SITE = GRIPPER_PREFIX + "pinch"
 """Tool centre point: between the finger pads; its y axis is the closing direction."""
 
 
+class UnreachablePoseError(RuntimeError):
+    """The arm cannot put its TCP at the asked pose (a far corner of the workspace at some
+    gripper angles, from some arm configurations)."""
+
+
 @dataclass(frozen=True)
 class RobotConfig:
     """Where the robot models come from and its resting pose.
@@ -141,7 +146,7 @@ class ArmIK:
     def solve(self, position: np.ndarray, theta: float, seed: np.ndarray | None = None) -> np.ndarray:
         """Arm joint angles putting the TCP at ``position`` pointing down, closing along ``theta``.
 
-        Raises ``RuntimeError`` when the pose is out of reach.
+        Raises :class:`UnreachablePoseError` (a ``RuntimeError``) when the pose is out of reach.
         """
         seed = self.home if seed is None else np.asarray(seed, dtype=float)
         self._physics.data.qpos[:6] = seed
@@ -160,7 +165,7 @@ class ArmIK:
         )
         self.solves += 1
         if not result.success:
-            raise RuntimeError(
+            raise UnreachablePoseError(
                 f"IK failed for TCP position {np.round(position, 4).tolist()} angle {theta:.3f} rad "
                 f"(error {result.err_norm:.2e}); the pose is out of the arm's reach"
             )

@@ -339,3 +339,32 @@ def test_camera_obs_mode_agrees_with_raycast(make_env):
     assert np.abs(a["depth"][occupied] - b["depth"][occupied]).mean() < 0.002
     assert np.array_equal(a["mask"], b["mask"]) and a["occluded"][0] == b["occluded"][0]
     cam.close()
+
+
+def test_an_unreachable_pose_is_a_motion_that_did_nothing():
+    import gymnasium as gym
+
+    from mpg_envs.robot import UnreachablePoseError
+
+    env = gym.make("MPG-Stage2-v0")
+    obs, _ = env.reset(seed=3)
+    ik = env.unwrapped._primitives.ik
+    solve, calls = ik.solve, []
+
+    def failing_midway(*args, **kwargs):  # the arm is already moving when the pose fails
+        calls.append(1)
+        if len(calls) == 3:
+            raise UnreachablePoseError("IK failed (test)")
+        return solve(*args, **kwargs)
+
+    ik.solve = failing_midway
+    rows, cols = np.nonzero(obs["mask"])
+    action = env.unwrapped.action_space.encode("grasp", 0, int(rows.mean()), int(cols.mean()))
+    after, reward, terminated, truncated, info = env.step(action)
+    assert len(calls) == 3 and info["unreachable"] and info["grasp_failure"] == "unreachable"
+    assert reward == 0.0 and not terminated and not truncated and info["num_motions"] == 1
+    assert np.array_equal(after["depth"], obs["depth"]) and np.array_equal(after["mask"], obs["mask"])
+    ik.solve = solve
+    _, _, _, _, info = env.step(action)  # the env carries on
+    assert not info["unreachable"]
+    env.close()
