@@ -18,7 +18,7 @@ from mpg_envs.objects import ObjectAsset, load_object_set
 from mpg_envs.occlusion import change_detected, is_occluded, surrounded_sectors
 from mpg_envs.primitives import PrimitiveResult, Primitives
 from mpg_envs.rewards import StepOutcome
-from mpg_envs.robot import ArmIK, UnreachablePoseError
+from mpg_envs.robot import ArmIK
 from mpg_envs.scene_io import (
     SceneFile,
     SceneFileError,
@@ -29,7 +29,6 @@ from mpg_envs.scene_io import (
     resolve_outside,
 )
 from mpg_envs.scenes import SCENES, InvalidSceneError, keep_inside
-from mpg_envs.sim_trial import WorldCheckpoint
 from mpg_envs.stages import END_REASONS, STAGES, StageSpec, episode_end
 from mpg_envs.world import World
 
@@ -151,14 +150,7 @@ class MPGEnv(gym.Env):
         before = self._obs
         occluded_before = bool(before["occluded"][0])
         score_before = self._grasp_score(before) if primitive != "grasp" else None
-        checkpoint = WorldCheckpoint(self.world)
-        try:
-            result = self._primitives.execute(primitive, rotation, row, col, before["depth"], self.target)
-        except UnreachablePoseError:
-            # An action inside the action space never ends the episode by an exception: a pose
-            # the arm cannot reach is a motion that did nothing (the world is put back).
-            checkpoint.restore()
-            result = self._primitives.unreachable(primitive, rotation, row, col)
+        result = self._primitives.execute(primitive, rotation, row, col, before["depth"], self.target)
         self.num_motions += 1
         sim_warnings = self._check_physics()
         obs = self._observe()

@@ -19,9 +19,9 @@ import mujoco
 import numpy as np
 
 from mpg_envs.actions import PRIMITIVES
-from mpg_envs.robot import ArmIK, gripper_states
+from mpg_envs.robot import ArmIK, UnreachablePoseError, gripper_states
 from mpg_envs.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
-from mpg_envs.world import World
+from mpg_envs.world import World, WorldCheckpoint
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ class PrimitiveConfig:
 GRASP_FAILURES = ("closed_empty", "not_lifted", "unreachable")
 """Why a grasp held nothing: the fingers closed fully on nothing (missed), or something was
 between the pads but did not rise with them (slipped out, or pinned under another object),
-or the arm could not reach the pose (nothing moved; see :meth:`Primitives.unreachable`)."""
+or the arm could not reach the pose (nothing moved; see :meth:`Primitives.execute`)."""
 
 
 @dataclass
@@ -107,7 +107,10 @@ class Primitives:
         """Run ``primitive`` at rotation index ``rotation`` and pixel ``(row, col)``.
 
         ``depth`` is the current depth heightmap (metres above the table); ``target`` the
-        index of the target object, whose motion is reported.
+        index of the target object, whose motion is reported. A pose the arm cannot reach
+        (:class:`~mpg_envs.robot.UnreachablePoseError`) puts the world back as it was and
+        returns a result with ``unreachable`` set (``grasp_failure="unreachable"`` for grasp
+        and move), so the env and the oracle's trials both carry on.
         """
         if primitive not in PRIMITIVES:
             raise ValueError(f"unknown primitive {primitive!r}; valid: {PRIMITIVES}")
@@ -120,7 +123,14 @@ class Primitives:
         start = time.perf_counter()
         steps0, secs0, solves0 = world.counter.steps, world.counter.seconds, self.ik.solves
         target_pose = world.object_pose(target) if target is not None and world.active[target] else None
-        result = getattr(self, f"_{primitive}")(int(rotation), int(row), int(col), depth, target)
+        checkpoint = WorldCheckpoint(world)
+        try:
+            result = getattr(self, f"_{primitive}")(int(rotation), int(row), int(col), depth, target)
+        except UnreachablePoseError:
+            # An action inside the action space never ends in an exception: a pose the arm
+            # cannot reach is a motion that did nothing (the world is put back).
+            checkpoint.restore()
+            result = self._unreachable(primitive, int(rotation), int(row), int(col))
         if target_pose is not None:
             result.target_moved = target in result.removed_objects or self._moved(target, *target_pose)
         result.physics_steps = world.counter.steps - steps0
@@ -129,8 +139,8 @@ class Primitives:
         result.seconds = time.perf_counter() - start
         return result
 
-    def unreachable(self, primitive: str, rotation: int, row: int, col: int) -> PrimitiveResult:
-        """The result of a motion the arm could not reach (the caller put the world back)."""
+    def _unreachable(self, primitive: str, rotation: int, row: int, col: int) -> PrimitiveResult:
+        """The result of a motion the arm could not reach (the world was put back)."""
         x, y = pixel_to_world(self.world.workspace, row, col)
         return PrimitiveResult(
             primitive, int(rotation), (int(row), int(col)), (float(x), float(y), 0.0),
@@ -293,7 +303,7 @@ class Primitives:
         while True:
             try:
                 return z, self.ik.solve((spot[0], spot[1], z), theta, seed)
-            except RuntimeError:
+            except UnreachablePoseError:
                 if z - 0.05 < z_release + 0.05:
                     raise
                 z -= 0.05

@@ -303,6 +303,33 @@ class World:
         return out
 
 
+class WorldCheckpoint:
+    """The state of a world at one moment, to return to."""
+
+    def __init__(self, world: World):
+        self.world = world
+        self._data = mujoco.MjData(world.model)
+        mujoco.mj_copyData(self._data, world.model, world.data)
+        self._active = world.active.copy()
+        self._counter = (world.counter.steps, world.counter.seconds)
+
+    def restore(self) -> None:
+        """Put the world back as it was when the checkpoint was made."""
+        world = self.world
+        for i in np.flatnonzero(world.active != self._active):
+            if self._active[i]:
+                pos, quat = self._pose(int(i))
+                world.set_object_pose(int(i), pos, quat)  # back in the scene (collisions, ray casts)
+            else:
+                world.remove_object(int(i))
+        mujoco.mj_copyData(world.data, world.model, self._data)
+        world.counter.steps, world.counter.seconds = self._counter
+
+    def _pose(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        adr = self.world.object_qpos_adr[i]
+        return self._data.qpos[adr : adr + 3].copy(), self._data.qpos[adr + 3 : adr + 7].copy()
+
+
 def _boxes_overlap(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
     plo, phi = points.min(axis=0), points.max(axis=0)
     return bool(np.all(plo <= hi) and np.all(phi >= lo))

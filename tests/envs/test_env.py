@@ -368,3 +368,23 @@ def test_an_unreachable_pose_is_a_motion_that_did_nothing():
     _, _, _, _, info = env.step(action)  # the env carries on
     assert not info["unreachable"]
     env.close()
+
+
+def test_an_unreachable_trial_of_the_oracle_returns_instead_of_raising():
+    import gymnasium as gym
+
+    from mpg_envs.robot import UnreachablePoseError
+    from mpg_envs.sim_trial import try_primitive
+
+    env = gym.make("MPG-Stage2-v0")
+    obs, _ = env.reset(seed=3)
+    primitives = env.unwrapped._primitives
+
+    def unreachable(*args, **kwargs):
+        raise UnreachablePoseError("IK failed (test)")
+
+    primitives.ik.solve = unreachable
+    rows, cols = np.nonzero(obs["mask"])
+    result = try_primitive(primitives, "grasp", 0, int(rows.mean()), int(cols.mean()), obs["depth"], env.unwrapped.target)
+    assert result.unreachable and result.grasp_failure == "unreachable" and not result.grasp_success
+    env.close()
