@@ -92,6 +92,7 @@ class NetworkPolicy:
     def __init__(
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
         grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
+        move_region: str | None = None,
     ):
         import torch
 
@@ -104,6 +105,8 @@ class NetworkPolicy:
         overrides: dict[str, Any] = {"grasp_region": grasp_region} if grasp_region is not None else {}
         if target_margin_px is not None:
             overrides["target_margin_px"] = int(target_margin_px)
+        if move_region is not None:
+            overrides["move_region"] = move_region
         self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
         if coordination is not None:
             self.policy.set_coordination(coordination)
@@ -113,6 +116,8 @@ class NetworkPolicy:
             self.name += f" [grasp region: {grasp_region}]"
         if target_margin_px is not None:
             self.name += f" [target margin: {target_margin_px} px]"
+        if move_region is not None:
+            self.name += f" [move region: {move_region}]"
         self.memory = None
         if avoid_repeats:
             from mpg_envs.action_memory import ActionMemory, RepeatRule

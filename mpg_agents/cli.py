@@ -158,6 +158,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                         help="network policies: where a grasp may act (override the checkpoint's: the target's rectangle or its own pixels)")
     parser.add_argument("--target-margin", type=int,
                         help="network policies: grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp region 'target'")
+    parser.add_argument("--move-region", choices=("rectangle", "top"),
+                        help="network policies: where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
     parser.add_argument("--avoid-repeats", action="store_true",
                         help="network policies: never repeat an action on an unchanged scene (take the best other one)")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
@@ -182,6 +184,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             extra += (("grasp_region", args.grasp_region),)
         if args.target_margin is not None:
             extra += (("target_margin_px", args.target_margin),)
+        if args.move_region:
+            extra += (("move_region", args.move_region),)
         if args.avoid_repeats:
             extra += (("avoid_repeats", True),)
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)

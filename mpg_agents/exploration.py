@@ -21,7 +21,7 @@ import torch
 
 from mpg_agents.heuristics import heuristic_grasp
 from mpg_agents.policy import Decision
-from mpg_agents.regions import target_pixels
+from mpg_agents.regions import footprint_top, target_pixels
 from mpg_envs.actions import encode_action
 from mpg_envs.workspace import NUM_ROTATIONS
 
@@ -58,6 +58,9 @@ class Explorer:
         target_margin_px: with ``grasp_on_target``, those pixels grown or shrunk as the
             network's (:func:`mpg_agents.regions.target_pixels`), so exploration grasps where a
             greedy grasp may.
+        move_band_m: explore moves on the target footprint's top (within this many metres of
+            its highest point: :func:`mpg_agents.regions.footprint_top`), for a network whose
+            ``move_region`` is ``"top"``; ``None``: anywhere in the rectangle.
         usable: the primitives a random primitive is drawn from (default: ``primitives``; a
             network without a move branch never explores a move).
     """
@@ -71,6 +74,7 @@ class Explorer:
         grasp_on_target: bool = False,
         usable: Sequence[str] | None = None,
         target_margin_px: int = 0,
+        move_band_m: float | None = None,
     ) -> None:
         self.primitives = tuple(primitives)
         self.usable = tuple(usable) if usable is not None else self.primitives
@@ -81,6 +85,7 @@ class Explorer:
         self.random_primitive = random_primitive
         self.grasp_on_target = grasp_on_target
         self.target_margin_px = int(target_margin_px)
+        self.move_band_m = move_band_m
 
     def choose(self, obs: Mapping[str, np.ndarray], decision: Decision, epsilon: float, failed_grasps_in_a_row: int) -> Choice:
         """The action for ``obs`` given the policy's greedy ``decision`` (its primitive is kept
@@ -102,8 +107,8 @@ class Explorer:
 
         Move and grasp: inside the target's bounding rectangle (the rough mask); grasp on a
         visible target pixel with :attr:`grasp_on_target` (grown or shrunk by
-        :attr:`target_margin_px`). Push: within :data:`PUSH_REACH_PX` of
-        the rectangle. An empty mask falls back to any occupied pixel, then to any pixel.
+        :attr:`target_margin_px`); move on the footprint's top with :attr:`move_band_m`.
+        Push: within :data:`PUSH_REACH_PX` of the rectangle. An empty mask falls back to any occupied pixel, then to any pixel.
         """
         mask = obs["mask"] > 0
         size = mask.shape[0]
@@ -111,6 +116,10 @@ class Explorer:
             region = target_pixels(torch.from_numpy(mask[None]), self.target_margin_px)[0].numpy() if self.target_margin_px else mask
             on_target = np.argwhere(region)
             row, col = (int(v) for v in on_target[self.rng.integers(len(on_target))])
+        elif primitive == "move" and self.move_band_m is not None and mask.any():
+            depth = torch.as_tensor(np.asarray(obs["depth"], dtype=np.float32))[None]
+            on_top = np.argwhere(footprint_top(torch.from_numpy(mask[None]), depth, self.move_band_m)[0].numpy())
+            row, col = (int(v) for v in on_top[self.rng.integers(len(on_top))])
         elif mask.any():
             rows, cols = np.nonzero(mask)
             pad = PUSH_REACH_PX if primitive == "push" else 0

@@ -192,6 +192,7 @@ class Learner:
             self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q",
             grasp_on_target=self.policy.net_config.grasp_region == "target", usable=self.policy.usable_primitives,
             target_margin_px=self.policy.net_config.target_margin_px,
+            move_band_m=self.policy.net_config.move_band_m if self.policy.net_config.move_region == "top" else None,
         )
         self.counters = Counters()
         self._stop = False

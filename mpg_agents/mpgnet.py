@@ -38,7 +38,7 @@ from torch.nn import functional as F
 from mpg_agents.inputs import normalize_inputs
 from mpg_agents.mobilenet import MobileNetV3Features, load_torchvision_features
 from mpg_agents.mpgnet_config import ROUGH_MASKED, MPGNetConfig
-from mpg_agents.regions import region_max, target_pixels, target_region
+from mpg_agents.regions import footprint_top, region_max, target_pixels, target_region
 from mpg_agents.rotations import rotation_grids
 
 # The input planes, stacked on channels and rotated together; each trunk's stem reads its own
@@ -97,6 +97,7 @@ class PreparedObs:
     region: Tensor  # (B, H, W) bool: the rough target mask (bounding rectangle)
     occluded: Tensor | None = field(default=None)  # (B,) bool when the observation had it
     grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
+    move_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
 
 
 @dataclass
@@ -114,11 +115,14 @@ class EncodedObs:
     region: Tensor  # (B, H, W) bool: the rough target mask (bounding rectangle)
     occluded: Tensor | None = field(default=None)  # (B,) bool when the observation had it
     grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
+    move_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
 
     def region_of(self, primitive: str) -> Tensor:
         """``(B, H, W)`` bool: where ``primitive`` may act (before ``rough_mask`` is consulted)."""
         if primitive == "grasp" and self.grasp_region is not None:
             return self.grasp_region
+        if primitive == "move" and self.move_region is not None:
+            return self.move_region
         return self.region
 
 
@@ -216,8 +220,11 @@ class MPGNet(nn.Module):
     def prepare(self, obs: Mapping[str, Any]) -> PreparedObs:
         """Normalise a raw batch and stack it into input planes (done once per observation)."""
         color, depth, mask, binary, occluded = self.normalize(obs)
-        grasp_region = target_pixels(binary, self.config.target_margin_px) if self.config.grasp_region == "target" else None
-        return PreparedObs(torch.cat([color, depth, mask], dim=1), target_region(binary), occluded, grasp_region)
+        cfg = self.config
+        grasp_region = target_pixels(binary, cfg.target_margin_px) if cfg.grasp_region == "target" else None
+        # Depth is normalised here: the band is scaled by the same std (the clip at depth_max is far above).
+        move_region = footprint_top(binary, depth, cfg.move_band_m / cfg.depth_std) if cfg.move_region == "top" else None
+        return PreparedObs(torch.cat([color, depth, mask], dim=1), target_region(binary), occluded, grasp_region, move_region)
 
     def encode(self, obs: Mapping[str, Any] | PreparedObs, rotations: Tensor | None = None) -> EncodedObs:
         """Pad and rotate a batch and run the shared mask trunk once.
@@ -249,6 +256,7 @@ class MPGNet(nn.Module):
             region=prep.region,
             occluded=prep.occluded,
             grasp_region=prep.grasp_region,
+            move_region=prep.move_region,
         )
 
     def branch_q(self, enc: EncodedObs, primitive: str, subset: Tensor | None = None) -> Tensor:

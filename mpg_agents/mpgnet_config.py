@@ -18,6 +18,7 @@ ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
 
 # Where a grasp may act: the paper's bounding rectangle, or the target's own pixels (dilated).
 GRASP_REGIONS: tuple[str, ...] = ("rectangle", "target")
+MOVE_REGIONS: tuple[str, ...] = ("rectangle", "top")
 
 # Trunk depth of the CPU-friendly variant: features.0-3 of MobileNetV3-small, output stride 8
 # (24 channels). The whole trunk (stride 32) maps the 320-pixel padded input to 10 x 10 cells
@@ -55,6 +56,11 @@ class MPGNetConfig:
             ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object).
         target_margin_px: growth (> 0) or shrinking (< 0) of the target pixels for
             ``grasp_region="target"``, in 2 mm pixels (see :func:`mpg_agents.regions.target_pixels`).
+        move_region: where move Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
+            (the paper's rough mask) or ``"top"`` (the target footprint's pixels within
+            ``move_band_m`` of its highest point: the occluder's top; see
+            :func:`mpg_agents.regions.footprint_top`).
+        move_band_m: height band of ``move_region="top"``, metres.
         bn_momentum: batch-norm momentum of the trunks (see ``mobilenet.DEFAULT_BN_MOMENTUM``).
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
@@ -82,6 +88,8 @@ class MPGNetConfig:
     rough_mask: bool = True
     grasp_region: str = "rectangle"
     target_margin_px: int = 2
+    move_region: str = "rectangle"
+    move_band_m: float = 0.015
     bn_momentum: float = DEFAULT_BN_MOMENTUM
     channels_last: bool = True
     trunk_batch: int | None = 4
@@ -105,6 +113,10 @@ class MPGNetConfig:
             raise ValueError("depth_std and depth_max must be positive")
         if self.grasp_region not in GRASP_REGIONS:
             raise ValueError(f"grasp_region must be one of {GRASP_REGIONS}, got {self.grasp_region!r}")
+        if self.move_region not in MOVE_REGIONS:
+            raise ValueError(f"move_region must be one of {MOVE_REGIONS}, got {self.move_region!r}")
+        if not self.move_band_m >= 0:
+            raise ValueError(f"move_band_m must be >= 0 metres, got {self.move_band_m}")
         if self.trunk_batch is not None and self.trunk_batch < 1:
             raise ValueError(f"trunk_batch must be None or positive, got {self.trunk_batch}")
 

@@ -4,7 +4,9 @@ Move and grasp Q maps are restricted to the axis-aligned bounding rectangle of t
 (:func:`target_region`). A grasp may further be kept on the target itself
 (:func:`target_pixels`: the visible target pixels, dilated by a margin): inside the rectangle
 of an L-shaped or partly covered target lie other objects, and a grasp there lifts the wrong
-one. :func:`region_max` is the best Q inside a region (the grasp score compared with Q*_g).
+one. A move may be kept on what lies highest over the target (:func:`footprint_top`): the
+occluder's top, which is what a move must grasp to carry it away. :func:`region_max` is the
+best Q inside a region (the grasp score compared with Q*_g).
 """
 
 from __future__ import annotations
@@ -72,6 +74,30 @@ def _interior(mask: np.ndarray, depth: int) -> np.ndarray:
     deepest = np.zeros(parts, dtype=np.float32)
     np.maximum.at(deepest, labels.ravel(), distance.ravel())
     return mask & (distance >= np.minimum(depth + 1, deepest[labels]))
+
+
+def footprint_top(mask: Tensor, depth: Tensor, band: float) -> Tensor:
+    """The pixels of the target's footprint ``mask`` that lie within ``band`` of the highest
+    point of ``depth`` over it, ``(B, H, W)`` bool.
+
+    On an occluded target (something in its footprint stands above it) these are the
+    occluder's top: where a move's fingers close around it rather than on the target below or
+    on the air beside it. On an uncovered target they are the target's own top. ``depth`` is in
+    any unit of height (``band`` in the same unit), ``(B, H, W)`` or ``(B, 1, H, W)``. An empty
+    mask gives an all-true region, as :func:`target_region` does.
+    """
+    if band < 0:
+        raise ValueError(f"band must be >= 0 (a height below the footprint's top), got {band}")
+    if mask.dim() == 4:
+        mask = mask[:, 0]
+    if depth.dim() == 4:
+        depth = depth[:, 0]
+    mask = mask > 0.5 if mask.dtype != torch.bool else mask
+    if depth.shape != mask.shape:
+        raise ValueError(f"depth {tuple(depth.shape)} and mask {tuple(mask.shape)} must have the same shape")
+    empty = ~mask.flatten(1).any(dim=1)
+    top = depth.masked_fill(~mask, float("-inf")).flatten(1).amax(dim=1)
+    return (mask & (depth >= (top - band)[:, None, None])) | empty[:, None, None]
 
 
 def region_max(q: Tensor, region: Tensor) -> Tensor:

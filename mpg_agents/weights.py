@@ -145,12 +145,36 @@ def load_mpgnet(path: str | Path, primitives: Sequence[str] | None = None) -> tu
     return net, header
 
 
-def export_weights(src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True) -> Path:
+SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = (
+    "rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m", "channels_last", "trunk_batch",
+)
+"""Network settings that change where Q counts or how it is computed, not any weight: an
+exported checkpoint may change them (:func:`export_weights`)."""
+
+
+def export_weights(
+    src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True,
+    settings: Mapping[str, Any] | None = None,
+) -> Path:
     """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
-    the shared mask trunk), floating tensors stored as float16 (loading casts them back)."""
+    the shared mask trunk), floating tensors stored as float16 (loading casts them back).
+
+    ``settings`` change :data:`SETTINGS_WITHOUT_WEIGHTS` in the copy's configuration (e.g. a
+    move region measured better after training); the header's ``extra`` records them as
+    ``settings_after_training``, so the copy never passes for what training used.
+    """
+    settings = dict(settings or {})
+    weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))
+    if weighty:
+        raise ValueError(f"settings {weighty} change the architecture or its weights; only {SETTINGS_WITHOUT_WEIGHTS} may change")
     net, header = load_mpgnet(src, primitives=primitives)
+    if settings:
+        net.config = MPGNetConfig.from_checkpoint(net.config.to_dict(), **settings)
     if half:
         net = net.half()
     q_star = header.get("q_star")
-    save_mpgnet(net, dst, q_star=float("nan") if q_star is None else float(q_star), extra={**header.get("extra", {}), "exported_from": str(src), "float16": half})
+    extra = {**header.get("extra", {}), "exported_from": str(src), "float16": half}
+    if settings:
+        extra["settings_after_training"] = {**extra.get("settings_after_training", {}), **settings}
+    save_mpgnet(net, dst, q_star=float("nan") if q_star is None else float(q_star), extra=extra)
     return Path(dst)

@@ -81,3 +81,12 @@ def test_a_random_primitive_is_one_the_network_has():
     assert drawn == {"push", "grasp"}
     with pytest.raises(ValueError, match="usable"):
         Explorer(("grasp",), np.random.default_rng(0), usable=("push",))
+
+
+def test_exploratory_moves_keep_to_the_footprints_top_like_the_network():
+    obs = _obs()
+    obs["depth"][130:140, 110:130] = 0.07  # an occluder over the L's foot, 4 cm above it
+    explorer = Explorer(PRIMS, np.random.default_rng(0), move_band_m=0.015)
+    for _ in range(100):
+        a = decode_action(PRIMS, explorer.choose(obs, _decision("move"), epsilon=1.0, failed_grasps_in_a_row=0).action)
+        assert 130 <= a.row < 140 and 110 <= a.col < 130

@@ -8,7 +8,7 @@ import torch
 
 from mpg_agents.mpgnet import MPGNet
 from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_agents.regions import region_max, target_pixels, target_region
+from mpg_agents.regions import footprint_top, region_max, target_pixels, target_region
 
 from .conftest import calibrate_bn
 
@@ -74,6 +74,31 @@ def test_each_part_of_the_mask_shrinks_on_its_own():
     assert torch.equal(shrunk, expected)
 
 
+def test_footprint_top_is_what_lies_highest_over_the_target():
+    mask = _mask(*[(r, c) for r in range(1, 4) for c in range(1, 4)], size=5)
+    depth = torch.zeros((1, 5, 5))
+    depth[0, 1:4, 1:4] = 0.03  # the target's top
+    depth[0, 2, 2:4] = 0.06  # an occluder over two of its pixels
+    depth[0, 0, 0] = 0.20  # higher, but outside the footprint
+    expected = torch.zeros((5, 5), dtype=torch.bool)
+    expected[2, 2:4] = True
+    assert torch.equal(footprint_top(mask, depth, 0.015)[0], expected)
+    # A band reaching down to the target's top takes the whole footprint; nothing on top: all of it.
+    assert torch.equal(footprint_top(mask, depth, 0.03)[0], mask[0].bool())
+    assert torch.equal(footprint_top(mask, torch.where(mask > 0, 0.03, 0.0), 0.0)[0], mask[0].bool())
+    # Channel dims are accepted; an empty mask leaves the move unrestricted, as the rectangle does.
+    assert torch.equal(footprint_top(mask[:, None], depth[:, None], 0.015)[0], expected)
+    assert footprint_top(torch.zeros_like(mask), depth, 0.015).all()
+
+
+def test_footprint_top_bad_input_is_named():
+    mask = _mask((1, 1))
+    with pytest.raises(ValueError, match="band"):
+        footprint_top(mask, torch.zeros((1, 8, 8)), -0.01)
+    with pytest.raises(ValueError, match="same shape"):
+        footprint_top(mask, torch.zeros((1, 4, 4)), 0.01)
+
+
 def test_region_max_ignores_pixels_outside():
     q = torch.zeros((1, 2, 8, 8))
     q[0, 1, 0, 0] = 9.0  # outside
@@ -100,3 +125,24 @@ def test_grasp_region_target_zeroes_grasp_off_the_target(scene):
     assert np.count_nonzero(move[:, rectangle & ~allowed]) > 0
     with pytest.raises(ValueError, match="grasp_region"):
         MPGNetConfig.small(grasp_region="disc")
+
+
+def test_move_region_top_zeroes_move_off_the_occluder(scene):
+    mask = np.zeros((224, 224), np.uint8)
+    mask[100:140, 90:130] = 1
+    depth = np.where(mask > 0, 0.03, 0.0).astype(np.float32)
+    depth[110:125, 100:120] = 0.07  # an occluder on the target
+    scene = dict(scene, mask=mask, depth=depth)
+    torch.manual_seed(0)
+    net = MPGNet(MPGNetConfig.small(move_region="top", move_band_m=0.015))
+    calibrate_bn(net, scene)
+    with torch.inference_mode():
+        maps = net(scene)
+    occluder = np.zeros((224, 224), bool)
+    occluder[110:125, 100:120] = True
+    move = maps["move"][0].numpy()
+    assert np.all(move[:, ~occluder] == 0) and np.count_nonzero(move[:, occluder]) > 0.9 * move[:, occluder].size
+    with pytest.raises(ValueError, match="move_region"):
+        MPGNetConfig.small(move_region="disc")
+    with pytest.raises(ValueError, match="move_band_m"):
+        MPGNetConfig.small(move_band_m=-0.01)

@@ -47,3 +47,21 @@ def test_weights_file_mode_follows_the_umask(tmp_path, small_net):
     finally:
         os.umask(old)
     assert (tmp_path / "w.safetensors").stat().st_mode & 0o777 == 0o644
+
+
+def test_export_keeps_the_weights_and_records_changed_settings(tmp_path, small_net):
+    from safetensors.torch import load_file
+
+    from mpg_agents.weights import export_weights, read_checkpoint_header
+
+    src = tmp_path / "net.safetensors"
+    save_mpgnet(small_net, src, q_star=1.25)
+    dst = export_weights(src, tmp_path / "lean.safetensors", settings={"move_region": "top"})
+    header = read_checkpoint_header(dst)
+    assert header["config"]["move_region"] == "top" and header["q_star"] == 1.25
+    assert header["extra"]["settings_after_training"] == {"move_region": "top"} and header["extra"]["float16"]
+    before, after = load_file(str(src)), load_file(str(dst))
+    assert before.keys() == after.keys()
+    assert all(torch.equal(before[k].half() if before[k].is_floating_point() else before[k], after[k]) for k in before)
+    with pytest.raises(ValueError, match=r"\['head_channels'\] change the architecture"):
+        export_weights(src, tmp_path / "bad.safetensors", settings={"head_channels": 32})

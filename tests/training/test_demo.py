@@ -81,6 +81,27 @@ def test_grasps_kept_off_the_target_rim():
     env.close()
 
 
+def test_moves_kept_on_the_occluders_top():
+    import gymnasium as gym
+    import torch
+
+    from mpg_agents.baselines import make_policy
+    from mpg_agents.regions import footprint_top
+    from mpg_envs.actions import decode_action
+
+    env = gym.make("MPG-Occluded-v0", num_objects=15)
+    policy = make_policy("shipped", env, move_region="top")
+    assert policy.name.endswith("[move region: top]")
+    obs, _ = env.reset(seed=700_003)
+    assert obs["occluded"][0] == 1
+    a = decode_action(env.unwrapped.primitives, policy.act(obs))
+    top = footprint_top(torch.from_numpy(obs["mask"][None] > 0), torch.from_numpy(obs["depth"][None]), 0.015)[0].numpy()
+    mask = obs["mask"] > 0
+    assert a.primitive == "move" and top[a.row, a.col] and top.sum() < mask.sum()
+    assert obs["depth"][a.row, a.col] > obs["depth"][mask].min() + 0.015  # on something above the target's lowest
+    env.close()
+
+
 def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
     import gymnasium as gym
 
