@@ -18,7 +18,8 @@ training episode's return as ``<out>/<algo>_episodes.csv``. The last output line
 
     python benchmarks/third_party.py [--steps 20000] [--envs N] [--episodes 50] [--out runs/third_party]
 
-Quick check (a minute or two): ``--steps 256 --episodes 3 --envs 2``.
+Quick check (a minute or two): ``--steps 256 --episodes 3 --envs 2``. A saved model (e.g. a
+checkpoint of a run that was stopped) is evaluated alone with ``--algos ppo --load PATH``.
 """
 
 from __future__ import annotations
@@ -214,6 +215,19 @@ def train(algo: str, args: argparse.Namespace) -> tuple[object, dict]:
     }
 
 
+def load(algo: str, path: str) -> tuple[object, dict]:
+    """A saved model (``<out>/ppo.zip`` or a checkpoint under ``<out>/ppo_checkpoints/``) to
+    evaluate without training; its row has no speed or memory figures."""
+    from stable_baselines3 import DQN, PPO
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"no saved model at {path!r}")
+    model = (PPO if algo == "ppo" else DQN).load(path, device="cpu")
+    params = sum(p.numel() for p in model.policy.parameters())
+    return model, {"parameters": int(params), "train_env_steps": int(model.num_timesteps), "env_steps_per_s": None,
+                   "peak_rss_mb": None, "model": path}
+
+
 class SB3Policy:
     """A trained SB3 model as an ``act(obs)`` policy (greedy) for ``evaluate``."""
 
@@ -265,6 +279,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--size", type=int, default=84, help="ImageObservation side in pixels")
     parser.add_argument("--action", choices=("grid", "continuous"), default="grid",
                         help="GridAction (PPO, DQN) or ContinuousAction (PPO only: x, y, angle, primitive scores)")
+    parser.add_argument("--load", help="evaluate this saved model (one algorithm in --algos) instead of training one")
     parser.add_argument("--seed", type=int, default=0, help="training seed")
     parser.add_argument("--eval-seed", type=int, default=100_000, help="first evaluation episode's seed (held out)")
     parser.add_argument("--out", default="runs/third_party", help="folder for the trained models")
@@ -274,6 +289,8 @@ def main(argv: list[str] | None = None) -> dict:
     bad = [a for a in algos if a not in ALGOS] + [b for b in baselines if b not in BASELINES]
     if bad or args.steps < 1 or args.envs < 1 or args.episodes < 1:
         parser.error(f"--steps, --envs, --episodes must be >= 1; algorithms from {ALGOS}, baselines from {BASELINES} (got {bad})")
+    if args.load and len(algos) != 1:
+        parser.error(f"--load evaluates one saved model: give one algorithm in --algos (got {algos})")
     if args.action == "continuous" and "dqn" in algos:
         parser.error("DQN needs a discrete action space: --action continuous takes --algos ppo")
     Path(args.out).mkdir(parents=True, exist_ok=True)
@@ -286,13 +303,18 @@ def main(argv: list[str] | None = None) -> dict:
 
     torch.set_num_threads(1)
     rows: dict[str, dict] = {}
-    print(f"{ENV_ID}: {args.steps} training steps per algorithm on {args.envs} workers; {args.episodes} evaluation episodes from seed {args.eval_seed}", flush=True)
+    what = f"the saved {args.load}" if args.load else f"{args.steps} training steps per algorithm on {args.envs} workers"
+    print(f"{ENV_ID}: {what}; {args.episodes} evaluation episodes from seed {args.eval_seed}", flush=True)
     for algo in algos:
-        model, row = train(algo, args)
-        print(f"{algo}: trained {row['train_env_steps']} steps in {row['train_seconds']} s ({row['env_steps_per_s']} steps/s), "
-              f"{row['parameters']:,} parameters, peak {row['peak_rss_mb']} MB; saved {row['model']}", flush=True)
-        curve = ", ".join(f"{p['mean_return']:.2f} (to step {p['until_step']})" for p in row["learning_curve"])
-        print(f"{algo}: mean training return over successive fifths of its episodes: {curve or 'no episode ended'}", flush=True)
+        if args.load:
+            model, row = load(algo, args.load)
+            print(f"{algo}: loaded {row['model']} ({row['train_env_steps']} training steps, {row['parameters']:,} parameters)", flush=True)
+        else:
+            model, row = train(algo, args)
+            print(f"{algo}: trained {row['train_env_steps']} steps in {row['train_seconds']} s ({row['env_steps_per_s']} steps/s), "
+                  f"{row['parameters']:,} parameters, peak {row['peak_rss_mb']} MB; saved {row['model']}", flush=True)
+            curve = ", ".join(f"{p['mean_return']:.2f} (to step {p['until_step']})" for p in row["learning_curve"])
+            print(f"{algo}: mean training return over successive fifths of its episodes: {curve or 'no episode ended'}", flush=True)
         wrapped = make_wrapped_env(args.cell, args.size, args.action)  # after training: not in its peak memory
         row.update(evaluate_row(SB3Policy(algo, model), wrapped, args))
         wrapped.close()
@@ -306,7 +328,7 @@ def main(argv: list[str] | None = None) -> dict:
         rows[name] = {"parameters": params, "env_steps_per_s": None, "peak_rss_mb": None, **evaluate_row(policy, raw, args)}
     raw.close()
     print(table(rows))
-    summary = {"env": ENV_ID, "action": args.action, "steps": args.steps, "envs": args.envs, "episodes": args.episodes, "eval_seed": args.eval_seed, "rows": rows}
+    summary = {"env": ENV_ID, "action": args.action, "steps": None if args.load else args.steps, "loaded": args.load, "envs": args.envs, "episodes": args.episodes, "eval_seed": args.eval_seed, "rows": rows}
     print(json.dumps(summary))
     return summary
 
