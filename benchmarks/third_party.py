@@ -188,18 +188,19 @@ def train(algo: str, args: argparse.Namespace) -> tuple[object, dict]:
 
     torch.set_num_threads(1)
     recorder = episode_recorder(algo, args.steps)
+    stem = algo if args.action == "grid" else f"{algo}_{args.action}"  # the saved model's, and its checkpoints' prefix
     with PeakMemory() as memory:
         envs = make_training_envs(args.envs, args.cell, args.size, args.action)
         model = build_model(algo, envs, args.steps, args.seed)
         start = time.perf_counter()
         # A model every 10,000 steps, so a long run that is stopped still leaves one to evaluate.
         keeper = CheckpointCallback(save_freq=max(1, 10_000 // args.envs), save_path=str(Path(args.out) / f"{algo}_checkpoints"),
-                                    name_prefix=algo if args.action == "grid" else f"{algo}_{args.action}")
+                                    name_prefix=stem)
         model.learn(total_timesteps=args.steps, callback=CallbackList([recorder, keeper]))
         seconds = time.perf_counter() - start
         envs.close()
     params = sum(p.numel() for p in model.policy.parameters())
-    path = Path(args.out) / (f"{algo}.zip" if args.action == "grid" else f"{algo}_{args.action}.zip")
+    path = Path(args.out) / f"{stem}.zip"
     model.save(path)
     # Every training episode, to plot the learning curve at any resolution.
     with open(path.with_name(path.stem + "_episodes.csv"), "w") as f:

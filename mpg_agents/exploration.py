@@ -108,7 +108,8 @@ class Explorer:
         Move and grasp: inside the target's bounding rectangle (the rough mask); grasp on a
         visible target pixel with :attr:`grasp_on_target` (grown or shrunk by
         :attr:`target_margin_px`); move on the footprint's top with :attr:`move_band_m`.
-        Push: within :data:`PUSH_REACH_PX` of the rectangle. An empty mask falls back to any occupied pixel, then to any pixel.
+        Push: within :data:`PUSH_REACH_PX` of the rectangle. An empty mask falls back to any
+        occupied pixel, then to any pixel.
         """
         mask = obs["mask"] > 0
         size = mask.shape[0]

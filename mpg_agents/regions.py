@@ -18,15 +18,20 @@ from torch import Tensor
 from torch.nn import functional as F
 
 
+def _binary(mask: Tensor) -> Tensor:
+    """``(B, H, W)`` bool from a 0/1 (or bool) mask, ``(B, H, W)`` or ``(B, 1, H, W)``."""
+    if mask.dim() == 4:
+        mask = mask[:, 0]
+    return mask > 0.5 if mask.dtype != torch.bool else mask
+
+
 def target_region(mask: Tensor) -> Tensor:
     """Rough target mask ``(B, H, W)`` bool: the mask's axis-aligned bounding rectangle.
 
     An empty mask (target not visible) gives an all-true region: there is nothing to
     localise, so Q is left unrestricted rather than zeroed everywhere.
     """
-    if mask.dim() == 4:
-        mask = mask[:, 0]
-    mask = mask > 0.5 if mask.dtype != torch.bool else mask
+    mask = _binary(mask)
     rows, cols = mask.any(dim=2), mask.any(dim=1)
     h, w = mask.shape[1:]
     ar_h = torch.arange(h, device=mask.device)
@@ -51,9 +56,7 @@ def target_pixels(mask: Tensor, margin: int) -> Tensor:
     object): a part too thin to shrink that far keeps its deepest pixels, so no part
     vanishes. An empty mask gives an all-true region, as :func:`target_region` does.
     """
-    if mask.dim() == 4:
-        mask = mask[:, 0]
-    mask = mask > 0.5 if mask.dtype != torch.bool else mask
+    mask = _binary(mask)
     empty = ~mask.flatten(1).any(dim=1)
     if margin >= 0:
         grown = mask
@@ -88,11 +91,9 @@ def footprint_top(mask: Tensor, depth: Tensor, band: float) -> Tensor:
     """
     if band < 0:
         raise ValueError(f"band must be >= 0 (a height below the footprint's top), got {band}")
-    if mask.dim() == 4:
-        mask = mask[:, 0]
+    mask = _binary(mask)
     if depth.dim() == 4:
         depth = depth[:, 0]
-    mask = mask > 0.5 if mask.dtype != torch.bool else mask
     if depth.shape != mask.shape:
         raise ValueError(f"depth {tuple(depth.shape)} and mask {tuple(mask.shape)} must have the same shape")
     empty = ~mask.flatten(1).any(dim=1)

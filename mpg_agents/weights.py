@@ -145,11 +145,10 @@ def load_mpgnet(path: str | Path, primitives: Sequence[str] | None = None) -> tu
     return net, header
 
 
-SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = (
-    "rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m", "channels_last", "trunk_batch",
-)
-"""Network settings that change where Q counts or how it is computed, not any weight: an
-exported checkpoint may change them (:func:`export_weights`)."""
+SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = ("rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m")
+"""Network settings that change where Q counts, not any weight: an exported checkpoint may
+change them (:func:`export_weights`). The execution fields (``channels_last``,
+``trunk_batch``) are not among them: loading takes those from the machine's variant defaults."""
 
 
 def export_weights(
