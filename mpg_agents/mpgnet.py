@@ -50,14 +50,21 @@ class QHead(nn.Sequential):
     """Two 1x1 convolutions with batch norm and ReLU (VPG's pre-activation order), 1 output channel.
 
     BN -> ReLU -> conv(C -> hidden) -> BN -> ReLU -> conv(hidden -> 1): the last layer is
-    linear so Q can be negative (the move and push rewards go down to -0.5).
+    linear so Q can be negative (the move and push rewards go down to -0.5). With
+    ``dilation`` > 0 the first convolution is 3x3 with that dilation (padding keeps the size):
+    each Q value then also reads the features ``dilation`` cells away on every side.
     """
 
-    def __init__(self, in_channels: int, hidden: int) -> None:
+    def __init__(self, in_channels: int, hidden: int, dilation: int = 0) -> None:
+        first = (
+            nn.Conv2d(in_channels, hidden, 3, padding=dilation, dilation=dilation, bias=False)
+            if dilation
+            else nn.Conv2d(in_channels, hidden, 1, bias=False)
+        )
         super().__init__(
             nn.BatchNorm2d(in_channels),
             nn.ReLU(inplace=True),
-            nn.Conv2d(in_channels, hidden, 1, bias=False),
+            first,
             nn.BatchNorm2d(hidden),
             nn.ReLU(inplace=True),
             nn.Conv2d(hidden, 1, 1),
@@ -78,7 +85,7 @@ class PrimitiveNet(nn.Module):
         # 3 channels (an ImageNet stem is loaded by summing its RGB kernels) and 3x cheaper.
         self.depth_trunk = MobileNetV3Features(config.variant, 1, config.trunk_depth, config.bn_momentum)
         channels = self.color_trunk.out_channels + self.depth_trunk.out_channels + mask_channels
-        self.head = QHead(channels, config.head_channels)
+        self.head = QHead(channels, config.head_channels, config.head_dilation)
 
     def forward(self, planes: Tensor, mask_features: Tensor) -> Tensor:
         """Coarse Q map ``(N, 1, h, w)`` from rotated, padded input planes (:data:`PLANES`) and

@@ -44,6 +44,12 @@ class MPGNetConfig:
         trunk_depth: ``features`` modules kept in each trunk; ``None`` = the whole trunk
             (output stride 32). :meth:`small` uses :data:`SMALL_TRUNK_DEPTH`.
         head_channels: width of the hidden 1x1 convolution (VPG's 64).
+        head_dilation: 0 (the paper): the head's first convolution is 1x1; ``d`` > 0: it is
+            3x3 with dilation ``d``, so a Q value also reads the trunk cells ``d`` away. The
+            small trunk's features see about +-9 pixels (90% of an output's input gradient),
+            the open gripper's fingers come down +-21 pixels from the grasp point: without
+            wider context a grasp net cannot tell which angle keeps the fingers clear of the
+            neighbours. 3 on the stride-8 trunk reaches +-24 pixels further.
         num_rotations: orientations per primitive (16, 22.5 degrees apart).
         heightmap_size: side of the square heightmaps (224).
         depth_max: depth is clipped to ``[0, depth_max]`` metres (the workspace height).
@@ -78,6 +84,7 @@ class MPGNetConfig:
     primitives: tuple[str, ...] = PRIMITIVES
     trunk_depth: int | None = None
     head_channels: int = 64
+    head_dilation: int = 0
     num_rotations: int = NUM_ROTATIONS
     heightmap_size: int = HEIGHTMAP_SIZE
     depth_max: float = 0.4
@@ -105,6 +112,8 @@ class MPGNetConfig:
                 f"trunk_depth for variant {self.variant!r} must be None or in 1..{full_depth(self.variant)}, "
                 f"got {self.trunk_depth}"
             )
+        if self.head_dilation < 0:
+            raise ValueError(f"head_dilation must be >= 0 (0: 1x1 head convolutions), got {self.head_dilation}")
         if self.heightmap_size <= 0 or self.heightmap_size % 2:
             raise ValueError(f"heightmap_size must be a positive even number, got {self.heightmap_size}")
         if self.num_rotations < 1:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.mpgnet import PLANES, MPGNet
+from mpg_agents.mpgnet import PLANES, MPGNet, QHead
 from mpg_agents.mpgnet_config import MPGNetConfig
 from mpg_agents.policy import MPGQNetwork
 from mpg_envs.actions import PixelActionSpace, encode_action
@@ -176,6 +176,39 @@ def test_training_path_matches_full_pass_and_isolates_the_chosen_rotation(small_
     finally:
         small_net.zero_grad()
         small_net.eval()
+
+
+@pytest.mark.parametrize("dilation", [0, 1, 3])
+def test_head_dilation_reads_exactly_the_cells_that_far_away(dilation):
+    """A head with dilation d: the Q of one cell depends on the features of the cells 0 and
+    +-d rows/columns away (a 3 x 3 grid), and on no other; d = 0 is the paper's 1 x 1 head."""
+    torch.manual_seed(0)
+    head = QHead(6, 8, dilation).eval()
+    features = torch.randn(1, 6, 15, 15, requires_grad=True)
+    head(features)[0, 0, 7, 7].backward()
+    reached = features.grad[0].abs().sum(0) > 0
+    expected = torch.zeros(15, 15, dtype=torch.bool)
+    offsets = sorted({-dilation, 0, dilation})
+    for dr in offsets:
+        for dc in offsets:
+            expected[7 + dr, 7 + dc] = True
+    assert torch.equal(reached, expected)
+    assert head(features).shape == (1, 1, 15, 15)  # padding keeps the size
+
+
+def test_head_dilation_setting_builds_the_wider_head_and_is_checked(scene):
+    torch.manual_seed(0)
+    net = MPGNet(MPGNetConfig.small(head_dilation=3)).eval()
+    first = net.branches["grasp"].head[2]
+    assert (first.kernel_size, first.dilation, first.padding) == ((3, 3), (3, 3), (3, 3))
+    with torch.inference_mode():
+        maps = net(scene)
+    assert all(q.shape == (1, 16, 224, 224) and torch.isfinite(q).all() for q in maps.values())
+    cfg = MPGNetConfig.from_checkpoint(MPGNetConfig.small(head_dilation=3).to_dict())
+    assert cfg.head_dilation == 3
+    assert MPGNetConfig.from_checkpoint({"variant": "small"}).head_dilation == 0  # older checkpoints
+    with pytest.raises(ValueError, match="head_dilation must be >= 0"):
+        MPGNetConfig.small(head_dilation=-1)
 
 
 def test_bad_input_gives_clear_errors(small_net, scene):
