@@ -47,9 +47,9 @@ class MPGNetConfig:
         head_dilation: 0 (the paper): the head's first convolution is 1x1; ``d`` > 0: it is
             3x3 with dilation ``d``, so a Q value also reads the trunk cells ``d`` away. The
             small trunk's features see about +-9 pixels (90% of an output's input gradient),
-            the open gripper's fingers come down +-21 pixels from the grasp point: without
-            wider context a grasp net cannot tell which angle keeps the fingers clear of the
-            neighbours. 3 on the stride-8 trunk reaches +-24 pixels further.
+            the open gripper's finger pads come down +-23 pixels (9.3 cm apart) from the grasp
+            point: without wider context a grasp net cannot tell which angle keeps the fingers
+            clear of the neighbours. 3 on the stride-8 trunk reaches +-24 pixels further.
         num_rotations: orientations per primitive (16, 22.5 degrees apart).
         heightmap_size: side of the square heightmaps (224).
         depth_max: depth is clipped to ``[0, depth_max]`` metres (the workspace height).
