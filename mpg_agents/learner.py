@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.demonstrations import collect_demonstrations
+from mpg_agents.demonstrations import DEMONSTRATION_SEED_OFFSET, collect_demonstrations
 from mpg_agents.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.grasp_scorer import GraspScorer
 from mpg_agents.policy import MPGNetPolicy
@@ -277,7 +277,7 @@ class Learner:
         (a resumed run keeps them and collects none). Every primitive the net has a branch for
         is kept, frozen ones too (:func:`td_step` leaves them out); the counters stay at 0."""
         stats = collect_demonstrations(
-            self.env, self.config.demonstration_episodes, self.config.seed * 1_000_003 + 500_000,  # not a training episode's seed
+            self.env, self.config.demonstration_episodes, self.config.seed * 1_000_003 + DEMONSTRATION_SEED_OFFSET,
             self.policy.branches, self.store,
         )
         self.log(f"{self.stage.name}: {stats.summary()}")
