@@ -45,6 +45,30 @@ def window_success(data: dict[str, np.ndarray], window: int) -> tuple[np.ndarray
     return np.array(xs), np.array(ys)
 
 
+def window_episode_success(data: dict[str, np.ndarray], window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Share of the training episodes ending in each ``window`` iterations that took the target.
+
+    An episode ends at its last row before the episode number changes (the run's last episode,
+    maybe unfinished, is left out); points sit where :func:`window_success` puts them, and a
+    window in which no episode ended gives none. This counts what the grasp rate cannot: a run
+    that grasps rarely but well has a high grasp rate and few successful episodes.
+    """
+    if window < 1:
+        raise ValueError(f"window must be >= 1, got {window}")
+    if "is_success" not in data:
+        raise ValueError(f"episode success needs an is_success column; the progress has {sorted(data)}")
+    ends = np.flatnonzero(np.diff(data["episode"]) > 0)
+    it, ok = data["iteration"][ends], data["is_success"][ends]
+    last = int(np.nanmax(data["iteration"]))
+    xs, ys = [], []
+    for start in range(0, last, window):
+        sel = (it > start) & (it <= start + window)
+        if sel.any():
+            xs.append(min(start + window, last))
+            ys.append(float(ok[sel].mean()))
+    return np.array(xs), np.array(ys)
+
+
 def episode_motions(data: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Motions of each finished episode, at the iteration it ended."""
     ep = data["episode"]
@@ -110,8 +134,10 @@ def plot_run(run: str | Path, out: str | Path | None = None, window: int = 200) 
 
 
 def plot_compare(runs: Sequence[tuple[str, str | Path]], stage: str, out: str | Path, window: int = 200) -> Path:
-    """One stage's target grasp success per ``window`` iterations for several runs, on one axis
-    (the paper's ablation figure: MPGNet's Stage V beside its ablations at equal iterations).
+    """One stage of several runs side by side: target grasp success per ``window`` iterations
+    (left; the paper's ablation figure: MPGNet's Stage V beside its ablations at equal
+    iterations) and the share of training episodes that took the target (right; runs whose
+    progress has no ``is_success`` column are left out of it).
 
     ``runs`` are ``(label, pipeline or run directory)``; a pipeline contributes ``stage``'s
     folder, a single run its own ``progress.csv``.
@@ -123,18 +149,24 @@ def plot_compare(runs: Sequence[tuple[str, str | Path]], stage: str, out: str | 
 
     if not runs:
         raise ValueError("plot_compare needs at least one run")
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig, (grasps, episodes) = plt.subplots(1, 2, figsize=(12, 4.5))
     for label, run in runs:
         run = Path(run)
         path = run / stage / "progress.csv" if (run / stage / "progress.csv").is_file() else run / "progress.csv"
         if not path.is_file():
             raise FileNotFoundError(f"no {stage}/progress.csv or progress.csv in {run}")
-        x, y = window_success(read_progress(path), window)
-        ax.plot(x, y, marker="o", label=label)
-    ax.set(title=f"{stage}: target grasp success per {window} iterations", xlabel="iteration", ylabel="success rate",
-           ylim=(-0.02, 1.02))
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+        data = read_progress(path)
+        grasps.plot(*window_success(data, window), marker="o", label=label)
+        if "is_success" in data:
+            episodes.plot(*window_episode_success(data, window), marker="o", label=label)
+    grasps.set(title=f"{stage}: target grasp success per {window} iterations", xlabel="iteration",
+               ylabel="target grasps / grasps", ylim=(-0.02, 1.02))
+    episodes.set(title=f"{stage}: training episodes that took the target, per {window} it.",
+                 xlabel="iteration", ylabel="successful episodes / episodes", ylim=(-0.02, 1.02))
+    for ax in (grasps, episodes):
+        ax.grid(alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=8)
     fig.tight_layout()
     out = Path(out)
     fig.savefig(out, dpi=100)

@@ -109,3 +109,26 @@ def test_plot_run_shorter_than_the_window(tmp_path, rng):
     out = plot_run(tmp_path / "run", window=200)
     image = cv2.imread(str(out))
     assert image is not None and image.shape[0] > 500
+
+
+def test_window_episode_success_counts_each_finished_episode_once_at_its_end(tmp_path):
+    from mpg_agents.plotting import plot_compare, read_progress, window_episode_success
+
+    # episodes 0..3 end at iterations 2 (success), 3 (failure), 6 (success); episode 3 is unfinished
+    rows = [(1, 0, 0), (2, 0, 1), (3, 1, 0), (4, 2, 0), (5, 2, 0), (6, 2, 1), (7, 3, 0)]
+    path = tmp_path / "run" / "Stage5" / "progress.csv"
+    path.parent.mkdir(parents=True)
+    path.write_text("iteration,episode,primitive,target_grasped,is_success\n"
+                    + "".join(f"{i},{e},grasp,{s},{s}\n" for i, e, s in rows))
+    data = read_progress(path)
+    x, y = window_episode_success(data, 3)
+    assert x.tolist() == [3, 6] and y.tolist() == [0.5, 1.0]
+    x, y = window_episode_success(data, 2)
+    assert x.tolist() == [2, 4, 6] and y.tolist() == [1.0, 0.0, 1.0]
+    with pytest.raises(ValueError, match="window"):
+        window_episode_success(data, 0)
+    with pytest.raises(ValueError, match="is_success"):
+        window_episode_success({k: v for k, v in data.items() if k != "is_success"}, 3)
+    out = plot_compare([("a", tmp_path / "run"), ("b", tmp_path / "run" / "Stage5")], "Stage5", tmp_path / "cmp.png", 3)
+    image = cv2.imread(str(out))
+    assert image is not None and image.shape[1] > image.shape[0]  # two panels side by side
