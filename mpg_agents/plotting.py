@@ -25,54 +25,56 @@ def read_progress(path: Path) -> dict[str, np.ndarray]:
     return out
 
 
+def _window_means(at: np.ndarray, values: np.ndarray, last: int, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of the ``values`` whose iteration ``at`` lies in each ``window`` iterations up to
+    ``last``; each point at its window's last iteration (a partial last window ends at ``last``),
+    no point for a window without values."""
+    if window < 1:
+        raise ValueError(f"window must be >= 1, got {window}")
+    xs, ys = [], []
+    for start in range(0, last, window):
+        sel = (at > start) & (at <= start + window)
+        if sel.any():
+            xs.append(min(start + window, last))
+            ys.append(float(values[sel].mean()))
+    return np.array(xs), np.array(ys)
+
+
+def _episode_ends(data: dict[str, np.ndarray]) -> np.ndarray:
+    """Row indices where an episode ends: its last row before the episode number changes
+    (the run's last episode, maybe unfinished, has none)."""
+    return np.flatnonzero(np.diff(data["episode"]) > 0)
+
+
 def window_success(data: dict[str, np.ndarray], window: int) -> tuple[np.ndarray, np.ndarray]:
     """Target grasp success rate of the grasps in each ``window`` iterations (paper metric).
 
     Each point sits at the last iteration of its window; a last, partial window counts the
     grasps it has (a run shorter than ``window`` gives one point, at its end).
     """
-    if window < 1:
-        raise ValueError(f"window must be >= 1, got {window}")
-    it = data["iteration"]
     grasp = data["primitive"] == "grasp"
-    last = int(np.nanmax(it))
-    xs, ys = [], []
-    for start in range(0, last, window):
-        sel = grasp & (it > start) & (it <= start + window)
-        if sel.any():
-            xs.append(min(start + window, last))
-            ys.append(float(data["target_grasped"][sel].mean()))
-    return np.array(xs), np.array(ys)
+    last = int(np.nanmax(data["iteration"]))
+    return _window_means(data["iteration"][grasp], data["target_grasped"][grasp], last, window)
 
 
 def window_episode_success(data: dict[str, np.ndarray], window: int) -> tuple[np.ndarray, np.ndarray]:
     """Share of the training episodes ending in each ``window`` iterations that took the target.
 
-    An episode ends at its last row before the episode number changes (the run's last episode,
-    maybe unfinished, is left out); points sit where :func:`window_success` puts them, and a
-    window in which no episode ended gives none. This counts what the grasp rate cannot: a run
-    that grasps rarely but well has a high grasp rate and few successful episodes.
+    Each finished episode counts once, at its last row (the run's last episode, maybe
+    unfinished, is left out); points sit where :func:`window_success` puts them, and a window
+    in which no episode ended gives none. This counts what the grasp rate cannot: a run that
+    grasps rarely but well has a high grasp rate and few successful episodes.
     """
-    if window < 1:
-        raise ValueError(f"window must be >= 1, got {window}")
     if "is_success" not in data:
         raise ValueError(f"episode success needs an is_success column; the progress has {sorted(data)}")
-    ends = np.flatnonzero(np.diff(data["episode"]) > 0)
-    it, ok = data["iteration"][ends], data["is_success"][ends]
+    ends = _episode_ends(data)
     last = int(np.nanmax(data["iteration"]))
-    xs, ys = [], []
-    for start in range(0, last, window):
-        sel = (it > start) & (it <= start + window)
-        if sel.any():
-            xs.append(min(start + window, last))
-            ys.append(float(ok[sel].mean()))
-    return np.array(xs), np.array(ys)
+    return _window_means(data["iteration"][ends], data["is_success"][ends], last, window)
 
 
 def episode_motions(data: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Motions of each finished episode, at the iteration it ended."""
-    ep = data["episode"]
-    ends = np.flatnonzero(np.diff(ep) > 0)
+    ends = _episode_ends(data)
     return data["iteration"][ends], data["num_motions"][ends]
 
 
