@@ -52,10 +52,12 @@ class QHead(nn.Sequential):
     BN -> ReLU -> conv(C -> hidden) -> BN -> ReLU -> conv(hidden -> 1): the last layer is
     linear so Q can be negative (the move and push rewards go down to -0.5). With
     ``dilation`` > 0 the first convolution is 3x3 with that dilation (padding keeps the size):
-    each Q value then also reads the features ``dilation`` cells away on every side.
+    each Q value then also reads the features ``dilation`` cells away on every side. Every
+    convolution starts He-normal (VPG's); ``zero_output`` starts the last one at zero, so the
+    untrained head answers Q = 0 everywhere (see ``MPGNetConfig.head_init``).
     """
 
-    def __init__(self, in_channels: int, hidden: int, dilation: int = 0) -> None:
+    def __init__(self, in_channels: int, hidden: int, dilation: int = 0, zero_output: bool = False) -> None:
         first = (
             nn.Conv2d(in_channels, hidden, 3, padding=dilation, dilation=dilation, bias=False)
             if dilation
@@ -72,6 +74,9 @@ class QHead(nn.Sequential):
         for module in self.modules():
             if isinstance(module, nn.Conv2d):
                 nn.init.kaiming_normal_(module.weight)
+        if zero_output:
+            nn.init.zeros_(self[-1].weight)
+            nn.init.zeros_(self[-1].bias)
 
 
 class PrimitiveNet(nn.Module):
@@ -85,7 +90,7 @@ class PrimitiveNet(nn.Module):
         # 3 channels (an ImageNet stem is loaded by summing its RGB kernels) and 3x cheaper.
         self.depth_trunk = MobileNetV3Features(config.variant, 1, config.trunk_depth, config.bn_momentum)
         channels = self.color_trunk.out_channels + self.depth_trunk.out_channels + mask_channels
-        self.head = QHead(channels, config.head_channels, config.head_dilation)
+        self.head = QHead(channels, config.head_channels, config.head_dilation, zero_output=config.head_init == "zero")
 
     def forward(self, planes: Tensor, mask_features: Tensor) -> Tensor:
         """Coarse Q map ``(N, 1, h, w)`` from rotated, padded input planes (:data:`PLANES`) and

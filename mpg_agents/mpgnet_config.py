@@ -19,6 +19,7 @@ ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
 # Where a grasp may act: the paper's bounding rectangle, or the target's own pixels (dilated).
 GRASP_REGIONS: tuple[str, ...] = ("rectangle", "target")
 MOVE_REGIONS: tuple[str, ...] = ("rectangle", "top")
+HEAD_INITS: tuple[str, ...] = ("kaiming", "zero")
 
 # Trunk depth of the CPU-friendly variant: features.0-3 of MobileNetV3-small, output stride 8
 # (24 channels). The whole trunk (stride 32) maps the 320-pixel padded input to 10 x 10 cells
@@ -50,6 +51,13 @@ class MPGNetConfig:
             the open gripper's finger pads come down +-23 pixels (9.3 cm apart) from the grasp
             point: without wider context a grasp net cannot tell which angle keeps the fingers
             clear of the neighbours. 3 on the stride-8 trunk reaches +-24 pixels further.
+        head_init: the head's last convolution starts as ``"kaiming"`` (VPG's He-normal, the
+            default) or ``"zero"`` (every Q 0 until trained). He-normal gives the untrained
+            small net, in training mode, grasp Q values of standard deviation 0.5 with a maximum
+            of 10 over one scene's 16 x 224 x 224 outputs, beyond every return the rewards
+            allow; the TD targets and the greedy Q*_g calibration start from that random
+            landscape. Zero removes it; the gradient reaches the earlier layers from the
+            second step on.
         num_rotations: orientations per primitive (16, 22.5 degrees apart).
         heightmap_size: side of the square heightmaps (224).
         depth_max: depth is clipped to ``[0, depth_max]`` metres (the workspace height).
@@ -85,6 +93,7 @@ class MPGNetConfig:
     trunk_depth: int | None = None
     head_channels: int = 64
     head_dilation: int = 0
+    head_init: str = "kaiming"
     num_rotations: int = NUM_ROTATIONS
     heightmap_size: int = HEIGHTMAP_SIZE
     depth_max: float = 0.4
@@ -114,6 +123,8 @@ class MPGNetConfig:
             )
         if self.head_dilation < 0:
             raise ValueError(f"head_dilation must be >= 0 (0: 1x1 head convolutions), got {self.head_dilation}")
+        if self.head_init not in HEAD_INITS:
+            raise ValueError(f"head_init must be one of {HEAD_INITS}, got {self.head_init!r}")
         if self.heightmap_size <= 0 or self.heightmap_size % 2:
             raise ValueError(f"heightmap_size must be a positive even number, got {self.heightmap_size}")
         if self.num_rotations < 1:

@@ -211,6 +211,37 @@ def test_head_dilation_setting_builds_the_wider_head_and_is_checked(scene):
         MPGNetConfig.small(head_dilation=-1)
 
 
+def test_zero_head_init_answers_zero_until_trained_and_then_learns(scene):
+    """head_init="zero": every Q is exactly 0 in training and evaluation mode before any
+    step (He-normal's untrained maps are not), and one Adam step on the Q values (those
+    inside the rough mask: the rest are 0 by construction) moves the last layer, after which
+    the earlier layers get a gradient too."""
+    torch.manual_seed(0)
+    net = MPGNet(MPGNetConfig.small(head_init="zero", primitives=("grasp",)))
+    for mode in (True, False):
+        net.train(mode)
+        with torch.no_grad():
+            assert torch.count_nonzero(net(scene)["grasp"]) == 0
+    torch.manual_seed(0)
+    kaiming = MPGNet(MPGNetConfig.small(primitives=("grasp",))).train()
+    with torch.no_grad():
+        assert kaiming(scene)["grasp"].abs().max() > 1.0  # the random start zero removes
+    net.train()
+    optimizer = torch.optim.Adam(net.parameters(), lr=1e-3)
+    trunk_weight = net.branches["grasp"].color_trunk.parameters().__next__()
+    for step in range(2):
+        optimizer.zero_grad()
+        (net(scene)["grasp"] - 1.0).pow(2).mean().backward()
+        grad = trunk_weight.grad
+        assert (grad is None or not grad.any()) if step == 0 else grad.abs().sum() > 0
+        optimizer.step()
+    with torch.no_grad():
+        assert torch.count_nonzero(net(scene)["grasp"]) > 0
+    assert MPGNetConfig.from_checkpoint({"variant": "small"}).head_init == "kaiming"  # older checkpoints
+    with pytest.raises(ValueError, match="head_init must be one of"):
+        MPGNetConfig.small(head_init="ones")
+
+
 def test_bad_input_gives_clear_errors(small_net, scene):
     with pytest.raises(ValueError, match="'color' has shape"):
         small_net(dict(scene, color=scene["color"][:200]))
