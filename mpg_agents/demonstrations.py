@@ -25,12 +25,6 @@ from mpg_envs.policies import OraclePolicy
 AddTransition = Callable[[dict[str, Any], dict[str, Any], int, float, bool], None]
 """``add(obs, next_obs, action, reward, terminated)``: stores one unbatched transition."""
 
-DEMONSTRATION_SEED_OFFSET = 800_000
-"""A run with seed ``s`` resets demonstration episode ``i`` with ``s * 1_000_003 + 800_000 + i``:
-clear of its training episodes (``s * 1_000_003 + episode``) and, for seed 0, of the Table I
-held-out seeds (500000-) and the tuning seeds (700000-) that evaluations use."""
-
-
 @dataclass(frozen=True)
 class DemoStats:
     """What a demonstration collection did."""

@@ -33,11 +33,12 @@ import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.demonstrations import DEMONSTRATION_SEED_OFFSET, collect_demonstrations
+from mpg_agents.demonstrations import collect_demonstrations
 from mpg_agents.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.grasp_scorer import GraspScorer
 from mpg_agents.policy import MPGNetPolicy
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.seeds import episode_seed
 from mpg_agents.run_state import load_run_state, save_run_state, state_folder
 from mpg_agents.td_step import TDStepConfig, td_step
 from mpg_agents.train_log import IterationRecord, TrainingLog
@@ -277,7 +278,7 @@ class Learner:
         (a resumed run keeps them and collects none). Every primitive the net has a branch for
         is kept, frozen ones too (:func:`td_step` leaves them out); the counters stay at 0."""
         stats = collect_demonstrations(
-            self.env, self.config.demonstration_episodes, self.config.seed * 1_000_003 + DEMONSTRATION_SEED_OFFSET,
+            self.env, self.config.demonstration_episodes, episode_seed(self.config.seed, 0, demonstration=True),
             self.policy.branches, self.store,
         )
         self.log(f"{self.stage.name}: {stats.summary()}")
@@ -292,7 +293,7 @@ class Learner:
         if n is not None and n != self.env.unwrapped.num_objects:
             self.env.close()
             self.env = self._make_env(n)
-        obs, _ = self.env.reset(seed=self.config.seed * 1_000_003 + c.episode)
+        obs, _ = self.env.reset(seed=episode_seed(self.config.seed, c.episode))
         c.episode_motions = c.failed_grasps_in_a_row = c.pushes_in_episode = 0
         return obs
 

@@ -8,7 +8,8 @@ import pytest
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.demonstrations import DEMONSTRATION_SEED_OFFSET, DemoStats, collect_demonstrations
+from mpg_agents.demonstrations import DemoStats, collect_demonstrations
+from mpg_agents.seeds import episode_seed
 from mpg_agents.learner import Counters, Learner, TrainConfig
 
 # The tiny learner settings of tests/training/test_training.py.
@@ -70,7 +71,7 @@ def test_a_fresh_run_starts_from_the_oracles_transitions_and_a_resumed_one_colle
     seed = 3
     expected: list = []
     env = gym.make("MPG-Stage2-v0", num_objects=2)
-    oracle = collect_demonstrations(env, 1, seed * 1_000_003 + DEMONSTRATION_SEED_OFFSET, ("grasp",), _recorder(expected))
+    oracle = collect_demonstrations(env, 1, episode_seed(seed, 0, demonstration=True), ("grasp",), _recorder(expected))
     env.close()
     n = len(expected)
     assert n >= 1 and oracle.kept == n

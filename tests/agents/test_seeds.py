@@ -1,0 +1,25 @@
+import pytest
+
+from mpg_agents.seeds import DEMONSTRATION_SEED_OFFSET, RUN_SEED_STRIDE, episode_seed
+
+
+def test_episode_seeds_by_hand():
+    assert episode_seed(0, 0) == 0
+    assert episode_seed(0, 7) == 7
+    assert episode_seed(2, 5) == 2_000_011
+    assert episode_seed(0, 0, demonstration=True) == 800_000
+    assert episode_seed(1, 3, demonstration=True) == 1_800_006
+
+
+def test_seed_zero_keeps_training_and_demonstrations_off_the_evaluation_seeds():
+    """Table I's held-out seeds are 500000-500099 and the tuning seeds 700000-700049; a run
+    of seed 0 with 10^5 training episodes and 10^4 demonstrations touches neither."""
+    training = {episode_seed(0, k) for k in (0, 99_999)}
+    demos = {episode_seed(0, i, demonstration=True) for i in (0, 9_999)}
+    assert max(training) < 500_000 and min(demos) > 700_049
+    assert max(demos) < RUN_SEED_STRIDE and DEMONSTRATION_SEED_OFFSET < RUN_SEED_STRIDE
+
+
+def test_negative_episode_index_is_refused():
+    with pytest.raises(ValueError, match="episode index must be >= 0"):
+        episode_seed(0, -1)
