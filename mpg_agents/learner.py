@@ -38,8 +38,8 @@ from mpg_agents.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.grasp_scorer import GraspScorer
 from mpg_agents.policy import MPGNetPolicy
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
-from mpg_agents.seeds import episode_seed
 from mpg_agents.run_state import load_run_state, save_run_state, state_folder
+from mpg_agents.seeds import episode_seed
 from mpg_agents.td_step import TDStepConfig, td_step
 from mpg_agents.train_log import IterationRecord, TrainingLog
 from mpg_agents.training_stages import TrainingStage, check_fields, stage_for_env

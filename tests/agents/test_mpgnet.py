@@ -228,7 +228,7 @@ def test_zero_head_init_answers_zero_until_trained_and_then_learns(scene):
         assert kaiming(scene)["grasp"].abs().max() > 1.0  # the random start zero removes
     net.train()
     optimizer = torch.optim.Adam(net.parameters(), lr=1e-3)
-    trunk_weight = net.branches["grasp"].color_trunk.parameters().__next__()
+    trunk_weight = next(net.branches["grasp"].color_trunk.parameters())
     for step in range(2):
         optimizer.zero_grad()
         (net(scene)["grasp"] - 1.0).pow(2).mean().backward()
