@@ -14,6 +14,9 @@ from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any, Sequence
 
+from mpg_agents.coordination import COORDINATIONS
+
+
 class UsageError(Exception):
     """Bad command-line input: reported on one line, exit status 2."""
 
@@ -153,7 +156,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
     parser.add_argument("--json", help="also write the metrics and every episode's record to this JSON file")
-    parser.add_argument("--coordination", choices=("workflow", "max_q"), help="network policies: override the coordination")
+    parser.add_argument("--coordination", choices=COORDINATIONS, help="network policies: override the coordination")
     parser.add_argument("--grasp-region", choices=("rectangle", "target"),
                         help="network policies: where a grasp may act (override the checkpoint's: the target's rectangle or its own pixels)")
     parser.add_argument("--target-margin", type=int,

@@ -10,6 +10,10 @@ Rules (:data:`COORDINATIONS`):
 - ``"workflow"`` (paper, Section III-C): target occluded -> move; else grasp when the best
   grasp Q is at least Q*_g; else push. Until Q*_g is calibrated (NaN) the grasp/push choice
   is the larger of the best grasp Q and the best push Q.
+- ``"grasp_first"``: the workflow, but the grasp is asked first: a grasp whose best Q is at
+  least Q*_g is taken even when the target is occluded (a partly covered target the grasp
+  net already scores graspable needs no move); otherwise occluded -> move, else push. Not
+  the paper's rule; a measured lever (README). Until Q*_g is calibrated it is the workflow.
 - ``"max_q"``: the primitive with the largest best Q (the paper's "w/o alternating training"
   ablation).
 
@@ -25,8 +29,9 @@ from typing import Callable, Sequence
 
 from mpg_envs.actions import check_primitives
 
-COORDINATIONS: tuple[str, ...] = ("workflow", "max_q")
-"""Ways to pick the primitive: the paper's workflow, or the plain max over the Q maps."""
+COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "max_q")
+"""Ways to pick the primitive: the paper's workflow, the workflow asking the grasp first, or
+the plain max over the Q maps."""
 
 
 def check_coordination(rule: str) -> str:
@@ -58,7 +63,7 @@ def choose_primitive(
     """The primitive to use now.
 
     Args:
-        rule: ``"workflow"`` or ``"max_q"``.
+        rule: one of :data:`COORDINATIONS`.
         available: usable primitives in canonical order (see :func:`usable_primitives`).
         occluded: the observation's occlusion bit.
         q_star: the grasp threshold Q*_g (NaN: not calibrated).
@@ -70,6 +75,9 @@ def choose_primitive(
         return available[0]
     if rule == "max_q":
         return _largest(available, best_q)
+    if rule == "grasp_first" and occluded and "grasp" in available and not math.isnan(q_star):
+        if best_q("grasp") >= q_star:
+            return "grasp"
     if "move" in available and occluded:
         return "move"
     if "grasp" in available and "push" in available:

@@ -252,6 +252,8 @@ class Learner:
         """Train until the configured iterations are done; returns the final summary."""
         from tqdm import tqdm
 
+        if self.stage.calibration_episodes and not self.resumed:  # a fresh run: the starting net
+            self.calibrate_in_scenes(self.stage.calibration_episodes)
         if self.config.demonstration_episodes and not self.resumed:  # a fresh run: iteration 0, empty replay
             self.add_demonstrations()
         handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -272,6 +274,41 @@ class Learner:
             for s, h in handlers.items():
                 signal.signal(s, h)
         return {"iteration": self.counters.iteration, "episodes": self.counters.episode, "q_star": self.calibrated_q_star()}
+
+    def calibrate_in_scenes(self, episodes: int) -> float:
+        """Calibrate Q*_g in this stage's scenes and save the state (a resumed run keeps it).
+
+        Runs ``episodes`` grasp-only episodes of the current net, greedy and without learning
+        (nothing enters the replay; calibration seeds, :func:`episode_seed`), and sets Q*_g to
+        the median Q of the grasps that took the target; ``calibration.json`` in the run folder
+        keeps every value. Raises ``RuntimeError`` when no grasp took the target.
+        """
+        if "grasp" not in self.policy.usable_primitives:
+            raise ValueError(f"stage {self.stage.name}: Q*_g calibration needs a grasp branch, the net has {self.policy.branches}")
+        taken: list[float] = []
+        grasps = 0
+        for k in range(episodes):
+            obs, _ = self.env.reset(seed=episode_seed(self.config.seed, k, calibration=True))
+            done = False
+            while not done:
+                decision = self.policy.decide(obs, "grasp")
+                obs, _, terminated, truncated, info = self.env.step(decision.action)
+                grasps += 1
+                if info["target_grasped"] and math.isfinite(decision.q_value):
+                    taken.append(decision.q_value)
+                done = bool(terminated or truncated)
+        if not taken:
+            raise RuntimeError(f"stage {self.stage.name}: no grasp took the target in {episodes} calibration episodes")
+        q_star = float(np.median(taken))
+        before = self.policy.q_star
+        self.policy.set_q_star(q_star)
+        record = {"episodes": episodes, "grasps": grasps, "target_grasps": len(taken), "q_star_before": before,
+                  "q_star": q_star, "target_grasp_q": taken}
+        (self.out / "calibration.json").write_text(json.dumps(json_safe(record), indent=1))
+        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {q_star:.4g} in its scenes "
+                 f"({len(taken)} of {grasps} greedy grasps took the target in {episodes} episodes)")
+        self.save_state()
+        return q_star
 
     def add_demonstrations(self) -> None:
         """Fill the replay with the oracle's transitions on this stage's env and save the state

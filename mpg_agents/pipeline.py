@@ -3,7 +3,8 @@
 The stages run in order (:data:`~mpg_agents.training_stages.TRAINING_STAGES` by default), each
 starting from the previous stage's weights. After a stage that ``calibrates_q_star`` the
 threshold Q*_g is taken from its successful grasps and its weights become the discriminator of
-the stages that ``use_discriminator``. Ablations are changes of the table
+the stages that ``use_discriminator``; a stage with ``calibration_episodes`` calibrates Q*_g
+again in its own scenes before it trains, and that value goes on. Ablations are changes of the table
 (:func:`~mpg_agents.training_stages.without_multistage`,
 :func:`~mpg_agents.training_stages.without_alternation`).
 
@@ -63,6 +64,9 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
         if stage.calibrates_q_star:
             q_star = float(result["q_star"]) if result.get("q_star") is not None else float("nan")
             discriminator = weights
+        elif stage.calibration_episodes:
+            # Calibrated again in this stage's scenes before it trained: its weights carry it.
+            q_star = float(json.loads((stage_dir / "calibration.json").read_text())["q_star"])
     summary["q_star"] = None if math.isnan(q_star) else q_star
     summary["final_weights"] = weights
     # The record ships beside its weights: paths inside the run are written relative to it.

@@ -229,7 +229,8 @@ class MPGNetPolicy(DQNPolicy):
         primitives: the action space's primitives when it does not carry ``.primitives``.
         branches: the nets to build (default: the action primitives); a superset keeps e.g.
             the grasp net as Stage III's discriminator next to the move net.
-        coordination: ``"workflow"`` (paper) or ``"max_q"`` (ablation).
+        coordination: ``"workflow"`` (paper), ``"grasp_first"`` (lever) or ``"max_q"`` (ablation);
+            see :mod:`mpg_agents.coordination`.
         q_star: the calibrated grasp threshold Q*_g; NaN until calibrated.
         net_config: ``MPGNetConfig`` or its dict overriding the variant's defaults.
         imagenet_weights: optional torchvision MobileNetV3 checkpoint to initialise every trunk.
@@ -350,7 +351,7 @@ class MPGNetPolicy(DQNPolicy):
             net.q_star.fill_(value)
 
     def set_coordination(self, coordination: str) -> None:
-        """Switch between ``"workflow"`` and ``"max_q"``."""
+        """Switch to another of :data:`~mpg_agents.coordination.COORDINATIONS`."""
         self.coordination = check_coordination(coordination)
         self.q_net.coordination = coordination
         self.q_net_target.coordination = coordination

@@ -33,6 +33,11 @@ class TrainingStage:
             iterations (0: all together).
         coordination: how the primitive is chosen (:mod:`mpg_agents.coordination`).
         calibrates_q_star: Q*_g is calibrated from this stage's successful grasps.
+        calibration_episodes: before it trains, the stage calibrates Q*_g again in its own
+            scenes: the median Q of the greedy grasps that take the target in this many
+            grasp-only episodes of the starting net, no learning (0: keep the Q*_g it is given).
+            Q*_g from isolated targets (Stage II) sits above what a sure grasp in clutter
+            scores, and the workflow then pushes instead of grasping.
         uses_discriminator: the envs score states with the calibrated stage's grasp net.
         push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
         iterations: default number of training iterations.
@@ -50,6 +55,7 @@ class TrainingStage:
     alternate_every: int = 0
     coordination: str = "workflow"
     calibrates_q_star: bool = False
+    calibration_episodes: int = 0
     uses_discriminator: bool = False
     push_budget: int | None = None
     iterations: int = 1000
@@ -77,6 +83,10 @@ class TrainingStage:
                 raise ValueError(f"stage {self.name}: objects must be (start, end) with 1 <= start <= end, got {self.objects}")
             object.__setattr__(self, "objects", (start, end))
         check_coordination(self.coordination)
+        if self.calibration_episodes < 0:
+            raise ValueError(f"stage {self.name}: calibration_episodes must be >= 0, got {self.calibration_episodes}")
+        if self.calibration_episodes and self.calibrates_q_star:
+            raise ValueError(f"stage {self.name}: calibrates_q_star and calibration_episodes both set Q*_g; choose one")
         if self.alternate_every < 0 or self.iterations < 1:
             raise ValueError(f"stage {self.name}: need alternate_every >= 0 and iterations >= 1")
         if self.push_budget is not None and self.push_budget < 0:

@@ -64,3 +64,25 @@ def test_bad_rule_and_no_usable_primitive_are_named():
         choose_primitive("vote", ALL, False, 1.0, asked({})[0])
     with pytest.raises(ValueError, match="include none of the primitives"):
         usable_primitives(("move",), ("grasp",))
+
+
+@pytest.mark.parametrize(
+    "occluded, grasp_q, expected, needed",
+    [
+        (True, 0.8, "grasp", ["grasp"]),  # covered, but the grasp net scores it graspable: no move
+        (True, 0.7, "move", ["grasp"]),  # covered and not graspable: the workflow's move
+        (False, 0.8, "grasp", ["grasp"]),
+        (False, 0.7, "push", ["grasp"]),
+    ],
+)
+def test_grasp_first_asks_the_grasp_before_the_occlusion(occluded, grasp_q, expected, needed):
+    best_q, calls = asked({"move": 9.0, "push": 0.1, "grasp": grasp_q})
+    assert choose_primitive("grasp_first", ALL, occluded, 0.75, best_q) == expected
+    assert calls == needed
+
+
+def test_grasp_first_is_the_workflow_until_q_star_is_calibrated_or_without_a_grasp_branch():
+    best_q, calls = asked({"move": -1.0, "push": 5.0, "grasp": 5.0})
+    assert choose_primitive("grasp_first", ALL, True, math.nan, best_q) == "move"
+    assert calls == []
+    assert choose_primitive("grasp_first", ("move", "push"), True, 0.75, asked({})[0]) == "move"

@@ -1,6 +1,6 @@
 import pytest
 
-from mpg_agents.seeds import DEMONSTRATION_SEED_OFFSET, RUN_SEED_STRIDE, episode_seed
+from mpg_agents.seeds import CALIBRATION_SEED_OFFSET, DEMONSTRATION_SEED_OFFSET, RUN_SEED_STRIDE, episode_seed
 
 
 def test_episode_seeds_by_hand():
@@ -9,6 +9,8 @@ def test_episode_seeds_by_hand():
     assert episode_seed(2, 5) == 2_000_011
     assert episode_seed(0, 0, demonstration=True) == 800_000
     assert episode_seed(1, 3, demonstration=True) == 1_800_006
+    assert episode_seed(0, 4, calibration=True) == 900_004
+    assert episode_seed(1, 3, calibration=True) == 1_900_006
 
 
 def test_seed_zero_keeps_training_and_demonstrations_off_the_evaluation_seeds():
@@ -18,8 +20,15 @@ def test_seed_zero_keeps_training_and_demonstrations_off_the_evaluation_seeds():
     demos = {episode_seed(0, i, demonstration=True) for i in (0, 9_999)}
     assert max(training) < 500_000 and min(demos) > 700_049
     assert max(demos) < RUN_SEED_STRIDE and DEMONSTRATION_SEED_OFFSET < RUN_SEED_STRIDE
+    calibrations = {episode_seed(0, j, calibration=True) for j in (0, 9_999)}
+    assert min(calibrations) > max(demos) and max(calibrations) < RUN_SEED_STRIDE == CALIBRATION_SEED_OFFSET + 100_003
 
 
 def test_negative_episode_index_is_refused():
     with pytest.raises(ValueError, match="episode index must be >= 0"):
         episode_seed(0, -1)
+
+
+def test_an_episode_is_a_demonstration_or_a_calibration():
+    with pytest.raises(ValueError, match="not both"):
+        episode_seed(0, 0, demonstration=True, calibration=True)

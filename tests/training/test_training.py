@@ -194,3 +194,48 @@ def test_shipped_training_configs_load(name):
     base, stages = training_settings(str(path))
     assert base.variant == "small" and [s.name for s in stages] == [s.name for s in TRAINING_STAGES]
     MPGNetConfig.for_variant(base.variant, **base.net_config)  # the net it describes builds
+
+
+def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):
+    """calibration_episodes: greedy grasp-only episodes before training set Q*_g to the median
+    Q of the grasps that took the target; the weights and the pipeline carry it, a resumed
+    run does not calibrate again, and nothing of it enters the replay."""
+    from mpg_agents.weights import read_checkpoint_header
+
+    net = {"trunk_depth": 2, "grasp_region": "target", "target_margin_px": -8}
+    stages = with_overrides(
+        TRAINING_STAGES, {"Stage2": {"iterations": 1, "calibration_episodes": 3, "calibrates_q_star": False}}
+    )
+    cfg = PipelineConfig(base=TrainConfig(**{**TINY, "net_config": net}), stages=stages[1:2])
+    logged: list[str] = []
+    summary = run_pipeline(cfg, tmp_path, log=logged.append)
+    record = json.loads((tmp_path / "Stage2" / "calibration.json").read_text())
+    assert record["episodes"] == 3 and record["target_grasps"] == len(record["target_grasp_q"]) >= 1
+    values = sorted(record["target_grasp_q"])
+    assert record["q_star"] == pytest.approx((values[(len(values) - 1) // 2] + values[len(values) // 2]) / 2)
+    assert record["q_star_before"] is None  # nothing calibrated before: NaN in, None on disk
+    assert summary["q_star"] == pytest.approx(record["q_star"])
+    assert read_checkpoint_header(tmp_path / "Stage2" / "weights.safetensors")["q_star"] == pytest.approx(record["q_star"])
+    assert sum("in its scenes" in line for line in logged) == 1
+    # The state after calibration holds an empty replay; a resumed learner skips calibrating.
+    resumed = Learner(TrainConfig(steps=2, **{**TINY, "net_config": net}), stages[1], tmp_path / "Stage2", log=logged.append)
+    assert resumed.resumed and resumed.policy.q_star == pytest.approx(record["q_star"])
+    resumed.run()
+    assert sum("in its scenes" in line for line in logged) == 1
+    resumed.env.close()
+
+
+def test_calibration_with_no_target_grasp_is_an_error(tmp_path, monkeypatch):
+    stage = with_overrides(TRAINING_STAGES, {"Stage2": {"calibration_episodes": 1, "calibrates_q_star": False}})[1]
+    learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
+    learner.env.unwrapped.max_motions = 1
+    real_step = learner.env.step
+
+    def missing_step(action):
+        obs, reward, terminated, truncated, info = real_step(action)
+        return obs, reward, terminated, truncated, {**info, "target_grasped": False}
+
+    monkeypatch.setattr(learner.env, "step", missing_step)
+    with pytest.raises(RuntimeError, match="no grasp took the target in 1 calibration episodes"):
+        learner.calibrate_in_scenes(1)
+    learner.env.close()

@@ -83,3 +83,12 @@ def test_learned_baselines_are_table_changes_at_the_same_budget():
         at_budget(TRAINING_STAGES, 10)
     with pytest.raises(ValueError, match="branches"):
         TrainingStage("s", "MPG-Stage5-v0", trainable=("move",), branches=("push", "grasp"))
+
+
+def test_calibration_episodes_are_checked():
+    stage = TrainingStage("S", "MPG-Stage5-v0", calibration_episodes=50)
+    assert TrainingStage.from_dict(stage.to_dict()) == stage
+    with pytest.raises(ValueError, match="calibration_episodes must be >= 0"):
+        TrainingStage("S", "MPG-Stage5-v0", calibration_episodes=-1)
+    with pytest.raises(ValueError, match="choose one"):
+        TrainingStage("S", "MPG-Stage2-v0", calibrates_q_star=True, calibration_episodes=5)
