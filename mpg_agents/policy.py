@@ -402,8 +402,11 @@ class MPGNetPolicy(DQNPolicy):
         **kwargs: Any,
     ) -> "MPGNetPolicy":
         """A policy built with the checkpoint's own configuration (variant, head, trunk depth),
-        with ``net_overrides`` of settings that change no weight (e.g. ``grasp_region``)."""
+        with ``net_overrides`` of settings that change no weight (e.g. ``grasp_region``); it
+        coordinates as the checkpoint was trained to (its header's ``coordination``, else the
+        paper's workflow) unless ``coordination`` is given."""
         header = read_checkpoint_header(path)
+        kwargs.setdefault("coordination", header.get("extra", {}).get("coordination", "workflow"))
         cfg = MPGNetConfig.from_checkpoint(header["config"], **dict(net_overrides or {}))
         # Build the branches the file has that the env can use (an error names none usable).
         kwargs.setdefault("branches", usable_primitives(resolve_primitives(action_space), header["primitives"]))

@@ -13,6 +13,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+from mpg_agents.coordination import check_coordination
 from mpg_agents.mpgnet import MPGNet
 from mpg_agents.mpgnet_config import MPGNetConfig
 from mpg_envs.actions import check_primitives
@@ -153,7 +154,7 @@ change them (:func:`export_weights`). The execution fields (``channels_last``,
 
 def export_weights(
     src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True,
-    settings: Mapping[str, Any] | None = None,
+    settings: Mapping[str, Any] | None = None, coordination: str | None = None,
 ) -> Path:
     """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
     the shared mask trunk), floating tensors stored as float16 (loading casts them back).
@@ -161,6 +162,8 @@ def export_weights(
     ``settings`` change :data:`SETTINGS_WITHOUT_WEIGHTS` in the copy's configuration (e.g. a
     move region measured better after training); the header's ``extra`` records them as
     ``settings_after_training``, so the copy never passes for what training used.
+    ``coordination`` records the rule the copy acts with (:mod:`mpg_agents.coordination`;
+    default: the checkpoint's), for checkpoints written before the learner recorded it.
     """
     settings = dict(settings or {})
     weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))
@@ -173,6 +176,8 @@ def export_weights(
         net = net.half()
     q_star = header.get("q_star")
     extra = {**header.get("extra", {}), "exported_from": str(src), "float16": half}
+    if coordination is not None:
+        extra["coordination"] = check_coordination(coordination)
     if settings:
         extra["settings_after_training"] = {**extra.get("settings_after_training", {}), **settings}
     save_mpgnet(net, dst, q_star=float("nan") if q_star is None else float(q_star), extra=extra)

@@ -65,3 +65,26 @@ def test_export_keeps_the_weights_and_records_changed_settings(tmp_path, small_n
     assert all(torch.equal(before[k].half() if before[k].is_floating_point() else before[k], after[k]) for k in before)
     with pytest.raises(ValueError, match=r"\['head_channels'\] change the architecture"):
         export_weights(src, tmp_path / "bad.safetensors", settings={"head_channels": 32})
+
+
+def test_a_checkpoint_acts_with_the_coordination_it_records(tmp_path, small_net):
+    """The header's coordination (the learner writes its stage's; export may set it) is what a
+    loaded policy coordinates with; a header without one gets the paper's workflow."""
+    import gymnasium as gym
+
+    import mpg_envs  # noqa: F401
+    from mpg_agents.policy import MPGNetPolicy
+    from mpg_agents.weights import export_weights, read_checkpoint_header
+
+    env = gym.make("MPG-Occluded-v0", num_objects=5)
+    src = tmp_path / "net.safetensors"
+    save_mpgnet(small_net, src, q_star=0.8)
+    assert MPGNetPolicy.from_weights(src, env.observation_space, env.action_space).coordination == "workflow"
+    dst = export_weights(src, tmp_path / "gf.safetensors", coordination="grasp_first")
+    assert read_checkpoint_header(dst)["extra"]["coordination"] == "grasp_first"
+    assert MPGNetPolicy.from_weights(dst, env.observation_space, env.action_space).coordination == "grasp_first"
+    given = MPGNetPolicy.from_weights(dst, env.observation_space, env.action_space, coordination="max_q")
+    assert given.coordination == "max_q"
+    with pytest.raises(ValueError, match="coordination must be one of"):
+        export_weights(src, tmp_path / "bad.safetensors", coordination="vote")
+    env.close()
