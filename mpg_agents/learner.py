@@ -245,7 +245,10 @@ class Learner:
             self.out, online=self.net, target=self.target, q_star=self.policy.q_star, optimizer=self.optimizer,
             replay=self.replay, rng=self.rng, counters=asdict(self.counters), config=self._saved_config(),
         )
-        save_mpgnet(self.net, self.out / "weights.safetensors", q_star=self.policy.q_star, extra={"env_id": self.stage.env_id, "coordination": self.stage.coordination})
+        save_mpgnet(
+            self.net, self.out / "weights.safetensors", q_star=self.policy.q_star,
+            extra={"env_id": self.stage.env_id, "coordination": self.stage.coordination},
+        )
 
     # ------------------------------------------------------------------ loop
     def run(self) -> dict[str, Any]:
