@@ -283,8 +283,9 @@ class Learner:
 
         Runs ``episodes`` grasp-only episodes of the current net, greedy and without learning
         (nothing enters the replay; calibration seeds, :func:`episode_seed`), and sets Q*_g to
-        the median Q of the grasps that took the target; ``calibration.json`` in the run folder
-        keeps every value. Raises ``RuntimeError`` when no grasp took the target.
+        the stage's ``calibration_quantile`` (the median by default) of the Q of the grasps
+        that took the target; ``calibration.json`` in the run folder keeps every value.
+        Raises ``RuntimeError`` when no grasp took the target.
         """
         if "grasp" not in self.policy.usable_primitives:
             raise ValueError(f"stage {self.stage.name}: Q*_g calibration needs a grasp branch, the net has {self.policy.branches}")
@@ -302,11 +303,12 @@ class Learner:
                 done = bool(terminated or truncated)
         if not taken:
             raise RuntimeError(f"stage {self.stage.name}: no grasp took the target in {episodes} calibration episodes")
-        q_star = float(np.median(taken))
+        quantile = self.stage.calibration_quantile
+        q_star = float(np.quantile(taken, quantile))
         before = self.policy.q_star
         self.policy.set_q_star(q_star)
-        record = {"episodes": episodes, "grasps": grasps, "target_grasps": len(taken), "q_star_before": before,
-                  "q_star": q_star, "target_grasp_q": taken}
+        record = {"episodes": episodes, "grasps": grasps, "target_grasps": len(taken), "quantile": quantile,
+                  "q_star_before": before, "q_star": q_star, "target_grasp_q": taken}
         (self.out / "calibration.json").write_text(json.dumps(json_safe(record), indent=1))
         self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {q_star:.4g} in its scenes "
                  f"({len(taken)} of {grasps} greedy grasps took the target in {episodes} episodes)")

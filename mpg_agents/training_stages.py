@@ -38,6 +38,9 @@ class TrainingStage:
             grasp-only episodes of the starting net, no learning (0: keep the Q*_g it is given).
             Q*_g from isolated targets (Stage II) sits above what a sure grasp in clutter
             scores, and the workflow then pushes instead of grasping.
+        calibration_quantile: which quantile of those grasps' Q becomes Q*_g: 0.5, the median
+            (where the Q of successful grasps settles, the paper's reading); a lower one
+            lets the workflow take more of the grasps that do succeed.
         uses_discriminator: the envs score states with the calibrated stage's grasp net.
         push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
         iterations: default number of training iterations.
@@ -56,6 +59,7 @@ class TrainingStage:
     coordination: str = "workflow"
     calibrates_q_star: bool = False
     calibration_episodes: int = 0
+    calibration_quantile: float = 0.5
     uses_discriminator: bool = False
     push_budget: int | None = None
     iterations: int = 1000
@@ -85,6 +89,8 @@ class TrainingStage:
         check_coordination(self.coordination)
         if self.calibration_episodes < 0:
             raise ValueError(f"stage {self.name}: calibration_episodes must be >= 0, got {self.calibration_episodes}")
+        if not 0.0 <= self.calibration_quantile <= 1.0:
+            raise ValueError(f"stage {self.name}: calibration_quantile must be in [0, 1], got {self.calibration_quantile}")
         if self.calibration_episodes and self.calibrates_q_star:
             raise ValueError(f"stage {self.name}: calibrates_q_star and calibration_episodes both set Q*_g; choose one")
         if self.alternate_every < 0 or self.iterations < 1:

@@ -223,6 +223,11 @@ def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):
     resumed.run()
     assert sum("in its scenes" in line for line in logged) == 1
     resumed.env.close()
+    # Another quantile of the same grasps (same seeds, same starting net): the lowest Q.
+    low = with_overrides(stages, {"Stage2": {"calibration_quantile": 0.0}})[1]
+    learner = Learner(TrainConfig(steps=1, **{**TINY, "net_config": net}), low, tmp_path / "low", log=lambda s: None)
+    assert learner.calibrate_in_scenes(3) == pytest.approx(min(record["target_grasp_q"]))
+    learner.env.close()
 
 
 def test_calibration_with_no_target_grasp_is_an_error(tmp_path, monkeypatch):

@@ -92,3 +92,5 @@ def test_calibration_episodes_are_checked():
         TrainingStage("S", "MPG-Stage5-v0", calibration_episodes=-1)
     with pytest.raises(ValueError, match="choose one"):
         TrainingStage("S", "MPG-Stage2-v0", calibrates_q_star=True, calibration_episodes=5)
+    with pytest.raises(ValueError, match=r"calibration_quantile must be in \[0, 1\]"):
+        TrainingStage("S", "MPG-Stage5-v0", calibration_episodes=5, calibration_quantile=1.5)
