@@ -122,6 +122,7 @@ class Counters:
     window_grasps: int = 0
     window_target_grasps: int = 0
     successful_grasp_q: list[float] = field(default_factory=list)  # for Q*_g calibration
+    calibrated_at: int = -1  # iteration of the last in-scene Q*_g calibration (-1: none)
 
 
 class StopRequested(Exception):
@@ -196,6 +197,7 @@ class Learner:
             move_band_m=self.policy.net_config.move_band_m if self.policy.net_config.move_region == "top" else None,
         )
         self.counters = Counters()
+        self._calibration_env: gym.Env | None = None
         self._stop = False
         self._log: TrainingLog | None = None
         self.resumed = False
@@ -255,7 +257,7 @@ class Learner:
         """Train until the configured iterations are done; returns the final summary."""
         from tqdm import tqdm
 
-        if self.stage.calibration_episodes and not self.resumed:  # a fresh run: the starting net
+        if self.stage.calibration_episodes and self.counters.calibrated_at < 0:  # the starting net
             self.calibrate_in_scenes(self.stage.calibration_episodes)
         if self.config.demonstration_episodes and not self.resumed:  # a fresh run: iteration 0, empty replay
             self.add_demonstrations()
@@ -276,6 +278,8 @@ class Learner:
             bar.close()
             for s, h in handlers.items():
                 signal.signal(s, h)
+        if self.stage.calibrate_every and self.counters.calibrated_at != self.counters.iteration:
+            self.calibrate_in_scenes(self.stage.calibration_episodes)  # the weights ship with it
         return {"iteration": self.counters.iteration, "episodes": self.counters.episode, "q_star": self.calibrated_q_star()}
 
     def calibrate_in_scenes(self, episodes: int) -> float:
@@ -289,14 +293,17 @@ class Learner:
         """
         if "grasp" not in self.policy.usable_primitives:
             raise ValueError(f"stage {self.stage.name}: Q*_g calibration needs a grasp branch, the net has {self.policy.branches}")
+        if self._calibration_env is None:  # its own env: a training episode in progress is left as it is
+            self._calibration_env = self._make_env(self.env.unwrapped.num_objects)
+        env = self._calibration_env
         taken: list[float] = []
         grasps = 0
-        for k in range(episodes):
-            obs, _ = self.env.reset(seed=episode_seed(self.config.seed, k, calibration=True))
+        for k in range(episodes):  # the same scenes every time: one measuring stick through the stage
+            obs, _ = env.reset(seed=episode_seed(self.config.seed, k, calibration=True))
             done = False
             while not done:
                 decision = self.policy.decide(obs, "grasp")
-                obs, _, terminated, truncated, info = self.env.step(decision.action)
+                obs, _, terminated, truncated, info = env.step(decision.action)
                 grasps += 1
                 if info["target_grasped"] and math.isfinite(decision.q_value):
                     taken.append(decision.q_value)
@@ -307,11 +314,17 @@ class Learner:
         q_star = float(np.quantile(taken, quantile))
         before = self.policy.q_star
         self.policy.set_q_star(q_star)
-        record = {"episodes": episodes, "grasps": grasps, "target_grasps": len(taken), "quantile": quantile,
-                  "q_star_before": before, "q_star": q_star, "target_grasp_q": taken}
-        (self.out / "calibration.json").write_text(json.dumps(json_safe(record), indent=1))
-        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {q_star:.4g} in its scenes "
+        c = self.counters
+        path = self.out / "calibration.json"
+        history = json.loads(path.read_text()).get("history", []) if path.is_file() and c.calibrated_at >= 0 else []
+        history.append({"iteration": c.iteration, "q_star": q_star, "target_grasps": len(taken), "grasps": grasps})
+        record = {"iteration": c.iteration, "episodes": episodes, "grasps": grasps, "target_grasps": len(taken),
+                  "quantile": quantile, "q_star_before": before, "q_star": q_star, "target_grasp_q": taken,
+                  "history": history}
+        path.write_text(json.dumps(json_safe(record), indent=1))
+        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {q_star:.4g} in its scenes at iteration {c.iteration} "
                  f"({len(taken)} of {grasps} greedy grasps took the target in {episodes} episodes)")
+        c.calibrated_at = c.iteration
         self.save_state()
         return q_star
 
@@ -382,6 +395,9 @@ class Learner:
         if terminated or truncated:
             self._log.episode_end(c.iteration, info)
             c.episode += 1
+            every = self.stage.calibrate_every
+            if every and c.iteration < self.steps and c.iteration // every > max(c.calibrated_at, 0) // every:
+                self.calibrate_in_scenes(self.stage.calibration_episodes)
             return self._reset_episode()
         return next_obs
 

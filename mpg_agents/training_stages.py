@@ -41,6 +41,10 @@ class TrainingStage:
         calibration_quantile: which quantile of those grasps' Q becomes Q*_g: 0.5, the median
             (where the Q of successful grasps settles, the paper's reading); a lower one
             lets the workflow take more of the grasps that do succeed.
+        calibrate_every: with ``calibration_episodes``, calibrate again at the first episode
+            end after every this many iterations and once at the stage's end, so Q*_g follows
+            the grasp net's Q scale while it learns (0: only before training). A fixed Q*_g
+            that the learning grasp Q drifts below turns the workflow into pushing.
         uses_discriminator: the envs score states with the calibrated stage's grasp net.
         push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
         iterations: default number of training iterations.
@@ -60,6 +64,7 @@ class TrainingStage:
     calibrates_q_star: bool = False
     calibration_episodes: int = 0
     calibration_quantile: float = 0.5
+    calibrate_every: int = 0
     uses_discriminator: bool = False
     push_budget: int | None = None
     iterations: int = 1000
@@ -91,6 +96,8 @@ class TrainingStage:
             raise ValueError(f"stage {self.name}: calibration_episodes must be >= 0, got {self.calibration_episodes}")
         if not 0.0 <= self.calibration_quantile <= 1.0:
             raise ValueError(f"stage {self.name}: calibration_quantile must be in [0, 1], got {self.calibration_quantile}")
+        if self.calibrate_every < 0 or (self.calibrate_every and not self.calibration_episodes):
+            raise ValueError(f"stage {self.name}: calibrate_every must be 0, or >= 1 with calibration_episodes, got {self.calibrate_every}")
         if self.calibration_episodes and self.calibrates_q_star:
             raise ValueError(f"stage {self.name}: calibrates_q_star and calibration_episodes both set Q*_g; choose one")
         if self.alternate_every < 0 or self.iterations < 1:

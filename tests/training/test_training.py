@@ -244,3 +244,23 @@ def test_calibration_with_no_target_grasp_is_an_error(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="no grasp took the target in 1 calibration episodes"):
         learner.calibrate_in_scenes(1)
     learner.env.close()
+
+
+def test_calibrate_every_follows_the_grasp_net_and_ends_calibrated(tmp_path):
+    """calibrate_every: Q*_g is measured again while the stage learns (at episode ends) and
+    once at its end, on the same calibration scenes; the weights carry the last value."""
+    from mpg_agents.weights import read_checkpoint_header
+
+    net = {"trunk_depth": 2, "grasp_region": "target", "target_margin_px": -8}
+    stage = with_overrides(
+        TRAINING_STAGES, {"Stage2": {"calibration_episodes": 1, "calibrate_every": 2, "calibrates_q_star": False}}
+    )[1]
+    learner = Learner(TrainConfig(steps=6, **{**TINY, "net_config": net}), stage, tmp_path, log=lambda s: None)
+    learner.run()
+    record = json.loads((tmp_path / "calibration.json").read_text())
+    its = [h["iteration"] for h in record["history"]]
+    assert its[0] == 0 and its[-1] == 6 and its == sorted(set(its)) and record["iteration"] == 6
+    assert record["q_star"] == record["history"][-1]["q_star"] == pytest.approx(learner.policy.q_star)
+    assert read_checkpoint_header(tmp_path / "weights.safetensors")["q_star"] == pytest.approx(record["q_star"])
+    assert learner.counters.calibrated_at == 6
+    learner.env.close()

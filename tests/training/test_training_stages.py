@@ -94,3 +94,5 @@ def test_calibration_episodes_are_checked():
         TrainingStage("S", "MPG-Stage2-v0", calibrates_q_star=True, calibration_episodes=5)
     with pytest.raises(ValueError, match=r"calibration_quantile must be in \[0, 1\]"):
         TrainingStage("S", "MPG-Stage5-v0", calibration_episodes=5, calibration_quantile=1.5)
+    with pytest.raises(ValueError, match="calibrate_every must be 0, or >= 1 with calibration_episodes"):
+        TrainingStage("S", "MPG-Stage5-v0", calibrate_every=300)
