@@ -18,6 +18,8 @@ name, e.g. ``stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded
 
 from __future__ import annotations
 
+import math
+
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -92,7 +94,7 @@ class NetworkPolicy:
     def __init__(
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
         grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
-        move_region: str | None = None,
+        move_region: str | None = None, q_star: float | None = None,
     ):
         import torch
 
@@ -110,6 +112,10 @@ class NetworkPolicy:
         self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
         if coordination is not None:
             self.policy.set_coordination(coordination)
+        if q_star is not None:
+            if not math.isfinite(q_star):
+                raise ValueError(f"q_star must be a finite number, got {q_star!r}")
+            self.policy.set_q_star(q_star)
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
         self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
         if grasp_region is not None:
@@ -118,6 +124,8 @@ class NetworkPolicy:
             self.name += f" [target margin: {target_margin_px} px]"
         if move_region is not None:
             self.name += f" [move region: {move_region}]"
+        if q_star is not None:
+            self.name += f" [Q*_g: {q_star:g}]"
         self.memory = None
         if avoid_repeats:
             from mpg_envs.action_memory import ActionMemory, RepeatRule

@@ -163,6 +163,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                         help="network policies: grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp region 'target'")
     parser.add_argument("--move-region", choices=("rectangle", "top"),
                         help="network policies: where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
+    parser.add_argument("--q-star", type=float,
+                        help="network policies: grasp threshold Q*_g (override the checkpoint's calibrated one)")
     parser.add_argument("--avoid-repeats", action="store_true",
                         help="network policies: never repeat an action on an unchanged scene (take the best other one)")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
@@ -191,6 +193,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             extra += (("move_region", args.move_region),)
         if args.avoid_repeats:
             extra += (("avoid_repeats", True),)
+        if args.q_star is not None:
+            extra += (("q_star", args.q_star),)
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
         result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend)

@@ -264,3 +264,24 @@ def test_calibrate_every_follows_the_grasp_net_and_ends_calibrated(tmp_path):
     assert read_checkpoint_header(tmp_path / "weights.safetensors")["q_star"] == pytest.approx(record["q_star"])
     assert learner.counters.calibrated_at == 6
     learner.env.close()
+
+
+def test_mpg_eval_q_star_overrides_the_checkpoint(tmp_path, capsys):
+    from mpg_agents.baselines import NetworkPolicy
+    from mpg_agents.weights import save_mpgnet
+    import gymnasium as gym
+
+    cfg = TrainConfig(steps=1, **TINY)
+    learner = Learner(cfg, "MPG-Stage2-v0", tmp_path / "run", log=lambda s: None)
+    path = tmp_path / "net.safetensors"
+    save_mpgnet(learner.net, path, q_star=1.5)
+    learner.env.close()
+    env = gym.make("MPG-Occluded-v0", num_objects=5)
+    assert NetworkPolicy(path, env).policy.q_star == 1.5
+    policy = NetworkPolicy(path, env, q_star=0.5)
+    assert policy.policy.q_star == 0.5 and policy.name.endswith("[Q*_g: 0.5]")
+    with pytest.raises(ValueError, match="q_star must be a finite number"):
+        NetworkPolicy(path, env, q_star=float("nan"))
+    env.close()
+    assert eval_main(["--policy", str(path), "--env", "MPG-Stage2-v0", "--episodes", "1", "--q-star", "0.25", "--quiet"]) == 0
+    assert "[Q*_g: 0.25]" in capsys.readouterr().out
