@@ -34,7 +34,7 @@ class TrainingStage:
         coordination: how the primitive is chosen (:mod:`mpg_agents.coordination`).
         calibrates_q_star: Q*_g is calibrated from this stage's successful grasps.
         calibration_episodes: before it trains, the stage calibrates Q*_g again in its own
-            scenes: the median Q of the greedy grasps that take the target in this many
+            scenes from the Q of the greedy grasps that take the target in this many
             grasp-only episodes of the starting net, no learning (0: keep the Q*_g it is given).
             Q*_g from isolated targets (Stage II) sits above what a sure grasp in clutter
             scores, and the workflow then pushes instead of grasping.
