@@ -1,0 +1,40 @@
+"""Q*_g of the shipped MPGNet calibrated in N-object Stage V scenes, by the training procedure
+(``Learner.calibrate_in_scenes``: 50 greedy grasp-only episodes, calibration seeds, no learning).
+
+    python benchmarks/results/grasp_first/calibrate_30objects.py --out /tmp/cal30 --objects 30
+
+Writes ``<out>/calibration.json`` (``calibration_30objects.json`` beside this file is its output).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import replace
+
+from mpg_agents import training_stages as ts
+from mpg_agents.cli import training_settings
+from mpg_agents.learner import Learner
+
+CONFIG = "mpg_agents/checkpoints/mpgnet_train.toml"
+DISCRIMINATOR = "benchmarks/results/zero_init/Stage2/weights.safetensors"  # the shipped run's Stage II
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", required=True, help="a fresh folder for the learner's state and calibration.json")
+    parser.add_argument("--objects", type=int, default=30)
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--policy", default="mpg_agents/checkpoints/mpgnet_small.safetensors")
+    args = parser.parse_args()
+    base, stages = training_settings(CONFIG)
+    base = replace(base, discriminator=DISCRIMINATOR, seed=0, num_objects=args.objects)
+    learner = Learner(base, ts.stage_for_env("MPG-Stage5-v0", stages), args.out, init=args.policy)
+    start = time.perf_counter()
+    print(f"Q*_g in the checkpoint: {learner.policy.q_star:.4f}")
+    learner.calibrate_in_scenes(args.episodes)
+    print(f"{time.perf_counter() - start:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
