@@ -267,9 +267,10 @@ def test_calibrate_every_follows_the_grasp_net_and_ends_calibrated(tmp_path):
 
 
 def test_mpg_eval_q_star_overrides_the_checkpoint(tmp_path, capsys):
+    import gymnasium as gym
+
     from mpg_agents.baselines import NetworkPolicy
     from mpg_agents.weights import save_mpgnet
-    import gymnasium as gym
 
     cfg = TrainConfig(steps=1, **TINY)
     learner = Learner(cfg, "MPG-Stage2-v0", tmp_path / "run", log=lambda s: None)
