@@ -1,4 +1,4 @@
-"""Q*_g of the shipped MPGNet calibrated in N-object Stage V scenes, by the training procedure
+"""Q*_g of the grasp-first MPGNet (the previous release's shipped net) calibrated in N-object Stage V scenes, by the training procedure
 (``Learner.calibrate_in_scenes``: 50 greedy grasp-only episodes, calibration seeds, no learning).
 
     python benchmarks/results/grasp_first/calibrate_30objects.py --out /tmp/cal30 --objects 30
@@ -17,7 +17,7 @@ from mpg_agents.cli import training_settings
 from mpg_agents.learner import Learner
 
 CONFIG = "mpg_agents/checkpoints/mpgnet_train.toml"
-DISCRIMINATOR = "benchmarks/results/zero_init/Stage2/weights.safetensors"  # the shipped run's Stage II
+DISCRIMINATOR = "benchmarks/results/zero_init/Stage2/weights.safetensors"  # its Stage II
 
 
 def main() -> None:
@@ -25,7 +25,7 @@ def main() -> None:
     parser.add_argument("--out", required=True, help="a fresh folder for the learner's state and calibration.json")
     parser.add_argument("--objects", type=int, default=30)
     parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--policy", default="mpg_agents/checkpoints/mpgnet_small.safetensors")
+    parser.add_argument("--policy", default="benchmarks/results/grasp_first/mpgnet_small.safetensors")
     args = parser.parse_args()
     base, stages = training_settings(CONFIG)
     base = replace(base, discriminator=DISCRIMINATOR, seed=0, num_objects=args.objects)
