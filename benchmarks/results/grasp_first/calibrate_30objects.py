@@ -16,7 +16,7 @@ from mpg_agents import training_stages as ts
 from mpg_agents.cli import training_settings
 from mpg_agents.learner import Learner
 
-CONFIG = "mpg_agents/checkpoints/mpgnet_train.toml"
+CONFIG = "benchmarks/results/grasp_first/train.toml"  # the settings that net trained with
 DISCRIMINATOR = "benchmarks/results/zero_init/Stage2/weights.safetensors"  # its Stage II
 
 
