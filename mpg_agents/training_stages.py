@@ -188,8 +188,12 @@ def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str,
 
 
 def grasp_only_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
-    """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter."""
-    return _learned_baseline(stages, [("grasp",)], trainable=("grasp",), branches=("grasp",), alternate_every=0)
+    """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter
+    (no Q*_g calibration there: a net with one primitive never consults Q*_g)."""
+    return _learned_baseline(
+        stages, [("grasp",)], trainable=("grasp",), branches=("grasp",), alternate_every=0,
+        calibration_episodes=0, calibrate_every=0,
+    )
 
 
 def target_vpg_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:

@@ -64,7 +64,7 @@ def test_branch_init_pairs_are_checked_and_round_trip():
 
 
 def test_learned_baselines_are_table_changes_at_the_same_budget():
-    from mpg_agents.training_stages import BASELINES, at_budget
+    from mpg_agents.training_stages import BASELINES, at_budget, with_overrides
 
     total = sum(s.iterations for s in TRAINING_STAGES)
     for name, make in BASELINES.items():
@@ -74,6 +74,9 @@ def test_learned_baselines_are_table_changes_at_the_same_budget():
         assert all(s.uses_discriminator or s.trainable == ("grasp",) for s in table)
     grasp_only = BASELINES["grasp-only"](TRAINING_STAGES)
     assert [s.name for s in grasp_only] == ["Stage1", "Stage2", "Stage5"] and grasp_only[-1].branches == ("grasp",)
+    calibrated = with_overrides(TRAINING_STAGES, {"Stage5": {"calibration_episodes": 50, "calibrate_every": 300}})
+    assert (BASELINES["grasp-only"](calibrated)[-1].calibration_episodes, BASELINES["grasp-only"](calibrated)[-1].calibrate_every) == (0, 0)
+    assert BASELINES["push-grasp"](calibrated)[-1].calibration_episodes == 50  # its Q*_g rule uses it
     vpg = BASELINES["to-vpg"](TRAINING_STAGES)
     assert vpg[-1].coordination == "max_q" and vpg[-1].alternate_every == 0 and vpg[-1].trainable == ("push", "grasp")
     epg = BASELINES["push-grasp"](TRAINING_STAGES)
