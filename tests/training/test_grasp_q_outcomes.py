@@ -1,0 +1,36 @@
+"""The ROC AUC and summary of benchmarks/grasp_q_outcomes.py on hand-checked cases."""
+
+import importlib.util
+import math
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "grasp_q_outcomes.py"
+spec = importlib.util.spec_from_file_location("grasp_q_outcomes", BENCH)
+bench = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(bench)
+
+
+def test_auc_separates_and_ties():
+    assert bench.roc_auc([0.1, 0.2, 0.9, 0.8], [False, False, True, True]) == 1.0
+    assert bench.roc_auc([0.9, 0.8, 0.1, 0.2], [False, False, True, True]) == 0.0
+    assert bench.roc_auc([0.5, 0.5, 0.5], [True, False, False]) == 0.5
+    # one positive (0.6) above one of two negatives (0.4) and below the other (0.7)
+    assert bench.roc_auc([0.6, 0.4, 0.7], [True, False, False]) == 0.5
+    assert math.isnan(bench.roc_auc([0.3, 0.4], [True, True]))
+    with pytest.raises(ValueError, match="one length"):
+        bench.roc_auc([0.1, 0.2], [True])
+
+
+def test_summary_counts_and_shares():
+    rec = lambda q, occ, took, fail: {"q": q, "occluded": occ, "target": took, "wrong": False, "failure": fail}  # noqa: E731
+    records = [rec(0.9, False, True, None), rec(0.8, True, False, "closed_empty"),
+               rec(0.7, False, True, None), rec(0.6, True, False, "closed_empty")]
+    out = bench.summarise(records, q_star=0.75)
+    assert (out["grasps"], out["target"], out["failures"]) == (4, 2, {"closed_empty": 2})
+    assert (out["target_share_covered"], out["target_share_uncovered"]) == (0.0, 1.0)
+    assert out["q_auc"] == 0.75  # 0.9 beats both misses, 0.7 beats only 0.6
+    assert (out["q_at_least_q_star"], out["target_share_q_at_least_q_star"]) == (2, 0.5)
+    with pytest.raises(ValueError, match="no grasps"):
+        bench.summarise([], q_star=0.75)
