@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections import Counter
 from typing import Sequence
 
 import gymnasium as gym
@@ -26,6 +27,7 @@ import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.baselines import make_policy
+from mpg_agents.evaluate import run_episodes
 from mpg_envs.threads import set_torch_threads
 
 
@@ -46,29 +48,41 @@ def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
     return float((greater + 0.5 * ties) / (len(pos) * len(neg)))
 
 
+class _LastQ:
+    """An MPGNet policy acting greedily that remembers the Q of the decision it just made."""
+
+    def __init__(self, network_policy):
+        self.net = network_policy
+        self.q = float("nan")
+
+    def reset(self) -> None:
+        self.net.reset()
+
+    def act(self, obs) -> int:
+        decision = self.net.policy.decide(obs)
+        self.q = float(decision.q_value)
+        return int(decision.action)
+
+
 def grasp_records(policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int) -> tuple[str, float, list[dict]]:
     """The policy's name, its Q*_g and every grasp of ``episodes`` greedy episodes (episode
-    ``i`` reset with ``seed + i``)."""
+    ``i`` reset with ``seed + i``, as ``mpg-eval`` runs them)."""
     env = gym.make(env_id, num_objects=num_objects)
     policy = make_policy(policy_name, env)
     if not hasattr(policy, "policy"):
         raise ValueError(f"--policy must be an MPGNet checkpoint (or 'shipped'), got {policy_name!r}")
+    acting = _LastQ(policy)
     records = []
-    for i in range(episodes):
-        obs, _ = env.reset(seed=seed + i)
-        policy.reset()
-        done = False
-        while not done:
-            decision = policy.policy.decide(obs)
-            occluded = bool(np.asarray(obs["occluded"]))
-            obs, _, terminated, truncated, info = env.step(decision.action)
-            done = terminated or truncated
-            if decision.primitive == "grasp":
-                records.append({
-                    "seed": seed + i, "q": float(decision.q_value), "occluded": occluded,
-                    "target": bool(info["target_grasped"]), "wrong": bool(info["wrong_grasp"]),
-                    "failure": info["grasp_failure"],
-                })
+
+    def on_step(index: int, reward: float, info: dict) -> None:
+        if info["primitive"] == "grasp":
+            records.append({
+                "seed": seed + index, "q": acting.q, "occluded": bool(info["occluded_before"]),
+                "target": bool(info["target_grasped"]), "wrong": bool(info["wrong_grasp"]),
+                "failure": info["grasp_failure"],
+            })
+
+    run_episodes(acting, env, range(episodes), seed, on_step=on_step)
     env.close()
     return policy.name, float(policy.policy.q_star), records
 
@@ -83,15 +97,12 @@ def summarise(records: list[dict], q_star: float) -> dict:
     edges = np.quantile(q, [0.25, 0.5, 0.75])
     quartile = np.searchsorted(edges, q, side="right")
     share = lambda sel: float(took[sel].mean()) if sel.any() else float("nan")  # noqa: E731
-    failures: dict[str, int] = {}
-    for r in records:
-        if r["failure"] is not None:
-            failures[r["failure"]] = failures.get(r["failure"], 0) + 1
+    failures = Counter(r["failure"] for r in records if r["failure"] is not None)
     return {
         "grasps": len(records),
         "target": int(took.sum()),
         "wrong": int(sum(r["wrong"] for r in records)),
-        "failures": failures,
+        "failures": dict(failures),
         "target_share_covered": share(occluded),
         "covered": int(occluded.sum()),
         "target_share_uncovered": share(~occluded),

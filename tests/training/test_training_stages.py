@@ -75,7 +75,8 @@ def test_learned_baselines_are_table_changes_at_the_same_budget():
     grasp_only = BASELINES["grasp-only"](TRAINING_STAGES)
     assert [s.name for s in grasp_only] == ["Stage1", "Stage2", "Stage5"] and grasp_only[-1].branches == ("grasp",)
     calibrated = with_overrides(TRAINING_STAGES, {"Stage5": {"calibration_episodes": 50, "calibrate_every": 300}})
-    assert (BASELINES["grasp-only"](calibrated)[-1].calibration_episodes, BASELINES["grasp-only"](calibrated)[-1].calibrate_every) == (0, 0)
+    grasping = BASELINES["grasp-only"](calibrated)[-1]
+    assert (grasping.calibration_episodes, grasping.calibrate_every) == (0, 0)
     assert BASELINES["push-grasp"](calibrated)[-1].calibration_episodes == 50  # its Q*_g rule uses it
     vpg = BASELINES["to-vpg"](TRAINING_STAGES)
     assert vpg[-1].coordination == "max_q" and vpg[-1].alternate_every == 0 and vpg[-1].trainable == ("push", "grasp")

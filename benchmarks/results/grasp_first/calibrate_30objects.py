@@ -4,6 +4,8 @@
     python benchmarks/results/grasp_first/calibrate_30objects.py --out /tmp/cal30 --objects 30
 
 Writes ``<out>/calibration.json`` (``calibration_30objects.json`` beside this file is its output).
+``--config``, ``--env`` and ``--policy`` calibrate another net with its own settings the same way
+(``benchmarks/results/grasp_probe/``: the occluded-curriculum config, ``MPG-Occluded-v0``, 10 objects).
 """
 
 from __future__ import annotations
@@ -26,10 +28,12 @@ def main() -> None:
     parser.add_argument("--objects", type=int, default=30)
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--policy", default="benchmarks/results/grasp_first/mpgnet_small.safetensors")
+    parser.add_argument("--config", default=CONFIG, help="the settings the net trained with")
+    parser.add_argument("--env", default="MPG-Stage5-v0", help="the env of the stage whose calibration settings apply")
     args = parser.parse_args()
-    base, stages = training_settings(CONFIG)
+    base, stages = training_settings(args.config)
     base = replace(base, discriminator=DISCRIMINATOR, seed=0, num_objects=args.objects)
-    learner = Learner(base, ts.stage_for_env("MPG-Stage5-v0", stages), args.out, init=args.policy)
+    learner = Learner(base, ts.stage_for_env(args.env, stages), args.out, init=args.policy)
     start = time.perf_counter()
     print(f"Q*_g in the checkpoint: {learner.policy.q_star:.4f}")
     learner.calibrate_in_scenes(args.episodes)
