@@ -358,11 +358,9 @@ class Learner:
         return linear_epsilon(self.counters.iteration, cfg.epsilon_start, cfg.epsilon_end, decay)
 
     def active_branches(self) -> tuple[str, ...]:
-        """The branches learning this iteration (an alternating stage trains them in turn)."""
-        every = self.stage.alternate_every
-        if every <= 0:
-            return self.trainable
-        return (self.trainable[(self.counters.iteration // every) % len(self.trainable)],)
+        """The branches learning this iteration (an alternating stage trains them in turn, a
+        stage with a finish trains its ``finish_trainable`` alone at the end)."""
+        return self.stage.branches_at(self.counters.iteration, self.steps, self.trainable)
 
     def iteration(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         c = self.counters

@@ -31,6 +31,12 @@ class TrainingStage:
             over the stage; ``None`` keeps the env's count.
         alternate_every: train the trainable nets in turn, switching every this many
             iterations (0: all together).
+        alternate_shares: ``((branch, turns), ...)``: in each round of the alternation this
+            branch trains ``turns`` turns of ``alternate_every`` iterations in a row (the others
+            one), e.g. ``(("grasp", 3),)`` gives the grasp net 3/5 of a three-net stage's steps.
+        finish_iterations: the stage's last this many iterations train only ``finish_trainable``
+            (0: no finish), e.g. the grasp net alone after the three nets' alternation.
+        finish_trainable: the branches that learn in the finish.
         coordination: how the primitive is chosen (:mod:`mpg_agents.coordination`).
         calibrates_q_star: Q*_g is calibrated from this stage's successful grasps.
         calibration_episodes: before it trains, the stage calibrates Q*_g again in its own
@@ -60,6 +66,9 @@ class TrainingStage:
     trainable: tuple[str, ...] | None = None
     objects: tuple[int, int] | None = None
     alternate_every: int = 0
+    alternate_shares: tuple[tuple[str, int], ...] = ()
+    finish_iterations: int = 0
+    finish_trainable: tuple[str, ...] = ()
     coordination: str = "workflow"
     calibrates_q_star: bool = False
     calibration_episodes: int = 0
@@ -74,7 +83,7 @@ class TrainingStage:
     def __post_init__(self) -> None:
         if self.branches is not None:
             object.__setattr__(self, "branches", check_primitives(self.branches))
-            outside = sorted(set(self.trainable or ()) - set(self.branches))
+            outside = sorted((set(self.trainable or ()) | set(self.finish_trainable)) - set(self.branches))
             if outside:
                 raise ValueError(f"stage {self.name}: trains {outside}, which are not among its branches {self.branches}")
         pairs = tuple(tuple(pair) for pair in self.branch_init)
@@ -84,6 +93,18 @@ class TrainingStage:
             for primitive in pair:
                 check_primitives((primitive,))
         object.__setattr__(self, "branch_init", pairs)
+        shares = tuple((str(branch), int(turns)) for branch, turns in self.alternate_shares)
+        for branch, turns in shares:
+            check_primitives((branch,))
+            if turns < 1:
+                raise ValueError(f"stage {self.name}: alternate_shares gives {branch!r} {turns} turns; need >= 1")
+        object.__setattr__(self, "alternate_shares", shares)
+        if self.finish_trainable:
+            object.__setattr__(self, "finish_trainable", check_primitives(self.finish_trainable))
+        if not 0 <= self.finish_iterations < self.iterations:
+            raise ValueError(f"stage {self.name}: finish_iterations must be in [0, iterations={self.iterations}), got {self.finish_iterations}")
+        if bool(self.finish_iterations) != bool(self.finish_trainable):
+            raise ValueError(f"stage {self.name}: finish_iterations and finish_trainable go together (got {self.finish_iterations}, {self.finish_trainable})")
         if self.trainable is not None:
             object.__setattr__(self, "trainable", check_primitives(self.trainable))
         if self.objects is not None:
@@ -105,6 +126,23 @@ class TrainingStage:
         if self.push_budget is not None and self.push_budget < 0:
             raise ValueError(f"stage {self.name}: push_budget must be None or >= 0, got {self.push_budget}")
 
+    def branches_at(self, iteration: int, steps: int, trainable: tuple[str, ...]) -> tuple[str, ...]:
+        """The branches that learn at ``iteration`` (0-based) of a run of ``steps`` iterations
+        whose trainable branches are ``trainable``: the finish's, else the alternation's turn."""
+        if self.finish_iterations and iteration >= steps - self.finish_iterations:
+            return self.finish_trainable
+        if self.alternate_every <= 0:
+            return trainable
+        shares = dict(self.alternate_shares)
+        rounds = [branch for branch in trainable for _ in range(shares.get(branch, 1))]
+        return (rounds[(iteration // self.alternate_every) % len(rounds)],)
+
+    @property
+    def reads_q_star(self) -> bool:
+        """Whether this stage's coordination ever consults Q*_g: not by the largest Q, not with
+        one branch."""
+        return self.coordination != "max_q" and (self.branches is None or len(self.branches) > 1)
+
     def objects_at(self, fraction: float) -> int | None:
         """The curriculum's object count after ``fraction`` (0..1) of the stage; ``None``: the env's."""
         if self.objects is None:
@@ -115,6 +153,7 @@ class TrainingStage:
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         data["branch_init"] = [list(pair) for pair in self.branch_init]
+        data["alternate_shares"] = [list(pair) for pair in self.alternate_shares]
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
     @classmethod
@@ -166,9 +205,23 @@ def without_multistage(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, 
 
 
 def without_alternation(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
-    """Ablation "w/o alternating training": stages that alternate train all their nets at once
-    and choose actions by the largest Q."""
-    return tuple(replace(s, alternate_every=0, coordination="max_q") if s.alternate_every else s for s in stages)
+    """Ablation "w/o alternating training": stages that alternate (or finish with some nets
+    alone) train all their nets at once and choose actions by the largest Q."""
+    return tuple(
+        _without_unused_calibration(
+            replace(s, alternate_every=0, alternate_shares=(), finish_iterations=0, finish_trainable=(), coordination="max_q")
+        )
+        if s.alternate_every or s.finish_iterations else s
+        for s in stages
+    )
+
+
+def _without_unused_calibration(stage: TrainingStage) -> TrainingStage:
+    """``stage`` without in-scene Q*_g calibrations when its coordination never reads Q*_g:
+    each costs 50 episodes (about a minute and a half on 2 cores) for a value nothing uses."""
+    if stage.reads_q_star or not stage.calibration_episodes:
+        return stage
+    return replace(stage, calibration_episodes=0, calibrate_every=0)
 
 
 def at_budget(stages: Sequence[TrainingStage], iterations: int) -> tuple[TrainingStage, ...]:
@@ -183,22 +236,20 @@ def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str,
     """The earlier stages that train only ``keep``'s branch sets, then the last stage changed by
     ``last`` (no branch initialisation), with the whole budget of ``stages``."""
     kept = tuple(s for s in stages[:-1] if s.trainable in keep)
-    final = replace(stages[-1], branch_init=(), **last)
+    final = _without_unused_calibration(replace(stages[-1], branch_init=(), **last))
     return at_budget((*kept, final), sum(s.iterations for s in stages))
 
 
 def grasp_only_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
     """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter
     (no Q*_g calibration there: a net with one primitive never consults Q*_g)."""
-    return _learned_baseline(
-        stages, [("grasp",)], trainable=("grasp",), branches=("grasp",), alternate_every=0,
-        calibration_episodes=0, calibrate_every=0,
-    )
+    return _learned_baseline(stages, [("grasp",)], trainable=("grasp",), branches=("grasp",), alternate_every=0)
 
 
 def target_vpg_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
     """Baseline "Target-Oriented VPG": after the grasp stages, push and grasp nets trained
-    together in the joint stage's clutter, the action by the larger Q (no move, no Q*_g rule)."""
+    together in the joint stage's clutter, the action by the larger Q (no move, no Q*_g rule,
+    so no Q*_g calibration there)."""
     return _learned_baseline(
         stages, [("grasp",)], trainable=("push", "grasp"), branches=("push", "grasp"), alternate_every=0, coordination="max_q"
     )

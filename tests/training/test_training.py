@@ -50,6 +50,20 @@ def test_branch_init_starts_the_move_net_as_the_grasp_net(tmp_path):
     learner.env.close()
 
 
+def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
+    import mpg_agents.learner as learner_module
+
+    stage = with_overrides(TRAINING_STAGES, {"Stage5": {
+        "iterations": 4, "alternate_every": 1, "finish_iterations": 2, "finish_trainable": ["grasp"], "objects": [3, 3],
+    }})[-1]
+    trained: list[tuple[str, ...]] = []
+    real = learner_module.td_step
+    monkeypatch.setattr(learner_module, "td_step", lambda *args: trained.append(tuple(args[-2])) or real(*args))
+    learner = Learner(TrainConfig(**TINY), stage, tmp_path, log=lambda s: None)
+    learner.run()
+    assert trained == [("move",), ("push",), ("grasp",), ("grasp",)]
+
+
 def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
     from mpg_agents.baselines import make_policy
     from mpg_agents.training_stages import target_vpg_baseline

@@ -78,6 +78,11 @@ def test_learned_baselines_are_table_changes_at_the_same_budget():
     grasping = BASELINES["grasp-only"](calibrated)[-1]
     assert (grasping.calibration_episodes, grasping.calibrate_every) == (0, 0)
     assert BASELINES["push-grasp"](calibrated)[-1].calibration_episodes == 50  # its Q*_g rule uses it
+    # By the larger Q nothing reads Q*_g: neither to-vpg nor the ablation calibrates it.
+    assert (BASELINES["to-vpg"](calibrated)[-1].calibration_episodes, BASELINES["to-vpg"](calibrated)[-1].calibrate_every) == (0, 0)
+    assert without_alternation(calibrated)[-1].calibration_episodes == 0
+    assert without_multistage(calibrated)[-1].calibration_episodes == 50
+    assert calibrated[-1].reads_q_star and not grasping.reads_q_star
     vpg = BASELINES["to-vpg"](TRAINING_STAGES)
     assert vpg[-1].coordination == "max_q" and vpg[-1].alternate_every == 0 and vpg[-1].trainable == ("push", "grasp")
     epg = BASELINES["push-grasp"](TRAINING_STAGES)
@@ -100,3 +105,40 @@ def test_calibration_episodes_are_checked():
         TrainingStage("S", "MPG-Stage5-v0", calibration_episodes=5, calibration_quantile=1.5)
     with pytest.raises(ValueError, match="calibrate_every must be 0, or >= 1 with calibration_episodes"):
         TrainingStage("S", "MPG-Stage5-v0", calibrate_every=300)
+
+
+def test_unequal_alternation_and_finish_choose_the_learning_branches():
+    nets = ("move", "push", "grasp")
+    equal = TrainingStage("s", "MPG-Stage5-v0", trainable=nets, alternate_every=50, iterations=1500)
+    assert [equal.branches_at(i, 1500, nets)[0] for i in (0, 50, 100, 150, 149)] == ["move", "push", "grasp", "move", "grasp"]
+    shared = with_overrides((equal,), {"s": {"alternate_shares": [["grasp", 3]]}})[0]
+    assert shared.alternate_shares == (("grasp", 3),) and TrainingStage.from_dict(shared.to_dict()) == shared
+    # A round of 250 iterations: move 50, push 50, grasp 150.
+    turns = [shared.branches_at(i, 1500, nets)[0] for i in range(0, 500, 50)]
+    assert turns == ["move", "push", "grasp", "grasp", "grasp"] * 2
+    assert sum(shared.branches_at(i, 1500, nets) == ("grasp",) for i in range(1500)) == 900
+    finish = TrainingStage("s", "MPG-Stage5-v0", trainable=nets, alternate_every=50, iterations=2100,
+                           finish_iterations=600, finish_trainable=["grasp"])
+    assert finish.branches_at(1400, 2100, nets) == ("push",)
+    assert all(finish.branches_at(i, 2100, nets) == ("grasp",) for i in range(1500, 2100))
+    assert finish.branches_at(1400, 1700, nets) == ("grasp",)  # --steps shortens the stage, the finish stays at its end
+    assert TrainingStage("s", "MPG-Stage5-v0", iterations=9).branches_at(3, 9, nets) == nets
+    # The ablation without alternation trains every net at once to the end.
+    ablated = without_alternation((finish,))[0]
+    assert ablated.finish_iterations == 0 and ablated.branches_at(2000, 2100, nets) == nets
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"alternate_shares": [["grasp", 0]]}, "turns; need >= 1"),
+        ({"alternate_shares": [["lift", 2]]}, "lift"),
+        ({"finish_iterations": 600}, "go together"),
+        ({"finish_trainable": ["grasp"]}, "go together"),
+        ({"finish_iterations": 1000, "finish_trainable": ["grasp"]}, r"finish_iterations must be in \[0, iterations=1000\)"),
+        ({"finish_iterations": 10, "finish_trainable": ["move"], "branches": ["push", "grasp"]}, "not among its branches"),
+    ],
+)
+def test_alternation_shares_and_finish_are_checked(fields, message):
+    with pytest.raises(ValueError, match=message):
+        TrainingStage("s", "MPG-Stage5-v0", iterations=1000, **fields)
