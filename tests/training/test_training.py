@@ -3,6 +3,7 @@
 import json
 import os
 import signal
+from pathlib import Path
 
 import pytest
 import torch
@@ -11,6 +12,8 @@ from mpg_agents.cli import eval_main, plot_main, train_main
 from mpg_agents.learner import Learner, StopRequested, TrainConfig
 from mpg_agents.pipeline import PipelineConfig, run_pipeline
 from mpg_agents.training_stages import TRAINING_STAGES, with_overrides
+
+REPO = Path(__file__).resolve().parents[2]
 
 # A shallow trunk keeps every test fast; the code paths are the full ones.
 TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
@@ -208,6 +211,17 @@ def test_shipped_training_configs_load(name):
     base, stages = training_settings(str(path))
     assert base.variant == "small" and [s.name for s in stages] == [s.name for s in TRAINING_STAGES]
     MPGNetConfig.for_variant(base.variant, **base.net_config)  # the net it describes builds
+
+
+@pytest.mark.parametrize(
+    "path", sorted(str(p.relative_to(REPO)) for p in (REPO / "benchmarks" / "results").glob("*/train.toml")),
+)
+def test_recorded_training_configs_still_load(path):
+    """Every recorded run's config is still a valid stage table (its README command must run)."""
+    from mpg_agents.cli import training_settings
+
+    base, stages = training_settings(str(REPO / path))
+    assert [s.name for s in stages] == [s.name for s in TRAINING_STAGES], path
 
 
 def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):
