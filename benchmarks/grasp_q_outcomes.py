@@ -7,7 +7,10 @@ nothing, with the env's failure kind). Prints the counts, the share that took th
 with the target covered and uncovered, the share per Q quartile, and the ROC AUC of Q as a
 predictor of a target grasp (0.5: Q says nothing; 1: every target grasp scores above every
 other grasp). A Q*_g rule can only send the hopeless grasps to a move or a push when this AUC
-is well above 0.5.
+is well above 0.5. It also tallies the moves and pushes of the same episodes: how many found
+the target covered, how many left it uncovered, and how many moves lifted nothing, so the Q*_g
+rule's other branch is measured too (a grasp declined is worth a move only if moves free the
+target).
 
     python benchmarks/grasp_q_outcomes.py --policy mpg_agents/checkpoints/mpgnet_small.safetensors \
         --env MPG-Occluded-v0 --num-objects 15 --episodes 50 --seed 700000
@@ -64,18 +67,26 @@ class _LastQ:
         return int(decision.action)
 
 
-def grasp_records(policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int) -> tuple[str, float, list[dict]]:
-    """The policy's name, its Q*_g and every grasp of ``episodes`` greedy episodes (episode
-    ``i`` reset with ``seed + i``, as ``mpg-eval`` runs them)."""
+def grasp_records(
+    policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int
+) -> tuple[str, float, list[dict], list[dict]]:
+    """The policy's name, its Q*_g, every grasp and every move or push of ``episodes`` greedy
+    episodes (episode ``i`` reset with ``seed + i``, as ``mpg-eval`` runs them)."""
     env = gym.make(env_id, num_objects=num_objects)
     policy = make_policy(policy_name, env)
     if not hasattr(policy, "policy"):
         raise ValueError(f"--policy must be an MPGNet checkpoint (or 'shipped'), got {policy_name!r}")
     acting = _LastQ(policy)
-    records = []
+    records: list[dict] = []
+    others: list[dict] = []
 
     def on_step(index: int, reward: float, info: dict) -> None:
-        if info["primitive"] == "grasp":
+        if info["primitive"] != "grasp":
+            others.append({
+                "seed": seed + index, "primitive": info["primitive"], "covered_before": bool(info["occluded_before"]),
+                "covered_after": bool(info["occluded"]), "held_nothing": info["primitive"] == "move" and not info["grasp_success"],
+            })
+        else:
             records.append({
                 "seed": seed + index, "q": acting.q, "occluded": bool(info["occluded_before"]),
                 "target": bool(info["target_grasped"]), "wrong": bool(info["wrong_grasp"]),
@@ -84,7 +95,23 @@ def grasp_records(policy_name: str, env_id: str, num_objects: int, episodes: int
 
     run_episodes(acting, env, range(episodes), seed, on_step=on_step)
     env.close()
-    return policy.name, float(policy.policy.q_star), records
+    return policy.name, float(policy.policy.q_star), records, others
+
+
+def summarise_motions(others: list[dict]) -> dict:
+    """Per primitive (move, push): how many, how many found the target covered, how many of
+    those left it uncovered, and how many moves lifted nothing."""
+    out = {}
+    for primitive in ("move", "push"):
+        mine = [r for r in others if r["primitive"] == primitive]
+        covered = [r for r in mine if r["covered_before"]]
+        out[primitive] = {
+            "count": len(mine),
+            "covered_before": len(covered),
+            "uncovered_it": sum(not r["covered_after"] for r in covered),
+            "held_nothing": sum(r["held_nothing"] for r in mine),
+        }
+    return out
 
 
 def summarise(records: list[dict], q_star: float) -> dict:
@@ -127,9 +154,9 @@ def main() -> None:
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
     set_torch_threads(1)
-    name, q_star, records = grasp_records(args.policy, args.env, args.num_objects, args.episodes, args.seed)
+    name, q_star, records, others = grasp_records(args.policy, args.env, args.num_objects, args.episodes, args.seed)
     out = {"policy": name, "env": args.env, "num_objects": args.num_objects, "episodes": args.episodes,
-           "seed": args.seed, **summarise(records, q_star)}
+           "seed": args.seed, **summarise(records, q_star), "motions": summarise_motions(others)}
     print(f"{name}: {out['grasps']} grasps in {args.episodes} episodes of {args.env} ({args.num_objects} objects)")
     print(f"  took the target {out['target']}, another object {out['wrong']}, nothing {sum(out['failures'].values())} {out['failures']}")
     print(f"  target share covered {out['target_share_covered']:.2f} (of {out['covered']}), "
@@ -139,6 +166,9 @@ def main() -> None:
     print(f"  per Q quartile (edges {edges}): {shares}")
     print(f"  ROC AUC of Q for a target grasp: {out['q_auc']:.3f}; Q*_g {q_star:.4f}: "
           f"{out['q_at_least_q_star']} grasps at or above it, target share {out['target_share_q_at_least_q_star']:.2f}")
+    for primitive, m in out["motions"].items():
+        print(f"  {primitive}{'es' if primitive == 'push' else 's'}: {m['count']}, {m['covered_before']} with the target covered, {m['uncovered_it']} of those "
+              f"left it uncovered" + (f", {m['held_nothing']} lifted nothing" if primitive == "move" else ""))
     print(json.dumps(out))
 
 

@@ -34,3 +34,14 @@ def test_summary_counts_and_shares():
     assert (out["q_at_least_q_star"], out["target_share_q_at_least_q_star"]) == (2, 0.5)
     with pytest.raises(ValueError, match="no grasps"):
         bench.summarise([], q_star=0.75)
+
+
+def test_moves_and_pushes_are_tallied():
+    rec = lambda p, before, after, nothing=False: {  # noqa: E731
+        "primitive": p, "covered_before": before, "covered_after": after, "held_nothing": nothing}
+    others = [rec("move", True, False), rec("move", True, True, True), rec("move", False, False),
+              rec("push", True, True), rec("push", False, True)]
+    out = bench.summarise_motions(others)
+    assert out["move"] == {"count": 3, "covered_before": 2, "uncovered_it": 1, "held_nothing": 1}
+    assert out["push"] == {"count": 2, "covered_before": 1, "uncovered_it": 0, "held_nothing": 0}
+    assert bench.summarise_motions([])["move"]["count"] == 0
