@@ -166,9 +166,11 @@ def main() -> None:
     print(f"  per Q quartile (edges {edges}): {shares}")
     print(f"  ROC AUC of Q for a target grasp: {out['q_auc']:.3f}; Q*_g {q_star:.4f}: "
           f"{out['q_at_least_q_star']} grasps at or above it, target share {out['target_share_q_at_least_q_star']:.2f}")
-    for primitive, m in out["motions"].items():
-        print(f"  {primitive}{'es' if primitive == 'push' else 's'}: {m['count']}, {m['covered_before']} with the target covered, {m['uncovered_it']} of those "
-              f"left it uncovered" + (f", {m['held_nothing']} lifted nothing" if primitive == "move" else ""))
+    moves, pushes = out["motions"]["move"], out["motions"]["push"]
+    print(f"  moves: {moves['count']}, {moves['covered_before']} with the target covered, {moves['uncovered_it']} of those "
+          f"left it uncovered, {moves['held_nothing']} lifted nothing")
+    print(f"  pushes: {pushes['count']}, {pushes['covered_before']} with the target covered, {pushes['uncovered_it']} of those "
+          "left it uncovered")
     print(json.dumps(out))
 
 
