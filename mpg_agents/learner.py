@@ -45,6 +45,7 @@ from mpg_agents.train_log import IterationRecord, TrainingLog
 from mpg_agents.training_stages import TrainingStage, check_fields, stage_for_env
 from mpg_agents.weights import load_mpgnet_weights, save_mpgnet
 from mpg_envs.actions import PRIMITIVES
+from mpg_envs.config import EnvConfig
 
 
 @dataclass
@@ -210,6 +211,8 @@ class Learner:
             kwargs["num_objects"] = num_objects
         if self.config.discriminator is not None:
             kwargs["grasp_scorer"] = GraspScorer.from_weights(self.config.discriminator)
+        if self.stage.reward:
+            kwargs["config"] = EnvConfig(reward=self.stage.reward_config())
         return gym.make(self.stage.env_id, **kwargs)
 
     def _objects_now(self, iteration: int) -> int | None:

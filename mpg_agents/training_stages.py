@@ -17,6 +17,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from mpg_agents.coordination import check_coordination
 from mpg_envs.actions import check_primitives
+from mpg_envs.rewards import RewardConfig
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,9 @@ class TrainingStage:
         branch_init: ``((to, from), ...)``: at the stage's start, branch ``to`` is copied from
             branch ``from`` of the starting weights, e.g. ``(("move", "grasp"),)``: a move is a
             grasp of the occluder, carried away, so the move net starts as the grasp net.
+        reward: ``((field, value), ...)`` (a TOML table in a config) of
+            :class:`~mpg_envs.rewards.RewardConfig` fields that this stage's training envs
+            set, e.g. ``{"move_needs_lift": True}``; empty: the paper's rewards.
     """
 
     name: str
@@ -79,8 +83,15 @@ class TrainingStage:
     iterations: int = 1000
     branch_init: tuple[tuple[str, str], ...] = ()
     branches: tuple[str, ...] | None = None
+    reward: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
+        pairs = tuple(self.reward.items()) if isinstance(self.reward, Mapping) else tuple(tuple(p) for p in self.reward)
+        known = {f.name for f in fields(RewardConfig)}
+        for pair in pairs:
+            if len(pair) != 2 or pair[0] not in known:
+                raise ValueError(f"stage {self.name}: reward takes RewardConfig fields {sorted(known)} with values, got {pair}")
+        object.__setattr__(self, "reward", tuple(sorted(pairs)))
         if self.branches is not None:
             object.__setattr__(self, "branches", check_primitives(self.branches))
             outside = sorted((set(self.trainable or ()) | set(self.finish_trainable)) - set(self.branches))
@@ -143,6 +154,10 @@ class TrainingStage:
         one branch."""
         return self.coordination != "max_q" and (self.branches is None or len(self.branches) > 1)
 
+    def reward_config(self, base: RewardConfig = RewardConfig()) -> RewardConfig:
+        """``base`` with this stage's :attr:`reward` settings."""
+        return replace(base, **dict(self.reward))
+
     def objects_at(self, fraction: float) -> int | None:
         """The curriculum's object count after ``fraction`` (0..1) of the stage; ``None``: the env's."""
         if self.objects is None:
@@ -154,6 +169,7 @@ class TrainingStage:
         data = asdict(self)
         data["branch_init"] = [list(pair) for pair in self.branch_init]
         data["alternate_shares"] = [list(pair) for pair in self.alternate_shares]
+        data["reward"] = dict(self.reward)
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
     @classmethod

@@ -26,6 +26,10 @@ class RewardConfig:
     penalty: float = -0.5
     move_q_gain: float = 0.5  # Q_g^im threshold of R_m
     push_q_gain: float = 0.1  # Q_g^ip threshold of R_p
+    # Not the paper's (default off): a move whose fingers lifted nothing earns R_m's penalty,
+    # as "no change". Without it, fingers that close beside the occluder and nudge it off the
+    # target earn the full move reward, and the move net learns to nudge rather than to carry.
+    move_needs_lift: bool = False
 
 
 def reward_grasp_any(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
@@ -40,8 +44,9 @@ def reward_grasp_target(o: StepOutcome, c: RewardConfig = RewardConfig()) -> flo
 
 def reward_move(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
     """R_m (Stage III): 1 move success; 0.5 grasp-Q gain > 0.5 with change; -0.5 target
-    picked up by the move or no change; 0 otherwise."""
-    if o.target_grasped or not o.change_detected:
+    picked up by the move or no change (with ``c.move_needs_lift``, also a move that lifted
+    nothing); 0 otherwise."""
+    if o.target_grasped or not o.change_detected or (c.move_needs_lift and not o.grasp_success):
         return c.penalty
     if o.move_success:
         return c.success

@@ -12,7 +12,7 @@ import mpg_envs
 from mpg_envs.env import MPGEnv
 from mpg_envs.occlusion import change_detected, is_occluded, surrounded_sectors
 from mpg_envs.policies import OraclePolicy
-from mpg_envs.rewards import StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
+from mpg_envs.rewards import RewardConfig, StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
 from mpg_envs.scene_io import save_scene
 
 ALL_IDS = mpg_envs.ENV_IDS
@@ -209,6 +209,12 @@ def test_reward_equations_on_constructed_cases():
     assert reward_move(o("move", change_detected=True, grasp_q_gain=0.4)) == 0.0
     assert reward_move(o("move", change_detected=False)) == -0.5
     assert reward_move(o("move", target_grasped=True, change_detected=True)) == -0.5
+    # With move_needs_lift, a move whose fingers held nothing is a failed move, whatever it nudged.
+    lift = RewardConfig(move_needs_lift=True)
+    assert reward_move(o("move", move_success=True, change_detected=True), lift) == -0.5
+    assert reward_move(o("move", change_detected=True, grasp_q_gain=0.6), lift) == -0.5
+    assert reward_move(o("move", grasp_success=True, move_success=True, change_detected=True), lift) == 1.0
+    assert reward_move(o("move", grasp_success=True, change_detected=True, grasp_q_gain=0.6), lift) == 0.5
     assert reward_push(o("push", change_detected=True, grasp_q_gain=0.2)) == 0.5
     assert reward_push(o("push", change_detected=True, grasp_q_gain=0.05)) == 0.0
     assert reward_push(o("push", change_detected=False, grasp_q_gain=0.9)) == -0.5

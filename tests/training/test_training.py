@@ -53,6 +53,16 @@ def test_branch_init_starts_the_move_net_as_the_grasp_net(tmp_path):
     learner.env.close()
 
 
+def test_a_stage_reward_setting_reaches_its_env(tmp_path):
+    stage = with_overrides(TRAINING_STAGES, {"Stage3": {"reward": {"move_needs_lift": True}, "objects": [2, 2]}})[2]
+    learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
+    assert learner.env.unwrapped.config.reward.move_needs_lift
+    learner.env.close()
+    plain = Learner(TrainConfig(steps=1, **TINY), TRAINING_STAGES[2], tmp_path / "plain", log=lambda s: None)
+    assert not plain.env.unwrapped.config.reward.move_needs_lift
+    plain.env.close()
+
+
 def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
     import mpg_agents.learner as learner_module
 

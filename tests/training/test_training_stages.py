@@ -13,6 +13,7 @@ from mpg_agents.training_stages import (
     without_alternation,
     without_multistage,
 )
+from mpg_envs.rewards import RewardConfig
 
 
 def test_the_paper_table():
@@ -129,9 +130,17 @@ def test_unequal_alternation_and_finish_choose_the_learning_branches():
     assert ablated.finish_iterations == 0 and ablated.branches_at(2000, 2100, nets) == nets
 
 
+def test_a_stage_sets_reward_fields():
+    stage = with_overrides((TrainingStage("s", "MPG-Stage3-v0"),), {"s": {"reward": {"move_needs_lift": True}}})[0]
+    assert stage.reward == (("move_needs_lift", True),) and stage.reward_config().move_needs_lift
+    assert TrainingStage.from_dict(stage.to_dict()) == stage and stage.to_dict()["reward"] == {"move_needs_lift": True}
+    assert TrainingStage("s", "MPG-Stage3-v0").reward_config() == RewardConfig()
+
+
 @pytest.mark.parametrize(
     "fields, message",
     [
+        ({"reward": {"move_needs_lfit": True}}, "reward takes RewardConfig fields"),
         ({"alternate_shares": [["grasp", 0]]}, "turns; need >= 1"),
         ({"alternate_shares": [["lift", 2]]}, "lift"),
         ({"finish_iterations": 600}, "go together"),
