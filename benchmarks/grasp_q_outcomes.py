@@ -143,16 +143,27 @@ def summarise(records: list[dict], q_star: float) -> dict:
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def checkpoint_episodes_parser(description: str) -> argparse.ArgumentParser:
+    """The options of a benchmark that runs an MPGNet checkpoint greedily on seeded episodes
+    (also used by ``move_outcomes.py``); check ``--episodes`` with :func:`check_episodes`."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--policy", required=True, help="an MPGNet checkpoint, or 'shipped'")
     parser.add_argument("--env", default="MPG-Occluded-v0")
     parser.add_argument("--num-objects", type=int, default=15)
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=700000, help="episode i is reset with seed + i (default: the tuning seeds)")
-    args = parser.parse_args()
+    return parser
+
+
+def check_episodes(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     if args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
+
+
+def main() -> None:
+    parser = checkpoint_episodes_parser(__doc__.splitlines()[0])
+    args = parser.parse_args()
+    check_episodes(parser, args)
     set_torch_threads(1)
     name, q_star, records, others = grasp_records(args.policy, args.env, args.num_objects, args.episodes, args.seed)
     out = {"policy": name, "env": args.env, "num_objects": args.num_objects, "episodes": args.episodes,

@@ -20,7 +20,6 @@ Each trial costs a motion's simulation (about 0.3 s), ten per move. Ends with on
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from typing import Any
@@ -35,6 +34,9 @@ from mpg_envs.grasp_geometry import GRASP_ROTATIONS, angle_gap, footprint_rect
 from mpg_envs.policies import OraclePolicy
 from mpg_envs.sim_trial import try_primitive
 from mpg_envs.threads import set_torch_threads
+
+# Run as a script, benchmarks/ is on the path: the options are grasp_q_outcomes.py's.
+from grasp_q_outcomes import check_episodes, checkpoint_episodes_parser  # noqa: E402
 
 ON_WHAT = ("table", "target", "occluder", "other")
 """What a move's pixel shows."""
@@ -119,16 +121,10 @@ def summarise_moves(records: list[dict[str, Any]], angle_limit_deg: float = ANGL
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--policy", required=True, help="an MPGNet checkpoint, or 'shipped'")
-    parser.add_argument("--env", default="MPG-Occluded-v0")
-    parser.add_argument("--num-objects", type=int, default=15)
-    parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--seed", type=int, default=700000, help="episode i is reset with seed + i (default: the tuning seeds)")
+    parser = checkpoint_episodes_parser(__doc__.splitlines()[0])
     parser.add_argument("--move-region", choices=("rectangle", "top"), help="override where the net's moves may act")
     args = parser.parse_args()
-    if args.episodes < 1:
-        parser.error(f"--episodes must be >= 1, got {args.episodes}")
+    check_episodes(parser, args)
     set_torch_threads(1)
     env = gym.make(args.env, num_objects=args.num_objects)
     net = make_policy(args.policy, env, move_region=args.move_region)
