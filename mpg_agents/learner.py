@@ -15,7 +15,9 @@ the same scene). The log (:mod:`mpg_agents.train_log`) goes to TensorBoard and `
 
 Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
 fresh run first fills the replay with the oracle's transitions
-(:mod:`mpg_agents.demonstrations`); they are no iterations or episodes of the run.
+(:mod:`mpg_agents.demonstrations`); they are no iterations or episodes of the run. With ``TrainingStage.grasp_trials`` (off by
+default) each grasp is also tried at other gripper orientations in the simulation and undone,
+and those transitions are stored too (privileged, labelled like the demonstrations).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from mpg_agents.training_stages import TrainingStage, check_fields, stage_for_en
 from mpg_agents.weights import load_mpgnet_weights, save_mpgnet
 from mpg_envs.actions import PRIMITIVES
 from mpg_envs.config import EnvConfig
+from mpg_envs.workspace import NUM_ROTATIONS
 
 
 @dataclass
@@ -124,6 +127,8 @@ class Counters:
     window_target_grasps: int = 0
     successful_grasp_q: list[float] = field(default_factory=list)  # for Q*_g calibration
     calibrated_at: int = -1  # iteration of the last in-scene Q*_g calibration (-1: none)
+    grasp_trials: int = 0  # grasps tried in the simulation and undone (TrainingStage.grasp_trials)
+    grasp_trial_targets: int = 0  # of those, the ones that took the target
 
 
 class StopRequested(Exception):
@@ -283,7 +288,10 @@ class Learner:
                 signal.signal(s, h)
         if self.stage.calibrate_every and self.counters.calibrated_at != self.counters.iteration:
             self.calibrate_in_scenes(self.stage.calibration_episodes)  # the weights ship with it
-        return {"iteration": self.counters.iteration, "episodes": self.counters.episode, "q_star": self.calibrated_q_star()}
+        summary = {"iteration": self.counters.iteration, "episodes": self.counters.episode, "q_star": self.calibrated_q_star()}
+        if self.stage.grasp_trials:
+            summary.update(grasp_trials=self.counters.grasp_trials, grasp_trial_targets=self.counters.grasp_trial_targets)
+        return summary
 
     def calibrate_in_scenes(self, episodes: int) -> float:
         """Calibrate Q*_g in this stage's scenes and save the state (a resumed run keeps it).
@@ -370,10 +378,15 @@ class Learner:
         start = time.perf_counter()
         choice = self.act(obs)
         t_decide = time.perf_counter() - start
+        trials = self.stage.grasp_trials if choice.primitive == "grasp" else 0
+        if trials:
+            self.store_grasp_trials(obs, choice.action, trials)
         next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
         t_act = time.perf_counter() - start - t_decide
         self.store(obs, next_obs, choice.action, float(reward), bool(terminated))
         loss = self.learn()
+        if trials:
+            self.learn()  # the replay grew by 1 + trials transitions
         c.iteration += 1
         c.episode_motions += 1
         if choice.primitive == "grasp":
@@ -412,6 +425,21 @@ class Learner:
             np.array([terminated], dtype=np.float32),
             [{}],
         )
+
+    def store_grasp_trials(self, obs: dict[str, np.ndarray], action: int, trials: int) -> None:
+        """Try the grasp ``action`` at ``trials`` other gripper orientations at its pixel, in
+        the simulation and undone, and store each as a transition from ``obs``."""
+        env = self.env.unwrapped
+        primitive, rotation, row, col = env.action_space.decode(action)
+        half = NUM_ROTATIONS // 2
+        others = [k for k in range(half) if k != rotation % half]
+        for k in self.rng.choice(others, size=trials, replace=False):
+            other = int(k) + half * int(self.rng.integers(2))
+            trial = env.action_space.encode(primitive, other, row, col)
+            next_obs, reward, terminated, _, info = env.try_step(trial)
+            self.store(obs, next_obs, trial, float(reward), bool(terminated))
+            self.counters.grasp_trials += 1
+            self.counters.grasp_trial_targets += int(info["target_grasped"])
 
     def act(self, obs: dict[str, np.ndarray]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""

@@ -18,6 +18,7 @@ from typing import Any, Callable, Mapping, Sequence
 from mpg_agents.coordination import check_coordination
 from mpg_envs.actions import check_primitives
 from mpg_envs.rewards import RewardConfig
+from mpg_envs.workspace import NUM_ROTATIONS
 
 
 @dataclass(frozen=True)
@@ -63,6 +64,13 @@ class TrainingStage:
         reward: ``((field, value), ...)`` (a TOML table in a config) of
             :class:`~mpg_envs.rewards.RewardConfig` fields that this stage's training envs
             set, e.g. ``{"move_needs_lift": True}``; empty: the paper's rewards.
+        grasp_trials: each grasp the stage takes is also tried at this many other gripper
+            orientations at the same pixel (drawn from the other ``NUM_ROTATIONS // 2 - 1``, each
+            in either of its two rotations), in the simulation and undone
+            (:meth:`~mpg_envs.env.MPGEnv.try_step`); those transitions go into the replay, with
+            one more gradient step per grasp. A grasp in clutter is decided by its angle, and
+            one executed grasp labels one angle. Privileged (a simulator's counterfactual, like
+            demonstrations, not the paper's pure RL); 0: off.
     """
 
     name: str
@@ -84,8 +92,11 @@ class TrainingStage:
     branch_init: tuple[tuple[str, str], ...] = ()
     branches: tuple[str, ...] | None = None
     reward: tuple[tuple[str, Any], ...] = ()
+    grasp_trials: int = 0
 
     def __post_init__(self) -> None:
+        if isinstance(self.grasp_trials, bool) or not isinstance(self.grasp_trials, int) or not 0 <= self.grasp_trials < NUM_ROTATIONS // 2:
+            raise ValueError(f"stage {self.name}: grasp_trials must be an integer in 0..{NUM_ROTATIONS // 2 - 1}, got {self.grasp_trials!r}")
         pairs = tuple(self.reward.items()) if isinstance(self.reward, Mapping) else tuple(tuple(p) for p in self.reward)
         known = {f.name for f in fields(RewardConfig)}
         for pair in pairs:

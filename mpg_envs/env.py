@@ -30,7 +30,7 @@ from mpg_envs.scene_io import (
 )
 from mpg_envs.scenes import SCENES, InvalidSceneError, keep_inside
 from mpg_envs.stages import END_REASONS, STAGES, StageSpec, episode_end
-from mpg_envs.world import World
+from mpg_envs.world import World, WorldCheckpoint
 
 __all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "MPGEnv", "observation_space"]
 
@@ -200,6 +200,24 @@ class MPGEnv(gym.Env):
             "end_reason": end_reason,
         }
         return self._copy_obs(obs), reward, bool(terminated), bool(truncated), info
+
+    def try_step(self, action):
+        """What ``step(action)`` returns, with the episode then put back exactly as it was.
+
+        A counterfactual that only a simulator can give (the world, the motion count, the
+        last observation and the noise generator are restored; MuJoCo is deterministic, so
+        ``step(action)`` afterwards returns the same). Trainers may use it to label actions
+        they did not take; a policy under evaluation must not.
+        """
+        if self.world is None or self._obs is None:
+            raise RuntimeError("call reset() before try_step()")
+        checkpoint = WorldCheckpoint(self.world)
+        saved = (self.num_motions, self._obs, self._score, self.np_random.bit_generator.state)
+        try:
+            return self.step(action)
+        finally:
+            checkpoint.restore()
+            self.num_motions, self._obs, self._score, self.np_random.bit_generator.state = saved
 
     def render(self):
         if self.render_mode != "rgb_array":

@@ -63,6 +63,26 @@ def test_a_stage_reward_setting_reaches_its_env(tmp_path):
     plain.env.close()
 
 
+def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monkeypatch):
+    import mpg_agents.learner as learner_module
+
+    stage = with_overrides(TRAINING_STAGES, {"Stage5": {
+        "env_id": "MPG-Occluded-v0", "objects": [6, 6], "coordination": "grasp_first", "grasp_trials": 2, "alternate_every": 1,
+    }})[-1]
+    steps = []
+    real = learner_module.td_step
+    monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
+    learner = Learner(TrainConfig(steps=3, q_star=-10.0, **TINY), stage, tmp_path, log=lambda s: None)  # every decision a grasp
+    summary = learner.run()
+    env = learner.env.unwrapped
+    assert summary["grasp_trials"] == learner.counters.grasp_trials == 6 and len(steps) == 6  # two steps per grasp
+    actions = [env.action_space.decode(int(a)) for a in learner.replay.actions[:9, 0, 0]]
+    for k in range(3):  # each iteration: its two trials, then the grasp taken
+        (_, r1, *p1), (_, r2, *p2), (_, taken, *pixel) = actions[3 * k : 3 * k + 3]
+        assert p1 == p2 == pixel and len({r1 % 8, r2 % 8, taken % 8}) == 3
+    learner.env.close()
+
+
 def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
     import mpg_agents.learner as learner_module
 

@@ -137,10 +137,19 @@ def test_a_stage_sets_reward_fields():
     assert TrainingStage("s", "MPG-Stage3-v0").reward_config() == RewardConfig()
 
 
+def test_grasp_trials_round_trip_and_default_off():
+    stage = with_overrides((TrainingStage("s", "MPG-Occluded-v0"),), {"s": {"grasp_trials": 3}})[0]
+    assert stage.grasp_trials == 3 and TrainingStage.from_dict(stage.to_dict()) == stage
+    assert all(s.grasp_trials == 0 for s in TRAINING_STAGES)  # the paper's pipeline is pure RL
+
+
 @pytest.mark.parametrize(
     "fields, message",
     [
         ({"reward": {"move_needs_lfit": True}}, "reward takes RewardConfig fields"),
+        ({"grasp_trials": 8}, r"grasp_trials must be an integer in 0\.\.7"),
+        ({"grasp_trials": -1}, "grasp_trials"),
+        ({"grasp_trials": 2.0}, "grasp_trials"),
         ({"alternate_shares": [["grasp", 0]]}, "turns; need >= 1"),
         ({"alternate_shares": [["lift", 2]]}, "lift"),
         ({"finish_iterations": 600}, "go together"),
