@@ -404,10 +404,10 @@ def test_try_step_predicts_step_and_leaves_the_episode_as_it_was(make_env):
     rows, cols = np.nonzero(obs["mask"][0] if obs["mask"].ndim == 3 else obs["mask"])
     row, col = int(rows[len(rows) // 2]), int(cols[len(cols) // 2])
     qpos, active = env.world.data.qpos.copy(), env.world.active.copy()
-    trials = [env.try_step(env.action_space.encode("grasp", rotation, row, col)) for rotation in range(0, 16, 2)]
+    trials = [env.try_step(env.action_space.encode("grasp", rotation, row, col)) for rotation in range(0, 16, 4)]
     assert env.num_motions == 0 and np.array_equal(env.world.data.qpos, qpos) and np.array_equal(env.world.active, active)
     assert all(info["num_motions"] == 1 and info["primitive"] == "grasp" for *_, info in trials)
-    stepped = env.step(env.action_space.encode("grasp", 6, row, col))
-    tried = trials[3]
+    stepped = env.step(env.action_space.encode("grasp", 8, row, col))
+    tried = trials[2]
     assert all(np.array_equal(tried[0][k], stepped[0][k]) for k in stepped[0])
     assert tried[1:4] == stepped[1:4] and tried[4]["position"] == stepped[4]["position"]

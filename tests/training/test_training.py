@@ -72,12 +72,12 @@ def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monk
     steps = []
     real = learner_module.td_step
     monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
-    learner = Learner(TrainConfig(steps=3, q_star=-10.0, **TINY), stage, tmp_path, log=lambda s: None)  # every decision a grasp
+    learner = Learner(TrainConfig(steps=2, q_star=-10.0, **TINY), stage, tmp_path, log=lambda s: None)  # every decision a grasp
     summary = learner.run()
     env = learner.env.unwrapped
-    assert summary["grasp_trials"] == learner.counters.grasp_trials == 6 and len(steps) == 6  # two steps per grasp
-    actions = [env.action_space.decode(int(a)) for a in learner.replay.actions[:9, 0, 0]]
-    for k in range(3):  # each iteration: its two trials, then the grasp taken
+    assert summary["grasp_trials"] == learner.counters.grasp_trials == 4 and len(steps) == 4  # two steps per grasp
+    actions = [env.action_space.decode(int(a)) for a in learner.replay.actions[:6, 0, 0]]
+    for k in range(2):  # each iteration: its two trials, then the grasp taken
         (_, r1, *p1), (_, r2, *p2), (_, taken, *pixel) = actions[3 * k : 3 * k + 3]
         assert p1 == p2 == pixel and len({r1 % 8, r2 % 8, taken % 8}) == 3
     learner.env.close()
