@@ -10,7 +10,9 @@ other grasp). A Q*_g rule can only send the hopeless grasps to a move or a push 
 is well above 0.5. It also tallies the moves and pushes of the same episodes: how many found
 the target covered, how many left it uncovered, and how many moves lifted nothing, so the Q*_g
 rule's other branch is measured too (a grasp declined is worth a move only if moves free the
-target).
+target). With ``--angle-trials`` each grasp is also tried, before it is made, at the other
+gripper orientations at its pixel (``MPGEnv.try_step``, undone; the episode is unchanged), and
+the summary counts the grasps that missed the target where another angle would have taken it.
 
     python benchmarks/grasp_q_outcomes.py --policy mpg_agents/checkpoints/mpgnet_small.safetensors \
         --env MPG-Occluded-v0 --num-objects 15 --episodes 50 --seed 700000
@@ -32,6 +34,7 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.baselines import make_policy
 from mpg_agents.evaluate import run_episodes
 from mpg_envs.threads import set_torch_threads
+from mpg_envs.workspace import NUM_ROTATIONS
 
 
 def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
@@ -52,11 +55,13 @@ def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
 
 
 class _LastQ:
-    """An MPGNet policy acting greedily that remembers the Q of the decision it just made."""
+    """An MPGNet policy acting greedily that remembers the Q of the decision it just made and,
+    given ``env``, whether another orientation of its grasp would have taken the target."""
 
-    def __init__(self, network_policy):
-        self.net = network_policy
+    def __init__(self, network_policy, env: gym.Env | None = None):
+        self.net, self.env = network_policy, env
         self.q = float("nan")
+        self.other_angle_takes: bool | None = None
 
     def reset(self) -> None:
         self.net.reset()
@@ -64,11 +69,19 @@ class _LastQ:
     def act(self, obs) -> int:
         decision = self.net.policy.decide(obs)
         self.q = float(decision.q_value)
+        self.other_angle_takes = None
+        if self.env is not None and decision.primitive == "grasp":
+            u = self.env.unwrapped
+            half = NUM_ROTATIONS // 2
+            self.other_angle_takes = any(
+                u.try_step(u.action_space.encode("grasp", k, decision.row, decision.col))[4]["target_grasped"]
+                for k in range(half) if k != decision.rotation % half
+            )
         return int(decision.action)
 
 
 def grasp_records(
-    policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int
+    policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int, angle_trials: bool = False
 ) -> tuple[str, float, list[dict], list[dict]]:
     """The policy's name, its Q*_g, every grasp and every move or push of ``episodes`` greedy
     episodes (episode ``i`` reset with ``seed + i``, as ``mpg-eval`` runs them)."""
@@ -76,7 +89,7 @@ def grasp_records(
     policy = make_policy(policy_name, env)
     if not hasattr(policy, "policy"):
         raise ValueError(f"--policy must be an MPGNet checkpoint (or 'shipped'), got {policy_name!r}")
-    acting = _LastQ(policy)
+    acting = _LastQ(policy, env if angle_trials else None)
     records: list[dict] = []
     others: list[dict] = []
 
@@ -90,7 +103,7 @@ def grasp_records(
             records.append({
                 "seed": seed + index, "q": acting.q, "occluded": bool(info["occluded_before"]),
                 "target": bool(info["target_grasped"]), "wrong": bool(info["wrong_grasp"]),
-                "failure": info["grasp_failure"],
+                "failure": info["grasp_failure"], "other_angle_takes": acting.other_angle_takes,
             })
 
     run_episodes(acting, env, range(episodes), seed, on_step=on_step)
@@ -140,7 +153,22 @@ def summarise(records: list[dict], q_star: float) -> dict:
         "q_star": q_star,
         "target_share_q_at_least_q_star": share(q >= q_star),
         "q_at_least_q_star": int((q >= q_star).sum()),
+        **summarise_angles(records),
     }
+
+
+def summarise_angles(records: list[dict]) -> dict:
+    """With angle trials: of the grasps that missed the target, covered and uncovered, how many
+    had another orientation at the same pixel that would have taken it (empty without trials)."""
+    tried = [r for r in records if r.get("other_angle_takes") is not None]
+    if not tried:
+        return {}
+    out = {}
+    for name, covered in (("covered", True), ("uncovered", False)):
+        missed = [r for r in tried if r["occluded"] == covered and not r["target"]]
+        out[f"missed_{name}"] = len(missed)
+        out[f"missed_{name}_other_angle_takes"] = sum(r["other_angle_takes"] for r in missed)
+    return out
 
 
 def checkpoint_episodes_parser(description: str) -> argparse.ArgumentParser:
@@ -162,10 +190,13 @@ def check_episodes(parser: argparse.ArgumentParser, args: argparse.Namespace) ->
 
 def main() -> None:
     parser = checkpoint_episodes_parser(__doc__.splitlines()[0])
+    parser.add_argument("--angle-trials", action="store_true",
+                        help="also try each grasp at the other orientations at its pixel (undone)")
     args = parser.parse_args()
     check_episodes(parser, args)
     set_torch_threads(1)
-    name, q_star, records, others = grasp_records(args.policy, args.env, args.num_objects, args.episodes, args.seed)
+    name, q_star, records, others = grasp_records(
+        args.policy, args.env, args.num_objects, args.episodes, args.seed, args.angle_trials)
     out = {"policy": name, "env": args.env, "num_objects": args.num_objects, "episodes": args.episodes,
            "seed": args.seed, **summarise(records, q_star), "motions": summarise_motions(others)}
     print(f"{name}: {out['grasps']} grasps in {args.episodes} episodes of {args.env} ({args.num_objects} objects)")
@@ -177,6 +208,10 @@ def main() -> None:
     print(f"  per Q quartile (edges {edges}): {shares}")
     print(f"  ROC AUC of Q for a target grasp: {out['q_auc']:.3f}; Q*_g {q_star:.4f}: "
           f"{out['q_at_least_q_star']} grasps at or above it, target share {out['target_share_q_at_least_q_star']:.2f}")
+    if "missed_covered" in out:
+        print(f"  missed the target: covered {out['missed_covered']} (another angle at the pixel takes it in "
+              f"{out['missed_covered_other_angle_takes']}), uncovered {out['missed_uncovered']} "
+              f"({out['missed_uncovered_other_angle_takes']})")
     moves, pushes = out["motions"]["move"], out["motions"]["push"]
     print(f"  moves: {moves['count']}, {moves['covered_before']} with the target covered, {moves['uncovered_it']} of those "
           f"left it uncovered, {moves['held_nothing']} lifted nothing")

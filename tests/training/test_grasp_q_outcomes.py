@@ -45,3 +45,14 @@ def test_moves_and_pushes_are_tallied():
     assert out["move"] == {"count": 3, "covered_before": 2, "uncovered_it": 1, "held_nothing": 1}
     assert out["push"] == {"count": 2, "covered_before": 1, "uncovered_it": 0, "held_nothing": 0}
     assert bench.summarise_motions([])["move"]["count"] == 0
+
+
+def test_angle_trials_count_the_misses_another_angle_would_take():
+    rec = lambda occ, took, other: {"q": 0.5, "occluded": occ, "target": took, "wrong": False,  # noqa: E731
+                                    "failure": None if took else "closed_empty", "other_angle_takes": other}
+    records = [rec(False, True, False), rec(False, False, True), rec(False, False, False), rec(True, False, True)]
+    out = bench.summarise(records, q_star=0.0)
+    assert (out["missed_uncovered"], out["missed_uncovered_other_angle_takes"]) == (2, 1)
+    assert (out["missed_covered"], out["missed_covered_other_angle_takes"]) == (1, 1)
+    plain = [dict(r, other_angle_takes=None) for r in records]
+    assert "missed_covered" not in bench.summarise(plain, q_star=0.0)  # no trials, no such counts
