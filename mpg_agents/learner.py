@@ -15,9 +15,10 @@ the same scene). The log (:mod:`mpg_agents.train_log`) goes to TensorBoard and `
 
 Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
 fresh run first fills the replay with the oracle's transitions
-(:mod:`mpg_agents.demonstrations`); they are no iterations or episodes of the run. With ``TrainingStage.grasp_trials`` (off by
-default) each grasp is also tried at other gripper orientations in the simulation and undone,
-and those transitions are stored too (privileged, labelled like the demonstrations).
+(:mod:`mpg_agents.demonstrations`); they are no iterations or episodes of the run. With
+``TrainingStage.grasp_trials`` (off by default) each grasp is also tried at other gripper
+orientations in the simulation and undone, and those transitions are stored too (privileged,
+labelled like the demonstrations).
 """
 
 from __future__ import annotations
