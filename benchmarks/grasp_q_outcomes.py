@@ -34,7 +34,7 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.baselines import make_policy
 from mpg_agents.evaluate import run_episodes
 from mpg_envs.threads import set_torch_threads
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grasp_geometry import other_grasp_angles
 
 
 def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
@@ -72,10 +72,9 @@ class _LastQ:
         self.other_angle_takes = None
         if self.env is not None and decision.primitive == "grasp":
             u = self.env.unwrapped
-            half = NUM_ROTATIONS // 2
             self.other_angle_takes = any(
                 u.try_step(u.action_space.encode("grasp", k, decision.row, decision.col))[4]["target_grasped"]
-                for k in range(half) if k != decision.rotation % half
+                for k in other_grasp_angles(decision.rotation)
             )
         return int(decision.action)
 

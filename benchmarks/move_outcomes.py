@@ -30,7 +30,7 @@ import numpy as np
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.baselines import NetworkPolicy, make_policy
 from mpg_agents.evaluate import run_episodes
-from mpg_envs.grasp_geometry import GRASP_ROTATIONS, angle_gap, footprint_rect
+from mpg_envs.grasp_geometry import GRASP_ROTATIONS, angle_gap, footprint_rect, other_grasp_angles
 from mpg_envs.policies import OraclePolicy
 from mpg_envs.sim_trial import try_primitive
 from mpg_envs.threads import set_torch_threads
@@ -89,7 +89,7 @@ class MoveProbe:
             record["angle_off_deg"] = math.degrees(angle_gap(rotation * math.pi / GRASP_ROTATIONS, short_dir))
         record["lifted"] = self._lifts(rotation, row, col, depth)
         record["any_angle_lifts"] = record["lifted"] or any(
-            self._lifts(k, row, col, depth) for k in range(GRASP_ROTATIONS) if k != rotation % GRASP_ROTATIONS
+            self._lifts(k, row, col, depth) for k in other_grasp_angles(rotation)
         )
         record["oracle_lifts"] = None
         if occluders:

@@ -49,7 +49,7 @@ from mpg_agents.training_stages import TrainingStage, check_fields, stage_for_en
 from mpg_agents.weights import load_mpgnet_weights, save_mpgnet
 from mpg_envs.actions import PRIMITIVES
 from mpg_envs.config import EnvConfig
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
 
 
 @dataclass
@@ -432,10 +432,8 @@ class Learner:
         the simulation and undone, and store each as a transition from ``obs``."""
         env = self.env.unwrapped
         primitive, rotation, row, col = env.action_space.decode(action)
-        half = NUM_ROTATIONS // 2
-        others = [k for k in range(half) if k != rotation % half]
-        for k in self.rng.choice(others, size=trials, replace=False):
-            other = int(k) + half * int(self.rng.integers(2))
+        for k in self.rng.choice(other_grasp_angles(rotation), size=trials, replace=False):
+            other = int(k) + GRASP_ROTATIONS * int(self.rng.integers(2))  # either of the angle's two rotations
             trial = env.action_space.encode(primitive, other, row, col)
             next_obs, reward, terminated, _, info = env.try_step(trial)
             self.store(obs, next_obs, trial, float(reward), bool(terminated))

@@ -18,7 +18,7 @@ from typing import Any, Callable, Mapping, Sequence
 from mpg_agents.coordination import check_coordination
 from mpg_envs.actions import check_primitives
 from mpg_envs.rewards import RewardConfig
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grasp_geometry import GRASP_ROTATIONS
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class TrainingStage:
             :class:`~mpg_envs.rewards.RewardConfig` fields that this stage's training envs
             set, e.g. ``{"move_needs_lift": True}``; empty: the paper's rewards.
         grasp_trials: each grasp the stage takes is also tried at this many other gripper
-            orientations at the same pixel (drawn from the other ``NUM_ROTATIONS // 2 - 1``, each
+            orientations at the same pixel (drawn from the other ``GRASP_ROTATIONS - 1``, each
             in either of its two rotations), in the simulation and undone
             (:meth:`~mpg_envs.env.MPGEnv.try_step`); those transitions go into the replay, with
             one more gradient step per grasp. A grasp in clutter is decided by its angle, and
@@ -95,8 +95,8 @@ class TrainingStage:
     grasp_trials: int = 0
 
     def __post_init__(self) -> None:
-        if isinstance(self.grasp_trials, bool) or not isinstance(self.grasp_trials, int) or not 0 <= self.grasp_trials < NUM_ROTATIONS // 2:
-            raise ValueError(f"stage {self.name}: grasp_trials must be an integer in 0..{NUM_ROTATIONS // 2 - 1}, got {self.grasp_trials!r}")
+        if isinstance(self.grasp_trials, bool) or not isinstance(self.grasp_trials, int) or not 0 <= self.grasp_trials < GRASP_ROTATIONS:
+            raise ValueError(f"stage {self.name}: grasp_trials must be an integer in 0..{GRASP_ROTATIONS - 1}, got {self.grasp_trials!r}")
         pairs = tuple(self.reward.items()) if isinstance(self.reward, Mapping) else tuple(tuple(p) for p in self.reward)
         known = {f.name for f in fields(RewardConfig)}
         for pair in pairs:

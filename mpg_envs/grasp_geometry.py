@@ -38,6 +38,11 @@ def angle_to_rotation(theta: float, symmetric: bool = True) -> int:
     return k % GRASP_ROTATIONS if symmetric else k
 
 
+def other_grasp_angles(rotation: int) -> list[int]:
+    """The grasp angles (0..GRASP_ROTATIONS-1) other than the one rotation index ``rotation`` gives."""
+    return [k for k in range(GRASP_ROTATIONS) if k != int(rotation) % GRASP_ROTATIONS]
+
+
 def angle_gap(a: float, b: float) -> float:
     """Distance between two grasp angles modulo pi (radians, in [0, pi/2])."""
     d = (a - b) % math.pi

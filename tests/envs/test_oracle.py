@@ -16,6 +16,7 @@ from mpg_envs.grasp_geometry import (
     finger_region,
     footprint_rect,
     jaw_strip_heights,
+    other_grasp_angles,
     polygon_mask,
     region_max,
 )
@@ -44,6 +45,8 @@ def test_angle_to_rotation_and_gap() -> None:
     assert angle_to_rotation(math.radians(190), symmetric=False) == 8
     assert angle_gap(math.radians(10), math.radians(170)) == pytest.approx(math.radians(20))
     assert angle_gap(0.0, math.pi) == pytest.approx(0.0)
+    # rotation 11 is 247.5 degrees, the grasp angle 3 (67.5 degrees) turned by 180
+    assert other_grasp_angles(11) == [0, 1, 2, 4, 5, 6, 7] == other_grasp_angles(3)
 
 
 def test_extent_along() -> None:
