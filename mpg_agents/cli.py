@@ -1,4 +1,4 @@
-"""Command lines: ``mpg-train``, ``mpg-eval`` and ``mpg-plot``.
+"""Command lines: ``mpg-train``, ``mpg-eval``, ``mpg-calibrate`` and ``mpg-plot``.
 
 Bad input (an unknown env id, a missing checkpoint, a checkpoint of another architecture, an
 unreadable config file) ends the command with exit status 2 and one clear line on stderr.
@@ -205,6 +205,58 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         path = Path(args.json)
         path.write_text(json.dumps(result.to_dict(), indent=1, sort_keys=True))
         print(f"metrics written to {path.resolve()}")
+    return 0
+
+
+# ----------------------------------------------------------------------- calibrate
+def calibrate_main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="mpg-calibrate",
+        description="Measure Q*_g of a checkpoint in an env's scenes, as a training stage does: greedy grasp-only "
+                    "episodes on the run seed's calibration scenes, no learning; Q*_g is a quantile of the Q of the "
+                    "grasps that took the target. Use the result with mpg-eval --q-star.",
+    )
+    parser.add_argument("--policy", required=True, help="a checkpoint (.safetensors) with a grasp branch, or shipped")
+    parser.add_argument("--env", default="MPG-Occluded-v0")
+    parser.add_argument("--num-objects", type=int)
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--quantile", type=float, default=0.5,
+                        help="0.5: the median, the paper's reading (default); the shipped config calibrates at 0.25")
+    parser.add_argument("--seed", type=int, default=0, help="the run seed whose calibration scenes are used (a run's own: --seed of mpg-train)")
+    parser.add_argument("--json", help="also write the measurement (every successful grasp's Q) to this JSON file")
+    args = parser.parse_args(argv)
+    try:
+        import gymnasium as gym
+
+        from mpg_agents.baselines import make_policy
+        from mpg_agents.calibration import calibrate_q_star, calibration_dict
+
+        _check_env_id(args.env)
+        if args.policy != "shipped":
+            _check_checkpoint(args.policy)
+        if args.episodes < 1:
+            raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
+        if not 0.0 <= args.quantile <= 1.0:
+            raise UsageError(f"--quantile must be in [0, 1], got {args.quantile}")
+        env = gym.make(args.env, **({"num_objects": args.num_objects} if args.num_objects is not None else {}))
+        net = make_policy(args.policy, env).policy
+        print(f"Q*_g in the checkpoint: {net.q_star:.4f}")
+
+        def progress(k: int, grasps: int, taken: int) -> None:
+            print(f"  episode {k + 1}/{args.episodes}: {taken} of {grasps} grasps took the target", flush=True)
+
+        measured = calibrate_q_star(net, env, args.episodes, args.seed, args.quantile, on_episode=progress)
+        env.close()
+    except (UsageError, FileNotFoundError, ValueError, RuntimeError) as exc:
+        return _fail(exc)
+    print(f"Q*_g {measured.q_star:.4f}: quantile {measured.quantile:g} of the Q of {len(measured.target_grasp_q)} "
+          f"of {measured.grasps} greedy grasps that took the target in {measured.episodes} episodes")
+    if args.json:
+        path = Path(args.json)
+        record = {"policy": args.policy, "env_id": args.env, "num_objects": args.num_objects, "seed": args.seed,
+                  **calibration_dict(measured)}
+        path.write_text(json.dumps(record, indent=1))
+        print(f"written to {path.resolve()}")
     return 0
 
 

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.calibration import calibrate_q_star, write_calibration
 from mpg_agents.demonstrations import collect_demonstrations
 from mpg_agents.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.grasp_scorer import GraspScorer
@@ -295,50 +296,28 @@ class Learner:
         return summary
 
     def calibrate_in_scenes(self, episodes: int) -> float:
-        """Calibrate Q*_g in this stage's scenes and save the state (a resumed run keeps it).
-
-        Runs ``episodes`` grasp-only episodes of the current net, greedy and without learning
-        (nothing enters the replay; calibration seeds, :func:`episode_seed`), and sets Q*_g to
-        the stage's ``calibration_quantile`` (the median by default) of the Q of the grasps
-        that took the target; ``calibration.json`` in the run folder keeps every value.
+        """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.calibration.calibrate_q_star`,
+        at the stage's ``calibration_quantile``) and save the state (a resumed run keeps it);
+        ``calibration.json`` in the run folder keeps every value of the stage.
         Raises ``RuntimeError`` when no grasp took the target.
         """
-        if "grasp" not in self.policy.usable_primitives:
-            raise ValueError(f"stage {self.stage.name}: Q*_g calibration needs a grasp branch, the net has {self.policy.branches}")
         if self._calibration_env is None:  # its own env: a training episode in progress is left as it is
             self._calibration_env = self._make_env(self.env.unwrapped.num_objects)
-        env = self._calibration_env
-        taken: list[float] = []
-        grasps = 0
-        for k in range(episodes):  # the same scenes every time: one measuring stick through the stage
-            obs, _ = env.reset(seed=episode_seed(self.config.seed, k, calibration=True))
-            done = False
-            while not done:
-                decision = self.policy.decide(obs, "grasp")
-                obs, _, terminated, truncated, info = env.step(decision.action)
-                grasps += 1
-                if info["target_grasped"] and math.isfinite(decision.q_value):
-                    taken.append(decision.q_value)
-                done = bool(terminated or truncated)
-        if not taken:
-            raise RuntimeError(f"stage {self.stage.name}: no grasp took the target in {episodes} calibration episodes")
-        quantile = self.stage.calibration_quantile
-        q_star = float(np.quantile(taken, quantile))
+        try:
+            measured = calibrate_q_star(
+                self.policy, self._calibration_env, episodes, self.config.seed, self.stage.calibration_quantile
+            )
+        except (ValueError, RuntimeError) as exc:
+            raise type(exc)(f"stage {self.stage.name}: {exc}") from exc
         before = self.policy.q_star
-        self.policy.set_q_star(q_star)
+        self.policy.set_q_star(measured.q_star)
         c = self.counters
-        path = self.out / "calibration.json"
-        history = json.loads(path.read_text()).get("history", []) if path.is_file() and c.calibrated_at >= 0 else []
-        history.append({"iteration": c.iteration, "q_star": q_star, "target_grasps": len(taken), "grasps": grasps})
-        record = {"iteration": c.iteration, "episodes": episodes, "grasps": grasps, "target_grasps": len(taken),
-                  "quantile": quantile, "q_star_before": before, "q_star": q_star, "target_grasp_q": taken,
-                  "history": history}
-        path.write_text(json.dumps(json_safe(record), indent=1))
-        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {q_star:.4g} in its scenes at iteration {c.iteration} "
-                 f"({len(taken)} of {grasps} greedy grasps took the target in {episodes} episodes)")
+        write_calibration(self.out / "calibration.json", measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
+        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {measured.q_star:.4g} in its scenes at iteration {c.iteration} "
+                 f"({len(measured.target_grasp_q)} of {measured.grasps} greedy grasps took the target in {episodes} episodes)")
         c.calibrated_at = c.iteration
         self.save_state()
-        return q_star
+        return measured.q_star
 
     def add_demonstrations(self) -> None:
         """Fill the replay with the oracle's transitions on this stage's env and save the state
