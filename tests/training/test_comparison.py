@@ -1,0 +1,76 @@
+"""Paired comparison of two policies' eval records (mpg_agents.comparison, benchmarks/compare_evals.py)."""
+
+from __future__ import annotations
+
+import json
+import runpy
+import sys
+from pathlib import Path
+
+import pytest
+
+from mpg_agents.comparison import compare_paired, load_eval_records
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "compare_evals.py"
+
+
+def write_eval(path, policy, episodes, env_id="MPG-Occluded-v0", num_objects=15):
+    """An mpg-eval --json file with the fields the comparison reads: (seed, success, motions) per episode."""
+    records = [{"seed": s, "success": ok, "motions": m} for s, ok, m in episodes]
+    path.write_text(json.dumps({"policy": policy, "env_id": env_id, "num_objects": num_objects, "records": records}))
+    return path
+
+
+def test_paired_differences_on_shared_seeds_by_hand(tmp_path):
+    a = load_eval_records([
+        write_eval(tmp_path / "a1.json", "A", [(1, True, 2), (2, True, 3)]),
+        write_eval(tmp_path / "a2.json", "A", [(3, False, 10), (9, True, 1)]),  # seed 9: B never played it
+    ])
+    b = load_eval_records([write_eval(tmp_path / "b.json", "B", [(1, True, 4), (2, False, 10), (3, True, 4)])])
+    result = compare_paired(a, b)
+    assert result.episodes == 3
+    assert result.success_a == pytest.approx(2 / 3) and result.success_b == pytest.approx(2 / 3)
+    assert result.success_difference == pytest.approx(0.0)
+    # A - B motions per pair: -2, -7, +6 -> mean -1.
+    assert (result.motions_a, result.motions_b, result.motions_difference) == pytest.approx((5.0, 6.0, -1.0))
+    assert (result.fewer_motions_a, result.fewer_motions_b) == (2, 1)
+    lo, hi = result.motions_interval
+    assert -7 <= lo <= -1 <= hi <= 6
+    assert result == compare_paired(a, b)  # seeded bootstrap
+    text = result.describe("MPGNet", "GO")
+    assert "3 paired episodes" in text and "difference -1.00" in text and "MPGNet in 2 episodes, GO in 1" in text
+
+
+def test_identical_policies_differ_by_a_point_interval(tmp_path):
+    eps = [(s, s % 2 == 0, 1 + s % 4) for s in range(10)]
+    a = load_eval_records([write_eval(tmp_path / "a.json", "A", eps)])
+    b = load_eval_records([write_eval(tmp_path / "b.json", "B", eps)])
+    result = compare_paired(a, b)
+    assert result.motions_interval == (0.0, 0.0) and result.success_interval == (0.0, 0.0)
+
+
+def test_records_of_other_cells_or_repeated_seeds_are_refused(tmp_path):
+    a = write_eval(tmp_path / "a.json", "A", [(1, True, 2), (2, True, 2)])
+    with pytest.raises(ValueError, match="one policy and cell per side"):
+        load_eval_records([a, write_eval(tmp_path / "c.json", "A", [(3, True, 2)], num_objects=30)])
+    with pytest.raises(ValueError, match="episode seed 1 appears twice"):
+        load_eval_records([a, write_eval(tmp_path / "d.json", "A", [(1, True, 2)])])
+    with pytest.raises(ValueError, match="no eval JSON file"):
+        load_eval_records([])
+    b30 = load_eval_records([write_eval(tmp_path / "b.json", "B", [(1, True, 2), (2, True, 2)], num_objects=30)])
+    with pytest.raises(ValueError, match="different cells"):
+        compare_paired(load_eval_records([a]), b30)
+    few = load_eval_records([write_eval(tmp_path / "e.json", "B", [(2, True, 2), (7, True, 1)])])
+    with pytest.raises(ValueError, match="share 1 episode seeds"):
+        compare_paired(load_eval_records([a]), few)
+
+
+def test_the_benchmark_script_prints_a_minus_b(tmp_path, monkeypatch, capsys):
+    a = write_eval(tmp_path / "a.json", "A", [(1, True, 2), (2, True, 3)])
+    b = write_eval(tmp_path / "b.json", "B", [(1, True, 3), (2, True, 5)])
+    monkeypatch.setattr(sys, "argv", ["compare_evals.py", "--a", str(a), "--b", str(b), "--names", "X,Y"])
+    with pytest.raises(SystemExit) as end:
+        runpy.run_path(str(SCRIPT), run_name="__main__")
+    assert end.value.code == 0
+    out = capsys.readouterr().out
+    assert "A = X, B = Y" in out and "difference -1.50 [-2.00, -1.00]" in out
