@@ -44,7 +44,7 @@ def load_eval_records(paths: Sequence[str | Path]) -> EvalRecords:
     by_seed: dict[int, dict[str, Any]] = {}
     for i, path in enumerate(paths):
         data = json.loads(Path(path).read_text())
-        cell = (data["policy"], data["env_id"], data.get("num_objects"))
+        cell = (_policy_file(data["policy"]), data["env_id"], data.get("num_objects"))
         if i == 0:
             policy, env_id, num_objects = cell
         elif cell != (policy, env_id, num_objects):
@@ -55,6 +55,11 @@ def load_eval_records(paths: Sequence[str | Path]) -> EvalRecords:
                 raise ValueError(f"episode seed {seed} appears twice (in {path})")
             by_seed[seed] = record
     return EvalRecords(str(policy), str(env_id), num_objects, by_seed)
+
+
+def _policy_file(name: str) -> str:
+    """``mpg-eval`` names a policy by its file; ``--policy shipped`` adds a ``shipped:`` prefix."""
+    return name.removeprefix("shipped:")
 
 
 @dataclass(frozen=True)

@@ -65,6 +65,14 @@ def test_records_of_other_cells_or_repeated_seeds_are_refused(tmp_path):
         compare_paired(load_eval_records([a]), few)
 
 
+def test_the_shipped_policy_by_name_or_by_file_is_one_policy(tmp_path):
+    # mpg-eval --policy shipped names it "shipped:<file>"; --policy <path to it> names it "<file>".
+    by_name = write_eval(tmp_path / "a.json", "shipped:mpgnet_small.safetensors", [(1, True, 2)])
+    by_file = write_eval(tmp_path / "b.json", "mpgnet_small.safetensors", [(2, False, 10)])
+    records = load_eval_records([by_name, by_file])
+    assert records.policy == "mpgnet_small.safetensors" and sorted(records.by_seed) == [1, 2]
+
+
 def test_the_benchmark_script_prints_a_minus_b(tmp_path, monkeypatch, capsys):
     a = write_eval(tmp_path / "a.json", "A", [(1, True, 2), (2, True, 3)])
     b = write_eval(tmp_path / "b.json", "B", [(1, True, 3), (2, True, 5)])
