@@ -94,7 +94,7 @@ class NetworkPolicy:
     def __init__(
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
         grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
-        move_region: str | None = None, q_star: float | None = None,
+        move_region: str | None = None, q_star: float | None = None, grasp_fingers: str | None = None,
     ):
         import torch
 
@@ -109,6 +109,8 @@ class NetworkPolicy:
             overrides["target_margin_px"] = int(target_margin_px)
         if move_region is not None:
             overrides["move_region"] = move_region
+        if grasp_fingers is not None:
+            overrides["grasp_fingers"] = grasp_fingers
         self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
         if coordination is not None:
             self.policy.set_coordination(coordination)
@@ -124,6 +126,8 @@ class NetworkPolicy:
             self.name += f" [target margin: {target_margin_px} px]"
         if move_region is not None:
             self.name += f" [move region: {move_region}]"
+        if grasp_fingers is not None:
+            self.name += f" [grasp fingers: {grasp_fingers}]"
         if q_star is not None:
             self.name += f" [Q*_g: {q_star:g}]"
         self.memory = None

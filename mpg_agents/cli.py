@@ -163,6 +163,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                         help="network policies: grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp region 'target'")
     parser.add_argument("--move-region", choices=("rectangle", "top"),
                         help="network policies: where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
+    parser.add_argument("--grasp-fingers", choices=("any", "clear"),
+                        help="network policies: which grasps may act (override the checkpoint's): any, or only those whose open fingers land least blocked")
     parser.add_argument("--q-star", type=float,
                         help="network policies: grasp threshold Q*_g (override the checkpoint's calibrated one)")
     parser.add_argument("--avoid-repeats", action="store_true",
@@ -191,6 +193,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             extra += (("target_margin_px", args.target_margin),)
         if args.move_region:
             extra += (("move_region", args.move_region),)
+        if args.grasp_fingers:
+            extra += (("grasp_fingers", args.grasp_fingers),)
         if args.avoid_repeats:
             extra += (("avoid_repeats", True),)
         if args.q_star is not None:
@@ -223,6 +227,8 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--quantile", type=float, default=0.5,
                         help="0.5: the median, the paper's reading (default); the shipped config calibrates at 0.25")
     parser.add_argument("--seed", type=int, default=0, help="the run seed whose calibration scenes are used (a run's own: --seed of mpg-train)")
+    parser.add_argument("--grasp-fingers", choices=("any", "clear"),
+                        help="which grasps may act (override the checkpoint's; calibrate with the setting you evaluate with)")
     parser.add_argument("--json", help="also write the measurement (every successful grasp's Q) to this JSON file")
     args = parser.parse_args(argv)
     try:
@@ -239,7 +245,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         if not 0.0 <= args.quantile <= 1.0:
             raise UsageError(f"--quantile must be in [0, 1], got {args.quantile}")
         env = gym.make(args.env, **({"num_objects": args.num_objects} if args.num_objects is not None else {}))
-        net = make_policy(args.policy, env).policy
+        net = make_policy(args.policy, env, **({"grasp_fingers": args.grasp_fingers} if args.grasp_fingers else {})).policy
         print(f"Q*_g in the checkpoint: {net.q_star:.4f}")
 
         def progress(k: int, grasps: int, taken: int) -> None:
@@ -254,6 +260,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     if args.json:
         path = Path(args.json)
         record = {"policy": args.policy, "env_id": args.env, "num_objects": args.num_objects, "seed": args.seed,
+                  "grasp_fingers": net.net_config.grasp_fingers,
                   **calibration_dict(measured)}
         path.write_text(json.dumps(record, indent=1))
         print(f"written to {path.resolve()}")

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
@@ -38,8 +39,11 @@ from torch.nn import functional as F
 from mpg_agents.inputs import normalize_inputs
 from mpg_agents.mobilenet import MobileNetV3Features, load_torchvision_features
 from mpg_agents.mpgnet_config import ROUGH_MASKED, MPGNetConfig
-from mpg_agents.regions import footprint_top, region_max, target_pixels, target_region
+from mpg_agents.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
 from mpg_agents.rotations import rotation_grids
+from mpg_envs.grasp_geometry import fingers_blocked
+from mpg_envs.primitives import PrimitiveConfig
+from mpg_envs.workspace import Workspace
 
 # The input planes, stacked on channels and rotated together; each trunk's stem reads its own
 # channels from the stack (mobilenet.window_weight), so no plane is copied out of it (5 channels).
@@ -110,6 +114,7 @@ class PreparedObs:
     occluded: Tensor | None = field(default=None)  # (B,) bool when the observation had it
     grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
     move_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
+    grasp_fingers: Tensor | None = field(default=None)  # (B, R, H, W) bool: grasps whose fingers land clear enough
 
 
 @dataclass
@@ -128,6 +133,7 @@ class EncodedObs:
     occluded: Tensor | None = field(default=None)  # (B,) bool when the observation had it
     grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
     move_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
+    grasp_fingers: Tensor | None = field(default=None)  # (B, R, H, W) bool; None: every grasp
 
     def region_of(self, primitive: str) -> Tensor:
         """``(B, H, W)`` bool: where ``primitive`` may act (before ``rough_mask`` is consulted)."""
@@ -236,7 +242,23 @@ class MPGNet(nn.Module):
         grasp_region = target_pixels(binary, cfg.target_margin_px) if cfg.grasp_region == "target" else None
         # Depth is normalised here: the band is scaled by the same std (the clip at depth_max is far above).
         move_region = footprint_top(binary, depth, cfg.move_band_m / cfg.depth_std) if cfg.move_region == "top" else None
-        return PreparedObs(torch.cat([color, depth, mask], dim=1), target_region(binary), occluded, grasp_region, move_region)
+        region = target_region(binary)
+        fingers = None
+        if cfg.grasp_fingers == "clear":
+            fingers = self._clear_fingers(depth, region if grasp_region is None else grasp_region)
+        return PreparedObs(torch.cat([color, depth, mask], dim=1), region, occluded, grasp_region, move_region, fingers)
+
+    def _clear_fingers(self, depth: Tensor, grasp_region: Tensor) -> Tensor:
+        """``grasp_fingers="clear"``: the grasps whose fingers land least blocked ``(B, R, H, W)``,
+        from the normalised depth planes ``(B, 1, H, W)`` (the clip at ``depth_max`` lies far
+        above any finger)."""
+        cfg = self.config
+        metres = (depth[:, 0].float() * cfg.depth_std + cfg.depth_mean).cpu().numpy()
+        grasp, resolution = PrimitiveConfig(), Workspace().resolution
+        blocked = torch.from_numpy(
+            np.stack([fingers_blocked(m, resolution, grasp.grasp_depth, grasp.grasp_min_height, cfg.num_rotations) for m in metres])
+        ).to(depth.device)
+        return least_blocked(blocked, grasp_region, cfg.finger_tolerance_m)
 
     def encode(self, obs: Mapping[str, Any] | PreparedObs, rotations: Tensor | None = None) -> EncodedObs:
         """Pad and rotate a batch and run the shared mask trunk once.
@@ -269,6 +291,7 @@ class MPGNet(nn.Module):
             occluded=prep.occluded,
             grasp_region=prep.grasp_region,
             move_region=prep.move_region,
+            grasp_fingers=prep.grasp_fingers,
         )
 
     def branch_q(self, enc: EncodedObs, primitive: str, subset: Tensor | None = None) -> Tensor:
@@ -285,6 +308,20 @@ class MPGNet(nn.Module):
         if self.config.rough_mask and primitive in ROUGH_MASKED:
             q = q * enc.region_of(primitive)[_sample_of(enc, subset)]
         return q
+
+    def actable(self, enc: EncodedObs, primitive: str) -> Tensor | None:
+        """``(B, R, H, W)`` or ``(B, 1, H, W)`` bool: where ``primitive`` may act (the rough mask's
+        region for move and grasp, and for grasp the finger mask); ``None``: everywhere."""
+        allowed = enc.region_of(primitive)[:, None] if self.config.rough_mask and primitive in ROUGH_MASKED else None
+        if primitive == "grasp" and enc.grasp_fingers is not None:
+            allowed = enc.grasp_fingers if allowed is None else allowed & enc.grasp_fingers
+        return allowed
+
+    def grasp_where(self, enc: EncodedObs) -> Tensor:
+        """``(B, R, H, W)`` or ``(B, 1, H, W)`` bool: the grasps the grasp score ranges over (the
+        grasp region, and the finger mask when there is one)."""
+        where = enc.region_of("grasp")[:, None]
+        return where if enc.grasp_fingers is None else where & enc.grasp_fingers
 
     def forward(self, obs: Mapping[str, Any], primitives: Sequence[str] | None = None) -> dict[str, Tensor]:
         """Q maps ``{primitive: (B, R, H, W)}`` for ``primitives`` (default: all branches)."""
@@ -331,7 +368,7 @@ class MPGNet(nn.Module):
         """Best grasp Q where a grasp may act, per sample ``(B,)`` (the discriminator score)."""
         enc = self.encode(obs)
         q = self.maps_from(enc, ("grasp",))["grasp"]
-        return region_max(q, enc.region_of("grasp"))
+        return region_max(q, self.grasp_where(enc))
 
     def load_imagenet(self, path: str | Path) -> None:
         """Initialise every trunk from a torchvision MobileNetV3 checkpoint of the same variant."""

@@ -20,6 +20,8 @@ ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
 GRASP_REGIONS: tuple[str, ...] = ("rectangle", "target")
 MOVE_REGIONS: tuple[str, ...] = ("rectangle", "top")
 HEAD_INITS: tuple[str, ...] = ("kaiming", "zero")
+# Which grasps may act: any (the paper), or only those whose open fingers land least blocked.
+GRASP_FINGERS: tuple[str, ...] = ("any", "clear")
 
 # Trunk depth of the CPU-friendly variant: features.0-3 of MobileNetV3-small, output stride 8
 # (24 channels). The whole trunk (stride 32) maps the 320-pixel padded input to 10 x 10 cells
@@ -75,6 +77,17 @@ class MPGNetConfig:
             ``move_band_m`` of its highest point: the occluder's top; see
             :func:`mpg_agents.regions.footprint_top`).
         move_band_m: height band of ``move_region="top"``, metres.
+        grasp_fingers: which grasps may act: ``"any"`` (the paper) or ``"clear"``: only those
+            (pixel, angle) pairs whose open fingers come down least blocked, read off the depth
+            heightmap with the 2F-85's geometry (:func:`mpg_envs.grasp_geometry.fingers_blocked`,
+            the env's default grasp depth and workspace): the free ones when a grasp in the grasp
+            region has free landing strips, else the least blocked in that region, each up to
+            ``finger_tolerance_m`` more blocked (:func:`mpg_agents.regions.least_blocked`). Two
+            thirds of a trained net's greedy grasps in 15-object clutter lifted nothing, most
+            with a neighbour under a finger; the small trunk does not see 4 cm to each side.
+            It restricts greedy grasps, the grasp score compared with Q*_g and the TD target's
+            greedy next action; exploratory grasps stay unrestricted.
+        finger_tolerance_m: the slack of ``grasp_fingers="clear"``, metres.
         bn_momentum: batch-norm momentum of the trunks (see ``mobilenet.DEFAULT_BN_MOMENTUM``).
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
@@ -106,6 +119,8 @@ class MPGNetConfig:
     target_margin_px: int = 2
     move_region: str = "rectangle"
     move_band_m: float = 0.015
+    grasp_fingers: str = "any"
+    finger_tolerance_m: float = 0.005
     bn_momentum: float = DEFAULT_BN_MOMENTUM
     channels_last: bool = True
     trunk_batch: int | None = 4
@@ -137,6 +152,10 @@ class MPGNetConfig:
             raise ValueError(f"move_region must be one of {MOVE_REGIONS}, got {self.move_region!r}")
         if not self.move_band_m >= 0:
             raise ValueError(f"move_band_m must be >= 0 metres, got {self.move_band_m}")
+        if self.grasp_fingers not in GRASP_FINGERS:
+            raise ValueError(f"grasp_fingers must be one of {GRASP_FINGERS}, got {self.grasp_fingers!r}")
+        if not self.finger_tolerance_m >= 0:
+            raise ValueError(f"finger_tolerance_m must be >= 0 metres, got {self.finger_tolerance_m}")
         if self.trunk_batch is not None and self.trunk_batch < 1:
             raise ValueError(f"trunk_batch must be None or positive, got {self.trunk_batch}")
 

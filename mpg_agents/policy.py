@@ -30,7 +30,7 @@ from torch import Tensor, nn
 from mpg_agents.coordination import check_coordination, choose_primitive, usable_primitives
 from mpg_agents.grasp_scorer import GraspScorer
 from mpg_agents.mpgnet import EncodedObs, MPGNet, flat_q
-from mpg_agents.mpgnet_config import ROUGH_MASKED, MPGNetConfig
+from mpg_agents.mpgnet_config import MPGNetConfig
 from mpg_agents.regions import region_max
 from mpg_agents.spaces import check_observation_space, resolve_primitives
 from mpg_agents.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet
@@ -130,18 +130,18 @@ class MPGQNetwork(QNetwork):
         return q[b, row.to(q.device), col.to(q.device)].unsqueeze(1)
 
     def masked_flat_q(self, maps: Mapping[str, Tensor], enc: EncodedObs) -> Tensor:
-        """Flat Q for choosing actions: move/grasp set to -inf outside their regions (see
-        :meth:`EncodedObs.region_of`), and primitives without a branch -inf everywhere."""
+        """Flat Q for choosing actions: -inf where a primitive may not act (move/grasp outside
+        their regions, grasps the finger mask bars: :meth:`MPGNet.actable`), and primitives
+        without a branch -inf everywhere."""
         return flat_q(
-            self._with_missing({p: self._actable(maps[p], p, enc.region_of(p)[:, None]) for p in maps}),
+            self._with_missing({p: self._actable(maps[p], self.mpgnet.actable(enc, p)) for p in maps}),
             self.action_primitives,
         )
 
-    def _actable(self, q: Tensor, primitive: str, region: Tensor) -> Tensor:
-        """``q`` with -inf where ``primitive`` may not act (move/grasp: outside ``region``)."""
-        if self.net_config.rough_mask and primitive in ROUGH_MASKED:
-            return q.masked_fill(~region, float("-inf"))
-        return q
+    @staticmethod
+    def _actable(q: Tensor, allowed: Tensor | None) -> Tensor:
+        """``q`` with -inf where ``allowed`` (broadcast to it) is false; ``None``: unchanged."""
+        return q if allowed is None else q.masked_fill(~allowed, float("-inf"))
 
     def greedy_actions(self, obs: PyTorchObs) -> Tensor:
         """Max-Q actions ``(B,)`` over all allowed primitives (region-restricted for move/grasp)."""
@@ -176,11 +176,13 @@ class MPGQNetwork(QNetwork):
             """``p``'s ``(R, H, W)`` Q maps, -inf where it may not act (each branch run once)."""
             if p not in maps:
                 maps[p] = self.mpgnet.maps_from(enc, (p,))[p][0]
-                actable[p] = self._actable(maps[p], p, enc.region_of(p)[0][None])
+                allowed = self.mpgnet.actable(enc, p)
+                actable[p] = self._actable(maps[p], None if allowed is None else allowed[0])
                 if forbidden is not None and p in forbidden:
                     barred = torch.as_tensor(forbidden[p], dtype=torch.bool, device=actable[p].device)
-                    if not bool(barred.all()):  # never bar every action: the best of them is still an action
-                        actable[p] = actable[p].masked_fill(barred, float("-inf"))
+                    kept = actable[p].masked_fill(barred, float("-inf"))
+                    if bool(torch.isfinite(kept).any()):  # never bar every action: the best of them is still an action
+                        actable[p] = kept
             return actable[p]
 
         if primitive is not None:
@@ -195,7 +197,7 @@ class MPGQNetwork(QNetwork):
         value = float(q.flatten()[flat])
         rot, rest = divmod(flat, q.shape[1] * q.shape[2])
         row, col = divmod(rest, q.shape[2])
-        grasp_score = float(region_max(maps["grasp"][None], enc.region_of("grasp"))[0]) if "grasp" in maps else float("nan")
+        grasp_score = float(region_max(maps["grasp"][None], self.mpgnet.grasp_where(enc))[0]) if "grasp" in maps else float("nan")
         action = encode_action(self.action_primitives, primitive, rot, row, col, size=self.net_config.heightmap_size)
         return Decision(action, primitive, rot, row, col, value, grasp_score, maps)
 

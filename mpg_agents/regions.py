@@ -5,8 +5,9 @@ Move and grasp Q maps are restricted to the axis-aligned bounding rectangle of t
 (:func:`target_pixels`: the visible target pixels, dilated by a margin): inside the rectangle
 of an L-shaped or partly covered target lie other objects, and a grasp there lifts the wrong
 one. A move may be kept on what lies highest over the target (:func:`footprint_top`): the
-occluder's top, which is what a move must grasp to carry it away. :func:`region_max` is the
-best Q inside a region (the grasp score compared with Q*_g).
+occluder's top, which is what a move must grasp to carry it away. A grasp may be kept to the
+(pixel, angle) pairs whose open fingers land least blocked (:func:`least_blocked`).
+:func:`region_max` is the best Q inside a region (the grasp score compared with Q*_g).
 """
 
 from __future__ import annotations
@@ -101,8 +102,29 @@ def footprint_top(mask: Tensor, depth: Tensor, band: float) -> Tensor:
     return (mask & (depth >= (top - band)[:, None, None])) | empty[:, None, None]
 
 
+def least_blocked(blocked: Tensor, region: Tensor, tolerance: float) -> Tensor:
+    """The grasps whose open fingers land least blocked, ``(B, R, H, W)`` bool.
+
+    ``blocked (B, R, H, W)``: how far each grasp's finger strips are blocked (metres, ``<= 0``
+    free; :func:`mpg_envs.grasp_geometry.fingers_blocked`); ``region (B, H, W)``: where the
+    grasp must land (the target). Kept: every grasp at most ``tolerance`` more blocked than
+    the least blocked grasp in the region, counting a free one as 0 -- so the free grasps
+    (within ``tolerance``) when the region has one, else the region's least blocked. Pixels
+    outside the region are kept or not by the same rule; the region restricts them apart.
+    """
+    if not tolerance >= 0:
+        raise ValueError(f"tolerance must be >= 0 metres, got {tolerance}")
+    if blocked.dim() != 4 or region.shape != (blocked.shape[0], *blocked.shape[2:]):
+        raise ValueError(f"blocked must be (B, R, H, W) and region (B, H, W), got {tuple(blocked.shape)} and {tuple(region.shape)}")
+    inside = blocked.masked_fill(~region[:, None], float("inf")).flatten(1).amin(dim=1)
+    least = inside.clamp(min=0.0) + tolerance
+    return blocked <= least[:, None, None, None]
+
+
 def region_max(q: Tensor, region: Tensor) -> Tensor:
-    """Max of ``q (B, R, H, W)`` over rotations and the pixels where ``region (B, H, W)`` is true."""
-    masked = q.masked_fill(~region[:, None], float("-inf"))
+    """Max of ``q (B, R, H, W)`` where ``region`` is true: ``(B, H, W)`` (every rotation at
+    those pixels) or ``(B, R, H, W)`` / ``(B, 1, H, W)`` (per rotation)."""
+    allowed = region[:, None] if region.dim() == 3 else region
+    masked = q.masked_fill(~allowed, float("-inf"))
     return masked.flatten(1).amax(dim=1)
 

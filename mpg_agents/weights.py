@@ -146,7 +146,9 @@ def load_mpgnet(path: str | Path, primitives: Sequence[str] | None = None) -> tu
     return net, header
 
 
-SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = ("rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m")
+SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = (
+    "rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m", "grasp_fingers", "finger_tolerance_m",
+)
 """Network settings that change where Q counts, not any weight: an exported checkpoint may
 change them (:func:`export_weights`). The execution fields (``channels_last``,
 ``trunk_batch``) are not among them: loading takes those from the machine's variant defaults."""
@@ -154,7 +156,7 @@ change them (:func:`export_weights`). The execution fields (``channels_last``,
 
 def export_weights(
     src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True,
-    settings: Mapping[str, Any] | None = None, coordination: str | None = None,
+    settings: Mapping[str, Any] | None = None, coordination: str | None = None, q_star: float | None = None,
 ) -> Path:
     """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
     the shared mask trunk), floating tensors stored as float16 (loading casts them back).
@@ -164,6 +166,8 @@ def export_weights(
     ``settings_after_training``, so the copy never passes for what training used.
     ``coordination`` records the rule the copy acts with (:mod:`mpg_agents.coordination`;
     default: the checkpoint's), for checkpoints written before the learner recorded it.
+    ``q_star`` replaces Q*_g (e.g. one measured under the new settings); the header's ``extra``
+    keeps training's as ``q_star_from_training``.
     """
     settings = dict(settings or {})
     weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))
@@ -174,8 +178,14 @@ def export_weights(
         net.config = MPGNetConfig.from_checkpoint(net.config.to_dict(), **settings)
     if half:
         net = net.half()
-    q_star = header.get("q_star")
+    trained_q_star = header.get("q_star")
     extra = {**header.get("extra", {}), "exported_from": str(src), "float16": half}
+    if q_star is not None:
+        if not math.isfinite(q_star):
+            raise ValueError(f"q_star must be a finite number, got {q_star!r}")
+        extra.setdefault("q_star_from_training", trained_q_star)
+    else:
+        q_star = trained_q_star
     if coordination is not None:
         extra["coordination"] = check_coordination(coordination)
     if settings:

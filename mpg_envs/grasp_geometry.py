@@ -1,13 +1,16 @@
 """Plane geometry of parallel-jaw grasps on the heightmap grid (pure functions).
 
-Used by the scripted oracle and the grasp-ceiling benchmark: an object's footprint
-rectangle and short axis, the nearest of the 16 rotations, the regions the two open
-fingers sweep, and the highest point of the heightmap inside a polygon.
+Used by the scripted oracle, the grasp-ceiling benchmark and MPGNet's finger mask: an
+object's footprint rectangle and short axis, the nearest of the 16 rotations, the regions the
+two open fingers sweep, the highest point of the heightmap inside a polygon, and for every
+pixel and rotation at once how far the open fingers' landing strips are blocked
+(:func:`fingers_blocked`).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -16,6 +19,29 @@ from mpg_envs.workspace import NUM_ROTATIONS, Workspace
 
 GRASP_ROTATIONS = NUM_ROTATIONS // 2
 """Distinct grasp angles: a parallel jaw is the same turned by 180 degrees."""
+
+
+@dataclass(frozen=True)
+class JawGeometry:
+    """The open Robotiq 2F-85 seen from above, as a grasp primitive brings it down (metres).
+
+    Each open finger's pad is a strip ``finger_thickness`` thick along the closing direction,
+    its inner face ``finger_open_inner`` from the jaw's centre, ``2 * finger_half_width``
+    wide across the jaw (the sizes carry a margin). The pads' lower edge lies
+    ``pad_below_tcp`` below the tool centre point; a strip is free when nothing in it rises
+    above that edge plus ``finger_clearance`` (the pads push a few millimetres aside).
+    """
+
+    finger_open_inner: float = 0.0425
+    finger_thickness: float = 0.0095
+    finger_half_width: float = 0.013
+    pad_below_tcp: float = 0.005
+    finger_clearance: float = 0.004
+
+    def __post_init__(self) -> None:
+        for name in ("finger_open_inner", "finger_thickness", "finger_half_width"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"JawGeometry.{name} must be > 0 metres, got {getattr(self, name)}")
 
 
 def footprint_rect(points_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -101,3 +127,56 @@ def jaw_strip_heights(
     low = (s <= -edge) & (s >= offset - open_inner - finger_thickness)
     high = (s >= edge) & (s <= offset + open_inner + finger_thickness)
     return region_max(heights, low), region_max(heights, high)
+
+
+def finger_landing_kernel(theta: float, resolution: float, jaw: JawGeometry = JawGeometry()) -> np.ndarray:
+    """Where the two open fingers come down, relative to the grasp pixel: a square ``uint8``
+    kernel (odd side, the grasp pixel at its centre) marking the pixels whose centres lie in
+    either pad's strip for a jaw closing along world direction ``theta`` (radians; +x is
+    +column, +y is +row). Symmetric under a half turn, as a parallel jaw is."""
+    if not resolution > 0:
+        raise ValueError(f"resolution must be > 0 metres per pixel, got {resolution}")
+    outer = jaw.finger_open_inner + jaw.finger_thickness
+    radius = int(math.ceil(math.hypot(outer, jaw.finger_half_width) / resolution))
+    dr, dc = np.mgrid[-radius : radius + 1, -radius : radius + 1] * resolution
+    s = dc * math.cos(theta) + dr * math.sin(theta)  # along the closing direction
+    t = -dc * math.sin(theta) + dr * math.cos(theta)  # across the jaw
+    eps = 1e-9  # pixel centres exactly on a strip's edge count as inside, whatever the float error
+    inside = (np.abs(t) <= jaw.finger_half_width + eps) & (np.abs(s) >= jaw.finger_open_inner - eps) & (np.abs(s) <= outer + eps)
+    return inside.astype(np.uint8)
+
+
+def fingers_blocked(
+    depth: np.ndarray,
+    resolution: float,
+    grasp_depth: float,
+    grasp_min_height: float,
+    num_rotations: int = NUM_ROTATIONS,
+    jaw: JawGeometry = JawGeometry(),
+) -> np.ndarray:
+    """How far the open fingers' landing strips are blocked, for a grasp at every pixel and
+    rotation: ``(num_rotations, H, W)`` float32 metres.
+
+    Rotation ``k`` closes along ``k * 2 pi / num_rotations``. A grasp at pixel ``p`` brings the
+    tool centre down to ``max(depth[p] - grasp_depth, grasp_min_height)`` (as the grasp
+    primitive does); the value is the highest point of ``depth`` under either pad's strip
+    (:func:`finger_landing_kernel`) minus the pads' lower edge plus the clearance. ``<= 0``:
+    both fingers come down on free space; ``> 0``: that many metres of something stand in
+    their way. Off the grid counts as table (height 0).
+    """
+    depth = np.asarray(depth, dtype=np.float32)
+    if depth.ndim != 2:
+        raise ValueError(f"depth must be a (H, W) heightmap, got shape {depth.shape}")
+    if num_rotations < 1:
+        raise ValueError(f"num_rotations must be >= 1, got {num_rotations}")
+    limit = np.maximum(depth - grasp_depth, grasp_min_height) - jaw.pad_below_tcp + jaw.finger_clearance
+    out = np.empty((num_rotations, *depth.shape), dtype=np.float32)
+    half = num_rotations // 2 if num_rotations % 2 == 0 else None
+    for k in range(num_rotations):
+        if half is not None and k >= half:
+            out[k] = out[k - half]  # a half turn later the same jaw comes down
+            continue
+        # cv2.dilate takes, at each pixel, the max over the kernel's offsets: the strips' highest point.
+        kernel = finger_landing_kernel(k * 2 * math.pi / num_rotations, resolution, jaw)
+        out[k] = cv2.dilate(depth, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0.0) - limit
+    return out

@@ -36,6 +36,7 @@ import numpy as np
 from mpg_envs.action_memory import ActionMemory, RepeatRule
 from mpg_envs.grasp_geometry import (
     GRASP_ROTATIONS,
+    JawGeometry,
     angle_gap,
     angle_to_rotation,
     extent_along,
@@ -73,13 +74,14 @@ class OracleConfig:
     """Geometry the oracle plans with (metres); the finger sizes are the 2F-85's."""
 
     max_grasp_width: float = 0.075  # wider than this across the fingers: not graspable
-    finger_open_inner: float = 0.0425  # an open finger's inner face, from the jaw's centre
-    finger_thickness: float = 0.0095  # a finger's thickness along the closing direction, with a margin
-    finger_half_width: float = 0.013  # half a pad's width across the jaw, with a margin
+    # The 2F-85's open fingers (mpg_envs.grasp_geometry.JawGeometry, shared with MPGNet's finger mask).
+    finger_open_inner: float = JawGeometry.finger_open_inner  # an open finger's inner face, from the jaw's centre
+    finger_thickness: float = JawGeometry.finger_thickness  # a finger's thickness along the closing direction, with a margin
+    finger_half_width: float = JawGeometry.finger_half_width  # half a pad's width across the jaw, with a margin
     offset_step: float = 0.004  # the jaw slides along the closing direction in steps of this
     finger_margin: float = 0.004  # the swept strip starts this far off the object's side
-    pad_below_tcp: float = 0.005  # the pads' lower edge lies this far below the TCP
-    finger_clearance: float = 0.004  # a strip is free if nothing in it rises above the pads' lower edge + this
+    pad_below_tcp: float = JawGeometry.pad_below_tcp  # the pads' lower edge lies this far below the TCP
+    finger_clearance: float = JawGeometry.finger_clearance  # a strip is free if nothing in it rises above the pads' lower edge + this
     grasp_tolerance: float = 0.02  # a grasp this little blocked is tried before any push (the pads push small things aside)
     push_start_gap: float = 0.012  # a push starts this far outside the target's edge
     occluder_tolerance: float = 0.01  # as the env's occlusion test: higher than the target's top by this

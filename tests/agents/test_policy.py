@@ -241,3 +241,42 @@ def test_imagenet_initialisation_reaches_every_trunk(tmp_path, make_policy):
     last = [k for k in net.mask_trunk.state_dict() if k.endswith("weight") and k.startswith("features.")][-1]
     for trunk in (net.branches["grasp"].depth_trunk, policy.q_net_target.mpgnet.branches["grasp"].color_trunk):
         assert torch.equal(trunk.state_dict()[last], state[last])
+
+
+def test_grasp_fingers_clear_keeps_grasps_where_the_fingers_land(make_policy):
+    from mpg_agents.regions import least_blocked, target_pixels
+    from mpg_envs.grasp_geometry import fingers_blocked
+
+    rng = np.random.default_rng(5)
+    scene = random_scene(rng, occluded=False)
+    depth = np.zeros((224, 224), np.float32)
+    mask = np.zeros((224, 224), np.uint8)
+    depth[100:130, 100:120] = 0.03
+    mask[100:130, 100:120] = 1  # the target, 6 cm x 4 cm
+    depth[95:135, 132:140] = 0.08  # a tall wall 2.4-4 cm to its right (+x)
+    scene = dict(scene, depth=depth, mask=mask)
+    clear = make_policy(net_config={**TINY["net_config"], "grasp_fingers": "clear", "grasp_region": "target"})
+    calibrate_bn(clear.q_net.mpgnet, scene)
+    clear.set_training_mode(False)
+    blocked = torch.from_numpy(fingers_blocked(depth, 0.002, 0.04, 0.02))[None]
+    on_target = target_pixels(torch.as_tensor(mask)[None], 2)
+    expected = least_blocked(blocked, on_target, 0.005)[0] & on_target[0][None]
+    assert expected.any() and (on_target[0][None] & ~expected).any(), "the wall must bar some grasps and not all"
+    obs, _ = clear.obs_to_tensor(scene)
+    with torch.inference_mode():
+        enc = clear.q_net.mpgnet.encode(obs)
+        assert torch.equal(clear.q_net.mpgnet.actable(enc, "grasp")[0], expected)
+        assert torch.equal(clear.q_net.mpgnet.actable(enc, "move")[0, 0], enc.region[0])  # move keeps its region
+    decision = clear.decide(scene, "grasp")
+    assert expected[decision.rotation, decision.row, decision.col]
+    assert decision.grasp_score == pytest.approx(decision.q_value)  # the score ranges over the same grasps
+    # The greedy action of the flat Q (the TD target's argmax) obeys the mask as well.
+    grasp_only = make_policy(("grasp",), net_config={**TINY["net_config"], "grasp_fingers": "clear", "grasp_region": "target"})
+    grasp_only.q_net.load_state_dict({k: v for k, v in clear.q_net.state_dict().items() if "branches.move" not in k and "branches.push" not in k})
+    grasp_only.set_training_mode(False)
+    with torch.inference_mode():
+        flat = int(grasp_only.q_net.greedy_actions(grasp_only.obs_to_tensor(scene)[0])[0])
+    _, rot, row, col = decode_action(("grasp",), flat)
+    assert expected[rot, row, col]
+    with pytest.raises(ValueError, match="grasp_fingers"):
+        make_policy(net_config={**TINY["net_config"], "grasp_fingers": "free"})

@@ -8,7 +8,7 @@ import torch
 
 from mpg_agents.mpgnet import MPGNet
 from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_agents.regions import footprint_top, region_max, target_pixels, target_region
+from mpg_agents.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
 
 from .conftest import calibrate_bn
 
@@ -104,6 +104,42 @@ def test_region_max_ignores_pixels_outside():
     q[0, 1, 0, 0] = 9.0  # outside
     q[0, 0, 3, 2] = 0.5  # inside
     assert float(region_max(q, target_pixels(_mask((3, 2)), 0))[0]) == 0.5
+
+
+def test_region_max_per_rotation():
+    q = torch.zeros((1, 2, 8, 8))
+    q[0, 1, 3, 2] = 9.0  # barred at rotation 1
+    q[0, 0, 3, 2] = 0.5
+    where = torch.zeros((1, 2, 8, 8), dtype=torch.bool)
+    where[0, 0, 3, 2] = True
+    assert float(region_max(q, where)[0]) == 0.5
+    assert float(region_max(q, where[:, :1].expand(1, 2, 8, 8).clone())[0]) == 9.0
+
+
+def _blocked(values: list[list[float]]) -> torch.Tensor:
+    """(1, R, 1, W) finger blocking from rows of metres, one row per rotation."""
+    return torch.tensor(values)[None, :, None, :]
+
+
+def test_least_blocked_keeps_the_free_grasps_when_the_target_has_one():
+    blocked = _blocked([[-0.01, 0.02, 0.004, 0.006], [0.03, 0.001, -0.02, 0.0]])
+    region = torch.tensor([[[True, True, False, False]]])  # the target: the first two pixels
+    kept = least_blocked(blocked, region, tolerance=0.005)[0, :, 0]
+    # A free grasp exists on the target (-0.01): everything blocked by at most 5 mm is kept.
+    assert kept.tolist() == [[True, False, True, False], [False, True, True, True]]
+
+
+def test_least_blocked_keeps_the_least_blocked_when_none_is_free():
+    blocked = _blocked([[0.03, 0.02, -0.05], [0.024, 0.026, 0.0]])
+    region = torch.tensor([[[True, True, False]]])
+    kept = least_blocked(blocked, region, tolerance=0.005)[0, :, 0]
+    # The least blocked on the target is 0.02: kept up to 0.025 (outside the region too).
+    assert kept.tolist() == [[False, True, True], [True, False, True]]
+    assert least_blocked(blocked, region, tolerance=0.0)[0, :, 0].tolist() == [[False, True, True], [False, False, True]]
+    with pytest.raises(ValueError, match="tolerance"):
+        least_blocked(blocked, region, tolerance=-0.001)
+    with pytest.raises(ValueError, match=r"\(B, R, H, W\)"):
+        least_blocked(blocked[0], region, tolerance=0.0)
 
 
 def test_grasp_region_target_zeroes_grasp_off_the_target(scene):

@@ -65,6 +65,13 @@ def test_export_keeps_the_weights_and_records_changed_settings(tmp_path, small_n
     assert all(torch.equal(before[k].half() if before[k].is_floating_point() else before[k], after[k]) for k in before)
     with pytest.raises(ValueError, match=r"\['head_channels'\] change the architecture"):
         export_weights(src, tmp_path / "bad.safetensors", settings={"head_channels": 32})
+    # A finger mask set after training, with Q*_g measured under it: training's Q*_g stays on record.
+    masked = export_weights(src, tmp_path / "masked.safetensors", settings={"grasp_fingers": "clear"}, q_star=0.5)
+    header = read_checkpoint_header(masked)
+    assert header["config"]["grasp_fingers"] == "clear" and header["q_star"] == 0.5
+    assert header["extra"]["q_star_from_training"] == 1.25
+    with pytest.raises(ValueError, match="q_star"):
+        export_weights(src, tmp_path / "nan.safetensors", q_star=float("nan"))
 
 
 def test_a_checkpoint_acts_with_the_coordination_it_records(tmp_path, small_net):
