@@ -267,6 +267,49 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------- export
+def export_main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="mpg-export",
+        description="A lean copy of a trained checkpoint for shipping: float16, optionally only some branches, "
+                    "with settings that change where Q counts (not any weight) and a Q*_g measured after training; "
+                    "the header records what changed.",
+    )
+    parser.add_argument("src", help="the trained checkpoint (.safetensors), e.g. RUN/Stage5/weights.safetensors")
+    parser.add_argument("dst", help="the copy to write")
+    parser.add_argument("--primitives", help="comma-separated branches to keep (default: all)")
+    parser.add_argument("--float32", action="store_true", help="keep float32 (default: float16)")
+    parser.add_argument("--grasp-fingers", choices=("any", "clear"), help="which grasps may act (MPGNetConfig.grasp_fingers)")
+    parser.add_argument("--grasp-region", choices=("rectangle", "target"), help="where a grasp may act")
+    parser.add_argument("--target-margin", type=int, help="growth (> 0) or shrinking (< 0) of the target's pixels, pixels")
+    parser.add_argument("--move-region", choices=("rectangle", "top"), help="where a move may act")
+    parser.add_argument("--q-star", type=float, help="Q*_g of the copy (training's stays on record in the header)")
+    parser.add_argument("--coordination", choices=COORDINATIONS, help="the rule the copy acts with")
+    args = parser.parse_args(argv)
+    try:
+        from mpg_agents.weights import export_weights, read_checkpoint_header
+
+        _check_checkpoint(args.src)
+        settings = {
+            name: value
+            for name, value in (
+                ("grasp_fingers", args.grasp_fingers), ("grasp_region", args.grasp_region),
+                ("target_margin_px", args.target_margin), ("move_region", args.move_region),
+            )
+            if value is not None
+        }
+        primitives = tuple(p.strip() for p in args.primitives.split(",")) if args.primitives else None
+        dst = export_weights(args.src, args.dst, primitives=primitives, half=not args.float32, settings=settings,
+                             coordination=args.coordination, q_star=args.q_star)
+        header = read_checkpoint_header(dst)
+    except (UsageError, FileNotFoundError, ValueError) as exc:
+        return _fail(exc)
+    print(f"{dst}: {dst.stat().st_size / 1000:.0f} kB, branches {header['primitives']}, Q*_g {header['q_star']:.4f}, "
+          f"coordination {header['extra'].get('coordination', 'workflow')}, settings after training "
+          f"{header['extra'].get('settings_after_training', {})}")
+    return 0
+
+
 # ----------------------------------------------------------------------------- plot
 def plot_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="mpg-plot", description="Learning curves of a run (or pipeline) directory to PNG.")

@@ -95,3 +95,20 @@ def test_a_checkpoint_acts_with_the_coordination_it_records(tmp_path, small_net)
     with pytest.raises(ValueError, match="coordination must be one of"):
         export_weights(src, tmp_path / "bad.safetensors", coordination="vote")
     env.close()
+
+
+def test_mpg_export_cli(tmp_path, small_net, capsys):
+    from mpg_agents.cli import export_main
+    from mpg_agents.weights import read_checkpoint_header
+
+    src = tmp_path / "net.safetensors"
+    save_mpgnet(small_net, src, q_star=0.9)
+    dst = tmp_path / "grasp.safetensors"
+    assert export_main([str(src), str(dst), "--primitives", "grasp", "--grasp-fingers", "clear", "--q-star", "0"]) == 0
+    header = read_checkpoint_header(dst)
+    assert header["primitives"] == ["grasp"] and header["q_star"] == 0.0
+    assert header["config"]["grasp_fingers"] == "clear" and header["extra"]["q_star_from_training"] == 0.9
+    assert "Q*_g 0.0000" in capsys.readouterr().out
+    assert export_main([str(tmp_path / "missing.safetensors"), str(dst)]) == 2
+    assert export_main([str(src), str(dst), "--q-star", "nan"]) == 2
+    assert "q_star must be a finite number" in capsys.readouterr().err
