@@ -13,6 +13,11 @@ rule's other branch is measured too (a grasp declined is worth a move only if mo
 target). With ``--angle-trials`` each grasp is also tried, before it is made, at the other
 gripper orientations at its pixel (``MPGEnv.try_step``, undone; the episode is unchanged), and
 the summary counts the grasps that missed the target where another angle would have taken it.
+Each grasp's finger blocking is recorded too (how far the open fingers' landing strips are
+blocked, read off the depth heightmap: :func:`mpg_envs.grasp_geometry.fingers_blocked`), with
+the share of free (``<= 0``) and blocked grasps that took the target and the ROC AUC of minus
+the blocking: what a grasp's geometry alone says. ``--grasp-fingers clear`` runs the net with
+its finger mask (``MPGNetConfig.grasp_fingers``).
 
     python benchmarks/grasp_q_outcomes.py --policy mpg_agents/checkpoints/mpgnet_small.safetensors \
         --env MPG-Occluded-v0 --num-objects 15 --episodes 50 --seed 700000
@@ -34,7 +39,8 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.baselines import make_policy
 from mpg_agents.evaluate import run_episodes
 from mpg_envs.threads import set_torch_threads
-from mpg_envs.grasp_geometry import other_grasp_angles
+from mpg_envs.grasp_geometry import fingers_blocked, other_grasp_angles
+from mpg_envs.primitives import PrimitiveConfig
 
 
 def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
@@ -61,6 +67,7 @@ class _LastQ:
     def __init__(self, network_policy, env: gym.Env | None = None):
         self.net, self.env = network_policy, env
         self.q = float("nan")
+        self.blocked = float("nan")
         self.other_angle_takes: bool | None = None
 
     def reset(self) -> None:
@@ -70,6 +77,11 @@ class _LastQ:
         decision = self.net.policy.decide(obs)
         self.q = float(decision.q_value)
         self.other_angle_takes = None
+        self.blocked = float("nan")
+        if decision.primitive == "grasp":
+            grasp = PrimitiveConfig()
+            blocked = fingers_blocked(np.asarray(obs["depth"]), 0.002, grasp.grasp_depth, grasp.grasp_min_height)
+            self.blocked = float(blocked[decision.rotation, decision.row, decision.col])
         if self.env is not None and decision.primitive == "grasp":
             u = self.env.unwrapped
             self.other_angle_takes = any(
@@ -80,12 +92,13 @@ class _LastQ:
 
 
 def grasp_records(
-    policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int, angle_trials: bool = False
+    policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int, angle_trials: bool = False,
+    grasp_fingers: str | None = None,
 ) -> tuple[str, float, list[dict], list[dict]]:
     """The policy's name, its Q*_g, every grasp and every move or push of ``episodes`` greedy
     episodes (episode ``i`` reset with ``seed + i``, as ``mpg-eval`` runs them)."""
     env = gym.make(env_id, num_objects=num_objects)
-    policy = make_policy(policy_name, env)
+    policy = make_policy(policy_name, env, **({"grasp_fingers": grasp_fingers} if grasp_fingers else {}))
     if not hasattr(policy, "policy"):
         raise ValueError(f"--policy must be an MPGNet checkpoint (or 'shipped'), got {policy_name!r}")
     acting = _LastQ(policy, env if angle_trials else None)
@@ -103,6 +116,7 @@ def grasp_records(
                 "seed": seed + index, "q": acting.q, "occluded": bool(info["occluded_before"]),
                 "target": bool(info["target_grasped"]), "wrong": bool(info["wrong_grasp"]),
                 "failure": info["grasp_failure"], "other_angle_takes": acting.other_angle_takes,
+                "blocked": acting.blocked,
             })
 
     run_episodes(acting, env, range(episodes), seed, on_step=on_step)
@@ -153,6 +167,26 @@ def summarise(records: list[dict], q_star: float) -> dict:
         "target_share_q_at_least_q_star": share(q >= q_star),
         "q_at_least_q_star": int((q >= q_star).sum()),
         **summarise_angles(records),
+        **summarise_fingers(records),
+    }
+
+
+def summarise_fingers(records: list[dict]) -> dict:
+    """With finger blocking recorded: how many grasps had both fingers land free (``<= 0``),
+    the share of free and blocked grasps that took the target, and the ROC AUC of minus the
+    blocking as a predictor of a target grasp (empty without blocking)."""
+    known = [r for r in records if r.get("blocked") is not None and np.isfinite(r["blocked"])]
+    if not known:
+        return {}
+    blocked = np.array([r["blocked"] for r in known])
+    took = np.array([r["target"] for r in known])
+    free = blocked <= 0.0
+    share = lambda sel: float(took[sel].mean()) if sel.any() else float("nan")  # noqa: E731
+    return {
+        "fingers_free": int(free.sum()),
+        "target_share_fingers_free": share(free),
+        "target_share_fingers_blocked": share(~free),
+        "fingers_auc": roc_auc(-blocked, took),
     }
 
 
@@ -191,11 +225,12 @@ def main() -> None:
     parser = checkpoint_episodes_parser(__doc__.splitlines()[0])
     parser.add_argument("--angle-trials", action="store_true",
                         help="also try each grasp at the other orientations at its pixel (undone)")
+    parser.add_argument("--grasp-fingers", choices=("any", "clear"), help="override the checkpoint's finger mask")
     args = parser.parse_args()
     check_episodes(parser, args)
     set_torch_threads(1)
     name, q_star, records, others = grasp_records(
-        args.policy, args.env, args.num_objects, args.episodes, args.seed, args.angle_trials)
+        args.policy, args.env, args.num_objects, args.episodes, args.seed, args.angle_trials, args.grasp_fingers)
     out = {"policy": name, "env": args.env, "num_objects": args.num_objects, "episodes": args.episodes,
            "seed": args.seed, **summarise(records, q_star), "motions": summarise_motions(others)}
     print(f"{name}: {out['grasps']} grasps in {args.episodes} episodes of {args.env} ({args.num_objects} objects)")
@@ -207,6 +242,9 @@ def main() -> None:
     print(f"  per Q quartile (edges {edges}): {shares}")
     print(f"  ROC AUC of Q for a target grasp: {out['q_auc']:.3f}; Q*_g {q_star:.4f}: "
           f"{out['q_at_least_q_star']} grasps at or above it, target share {out['target_share_q_at_least_q_star']:.2f}")
+    if "fingers_auc" in out:
+        print(f"  fingers land free in {out['fingers_free']} grasps: target share free {out['target_share_fingers_free']:.2f}, "
+              f"blocked {out['target_share_fingers_blocked']:.2f}; ROC AUC of minus the blocking {out['fingers_auc']:.3f}")
     if "missed_covered" in out:
         print(f"  missed the target: covered {out['missed_covered']} (another angle at the pixel takes it in "
               f"{out['missed_covered_other_angle_takes']}), uncovered {out['missed_uncovered']} "

@@ -56,3 +56,15 @@ def test_angle_trials_count_the_misses_another_angle_would_take():
     assert (out["missed_covered"], out["missed_covered_other_angle_takes"]) == (1, 1)
     plain = [dict(r, other_angle_takes=None) for r in records]
     assert "missed_covered" not in bench.summarise(plain, q_star=0.0)  # no trials, no such counts
+
+
+def test_finger_blocking_is_summarised():
+    rec = lambda took, blocked: {"q": 0.5, "occluded": False, "target": took, "wrong": False,  # noqa: E731
+                                 "failure": None if took else "closed_empty", "blocked": blocked}
+    records = [rec(True, -0.01), rec(False, 0.02), rec(True, 0.01), rec(False, -0.005), rec(False, 0.03)]
+    out = bench.summarise(records, q_star=0.0)
+    assert out["fingers_free"] == 2
+    assert (out["target_share_fingers_free"], out["target_share_fingers_blocked"]) == (0.5, 1 / 3)
+    # Minus the blocking: the target grasps (0.01, -0.01) beat 3 and 2 of the 3 misses (-0.02, 0.005, -0.03).
+    assert out["fingers_auc"] == pytest.approx(5 / 6)
+    assert "fingers_auc" not in bench.summarise([dict(r, blocked=float("nan")) for r in records], q_star=0.0)
