@@ -102,6 +102,7 @@ def save_qmap_png(
     action: Any = None,
     primitives: Sequence[str] | None = None,
     scale: int = 2,
+    notes: Mapping[str, str] | None = None,
 ) -> Path:
     """Write a PNG that explains one decision: one panel per primitive, titled, on one colour scale.
 
@@ -121,6 +122,7 @@ def save_qmap_png(
         primitives: the action space's primitive order for a flat ``action`` (default: the
             keys of ``q_maps`` in canonical order).
         scale: integer upscaling of each heightmap panel.
+        notes: ``{primitive: text}`` added to that panel's title (e.g. what masks its map).
 
     Returns:
         The written path. Panels start at row ``HEADER_PX``, side by side, each
@@ -156,7 +158,9 @@ def save_qmap_png(
             contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
             cv2.drawContours(panel, [c * scale for c in contours], -1, WHITE, 1)
         header = np.zeros((HEADER_PX, side, 3), np.uint8)
-        _text(header, f"{name} Q map, max {float(np.nanmax(best[name])):.3f}", (8, 22), 0.6, bold=True)
+        note = f" {notes[name]}" if notes and name in notes else ""
+        top = best[name][np.isfinite(best[name])]
+        _text(header, f"{name} Q map{note}, max {float(top.max()) if top.size else float('nan'):.3f}", (8, 22), 0.6, bold=True)
         if chosen is not None and chosen.primitive == name:
             _draw_action(panel, chosen, scale)
             _text(header, "chosen: " + action_label(chosen).split(" at ", 1)[1], (8, 46), 0.45)
@@ -181,9 +185,16 @@ def save_policy_qmaps(path: str | Path, policy: Any, obs: Mapping[str, Any]) -> 
     every primitive the network has (the decision itself may compute only some of them)."""
     decision = policy.decide(obs)
     obs_tensor, _ = policy.obs_to_tensor(dict(obs))
+    notes = {}
     with torch.inference_mode():
-        maps = {name: q[0] for name, q in policy.q_net.q_maps(obs_tensor).items()}
-    return save_qmap_png(path, obs, maps, decision, primitives=policy.action_primitives)
+        net = policy.q_net.mpgnet
+        enc = net.encode(obs_tensor)
+        maps = {name: q[0] for name, q in net.maps_from(enc, policy.usable_primitives).items()}
+        if "grasp" in maps and enc.grasp_fingers is not None:
+            # Show only the grasps the finger mask keeps: the ones the policy chooses among.
+            maps["grasp"] = maps["grasp"].masked_fill(~enc.grasp_fingers[0], float("-inf"))
+            notes["grasp"] = "(fingers clear)"
+    return save_qmap_png(path, obs, maps, decision, primitives=policy.action_primitives, notes=notes)
 
 
 def _draw_action(panel: np.ndarray, action: PixelAction, scale: int) -> None:
