@@ -18,8 +18,10 @@ def test_shipped_checkpoint_is_small_and_loads():
 
     header = read_checkpoint_header(path)
     assert header["primitives"] == ["move", "push", "grasp"] and header["variant"] == "small"
-    assert header["q_star"] is not None  # calibrated after Stage II
+    assert header["q_star"] is not None  # chosen after training, training's on record
+    assert header["extra"]["q_star_from_training"] is not None
     assert header["config"]["grasp_region"] == "target" and header["config"]["target_margin_px"] == -8
+    assert header["config"]["grasp_fingers"] == "clear"
 
 
 def test_demo_runs_the_shipped_policy(tmp_path, capsys):
@@ -129,3 +131,26 @@ def encode(prims, a):
     from mpg_envs.actions import encode_action
 
     return encode_action(prims, a.primitive, a.rotation, a.row, a.col)
+
+
+def test_shipped_grasps_land_where_the_fingers_are_least_blocked():
+    import gymnasium as gym
+    import numpy as np
+    import torch
+
+    from mpg_agents.baselines import make_policy
+    from mpg_agents.regions import least_blocked, target_pixels
+    from mpg_envs.actions import decode_action
+    from mpg_envs.grasp_geometry import fingers_blocked
+
+    env = gym.make("MPG-Occluded-v0", num_objects=15)
+    policy = make_policy("shipped", env)
+    assert policy.policy.net_config.grasp_fingers == "clear"
+    obs, _ = env.reset(seed=700_003)
+    a = decode_action(env.unwrapped.primitives, policy.act(obs))
+    assert a.primitive == "grasp"  # Q*_g 0 with the finger mask: a grasp whenever the target shows
+    blocked = torch.from_numpy(fingers_blocked(np.asarray(obs["depth"]), 0.002, 0.04, 0.02))[None]
+    on_target = target_pixels(torch.from_numpy(obs["mask"][None] > 0), -8)
+    kept = least_blocked(blocked, on_target, 0.005)[0] & on_target[0][None]
+    assert kept[a.rotation, a.row, a.col] and kept.sum() < on_target.sum() * 16
+    env.close()
