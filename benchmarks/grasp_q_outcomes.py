@@ -41,6 +41,7 @@ from mpg_agents.evaluate import run_episodes
 from mpg_envs.threads import set_torch_threads
 from mpg_envs.grasp_geometry import fingers_blocked, other_grasp_angles
 from mpg_envs.primitives import PrimitiveConfig
+from mpg_envs.workspace import Workspace
 
 
 def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
@@ -80,7 +81,8 @@ class _LastQ:
         self.blocked = float("nan")
         if decision.primitive == "grasp":
             grasp = PrimitiveConfig()
-            blocked = fingers_blocked(np.asarray(obs["depth"]), 0.002, grasp.grasp_depth, grasp.grasp_min_height)
+            resolution = Workspace().resolution
+            blocked = fingers_blocked(np.asarray(obs["depth"]), resolution, grasp.grasp_depth, grasp.grasp_min_height)
             self.blocked = float(blocked[decision.rotation, decision.row, decision.col])
         if self.env is not None and decision.primitive == "grasp":
             u = self.env.unwrapped

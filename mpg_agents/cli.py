@@ -60,6 +60,25 @@ def _check_env_id(env_id: str) -> None:
         raise UsageError(f"unknown env id {env_id!r}; valid: {', '.join(mpg_envs.ENV_IDS)}")
 
 
+def _add_net_setting_arguments(parser: argparse.ArgumentParser, prefix: str) -> None:
+    """The options that override a checkpoint's settings without weights (read by :func:`_net_settings`)."""
+    parser.add_argument("--grasp-region", choices=("rectangle", "target"),
+                        help=prefix + "where a grasp may act (override the checkpoint's: the target's rectangle or its own pixels)")
+    parser.add_argument("--target-margin", type=int,
+                        help=prefix + "grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp region 'target'")
+    parser.add_argument("--move-region", choices=("rectangle", "top"),
+                        help=prefix + "where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
+    parser.add_argument("--grasp-fingers", choices=("any", "clear"),
+                        help=prefix + "which grasps may act (override the checkpoint's): any, or only those whose open fingers land least blocked")
+
+
+def _net_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """``MPGNetConfig`` field -> value of the :func:`_add_net_setting_arguments` options given."""
+    given = (("grasp_region", args.grasp_region), ("target_margin_px", args.target_margin),
+             ("move_region", args.move_region), ("grasp_fingers", args.grasp_fingers))
+    return {name: value for name, value in given if value is not None}
+
+
 def _check_checkpoint(path: str | None) -> None:
     if path is None:
         return
@@ -157,14 +176,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="episode i is reset with seed + i")
     parser.add_argument("--json", help="also write the metrics and every episode's record to this JSON file")
     parser.add_argument("--coordination", choices=COORDINATIONS, help="network policies: override the coordination")
-    parser.add_argument("--grasp-region", choices=("rectangle", "target"),
-                        help="network policies: where a grasp may act (override the checkpoint's: the target's rectangle or its own pixels)")
-    parser.add_argument("--target-margin", type=int,
-                        help="network policies: grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp region 'target'")
-    parser.add_argument("--move-region", choices=("rectangle", "top"),
-                        help="network policies: where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
-    parser.add_argument("--grasp-fingers", choices=("any", "clear"),
-                        help="network policies: which grasps may act (override the checkpoint's): any, or only those whose open fingers land least blocked")
+    _add_net_setting_arguments(parser, "network policies: ")
     parser.add_argument("--q-star", type=float,
                         help="network policies: grasp threshold Q*_g (override the checkpoint's calibrated one)")
     parser.add_argument("--avoid-repeats", action="store_true",
@@ -187,14 +199,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             raise UsageError(f"--workers must be >= 1, got {args.workers}")
         workers = 1 if args.workers is None and args.ray_address is None else args.workers
         extra = (("coordination", args.coordination),) if args.coordination else ()
-        if args.grasp_region:
-            extra += (("grasp_region", args.grasp_region),)
-        if args.target_margin is not None:
-            extra += (("target_margin_px", args.target_margin),)
-        if args.move_region:
-            extra += (("move_region", args.move_region),)
-        if args.grasp_fingers:
-            extra += (("grasp_fingers", args.grasp_fingers),)
+        extra += tuple(_net_settings(args).items())
         if args.avoid_repeats:
             extra += (("avoid_repeats", True),)
         if args.q_star is not None:
@@ -279,10 +284,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("dst", help="the copy to write")
     parser.add_argument("--primitives", help="comma-separated branches to keep (default: all)")
     parser.add_argument("--float32", action="store_true", help="keep float32 (default: float16)")
-    parser.add_argument("--grasp-fingers", choices=("any", "clear"), help="which grasps may act (MPGNetConfig.grasp_fingers)")
-    parser.add_argument("--grasp-region", choices=("rectangle", "target"), help="where a grasp may act")
-    parser.add_argument("--target-margin", type=int, help="growth (> 0) or shrinking (< 0) of the target's pixels, pixels")
-    parser.add_argument("--move-region", choices=("rectangle", "top"), help="where a move may act")
+    _add_net_setting_arguments(parser, "")
     parser.add_argument("--q-star", type=float, help="Q*_g of the copy (training's stays on record in the header)")
     parser.add_argument("--coordination", choices=COORDINATIONS, help="the rule the copy acts with")
     args = parser.parse_args(argv)
@@ -290,14 +292,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.weights import export_weights, read_checkpoint_header
 
         _check_checkpoint(args.src)
-        settings = {
-            name: value
-            for name, value in (
-                ("grasp_fingers", args.grasp_fingers), ("grasp_region", args.grasp_region),
-                ("target_margin_px", args.target_margin), ("move_region", args.move_region),
-            )
-            if value is not None
-        }
+        settings = _net_settings(args)
         primitives = tuple(p.strip() for p in args.primitives.split(",")) if args.primitives else None
         dst = export_weights(args.src, args.dst, primitives=primitives, half=not args.float32, settings=settings,
                              coordination=args.coordination, q_star=args.q_star)
