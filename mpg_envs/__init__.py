@@ -1,10 +1,17 @@
 """MPG environments: target-oriented grasping in clutter on MuJoCo.
 
-Importing the package registers the six Gymnasium ids (``MPG-Stage1-v0`` ...
-``MPG-Stage5-v0`` and ``MPG-Occluded-v0``); ``gymnasium.make("mpg_envs:MPG-Stage5-v0")``
-imports it on demand.
+Importing the package registers one Gymnasium id per stage of
+:data:`mpg_envs.stages.STAGES` (:data:`ENV_IDS`: ``MPG-Stage1-v0`` ... ``MPG-Stage5-v0``,
+``MPG-Occluded-v0``, ...); ``gymnasium.make("mpg_envs:MPG-Stage5-v0")`` imports it on demand.
+Each id carries its stage's motion cap as ``max_episode_steps``, so ``gymnasium.make`` wraps
+the env in Gymnasium's ``TimeLimit`` at the same cap the env enforces itself.
+
+Importing the package also picks an OpenGL backend for rendering when none is chosen
+(``MUJOCO_GL``; see :func:`mpg_envs.render.choose_gl_backend`). It imports no deep-learning
+library.
 """
 
+from mpg_envs._version import __version__
 from mpg_envs.render import choose_gl_backend
 
 choose_gl_backend()  # before anything imports mujoco: EGL (or OSMesa) on headless Linux
@@ -20,9 +27,20 @@ ENV_IDS: tuple[str, ...] = tuple(spec.env_id for spec in STAGES.values())
 
 
 def _register() -> None:
+    """Register every stage's id (once), with ``max_episode_steps`` = the stage's motion cap.
+
+    A cap passed to ``gymnasium.make(env_id, max_motions=n)`` changes the env's own cap; pass
+    ``max_episode_steps=n`` with it when ``n`` is larger than the stage's, or the
+    ``TimeLimit`` wrapper truncates at the stage's cap first.
+    """
     for name, stage in STAGES.items():
         if stage.env_id not in gym.registry:
-            gym.register(id=stage.env_id, entry_point="mpg_envs.env:MPGEnv", kwargs={"stage": name})
+            gym.register(
+                id=stage.env_id,
+                entry_point="mpg_envs.env:MPGEnv",
+                kwargs={"stage": name},
+                max_episode_steps=stage.max_motions,
+            )
 
 
 def env_primitives(env: gym.Env) -> tuple[str, ...]:
@@ -33,6 +51,7 @@ def env_primitives(env: gym.Env) -> tuple[str, ...]:
 _register()
 
 __all__ = [
+    "__version__",
     "ContinuousAction",
     "ENV_IDS",
     "GridAction",

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import hashlib
 from typing import Sequence
 
 import mujoco
+import numpy as np
 
 from mpg_envs.assets import ObjectAsset
 
@@ -22,6 +24,14 @@ OBJECT_GEOM_GROUP = 1
 """Geom group of object geoms: the heightmap ray casts see groups 0 and 1 only."""
 
 
+def part_mesh_name(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """The spec name of the mesh of one convex part: a digest of its vertices and faces, so
+    equal parts share one mesh and different parts never collide by name."""
+    digest = hashlib.blake2b(np.ascontiguousarray(vertices, np.float64).tobytes(), digest_size=8)
+    digest.update(np.ascontiguousarray(faces, np.int64).tobytes())
+    return f"part/{digest.hexdigest()}"
+
+
 def add_object_body(
     spec: mujoco.MjSpec,
     parent: mujoco.MjsBody,
@@ -32,7 +42,9 @@ def add_object_body(
 ) -> mujoco.MjsBody:
     """Add ``asset`` to ``spec`` as a free body named ``name``, child of ``parent``.
 
-    Creates one mesh asset per convex part, named ``f"{name}/part{i}"``; a body ``name`` at
+    Uses one mesh asset per convex part of the asset, shared by every body of the same
+    shape (named by a digest of the part's vertices and faces, so compiling a scene of 30
+    objects processes each distinct part once); a body ``name`` at
     ``pos``/``quat`` (relative to ``parent``) with a free joint ``f"{name}/joint"``; and one
     mesh geom ``f"{name}/geom{i}"`` per part: group :data:`OBJECT_GEOM_GROUP`,
     contype/conaffinity 1, condim :data:`OBJECT_CONDIM`, friction
@@ -42,7 +54,7 @@ def add_object_body(
     body origin. Solver parameters are left at the model's defaults.
 
     Raises:
-        ValueError: empty ``name``, or a mesh/body of that name already exists in ``spec``.
+        ValueError: empty ``name``, or a body of that name already exists in ``spec``.
     """
     if not name:
         raise ValueError("object body name must be non-empty")
@@ -53,15 +65,14 @@ def add_object_body(
     body = parent.add_body(name=name, pos=[float(x) for x in pos], quat=[float(x) for x in quat])
     body.add_freejoint(name=f"{name}/joint")
     for i, ((vertices, faces), part_mass) in enumerate(zip(asset.parts, masses)):
-        mesh_name = f"{name}/part{i}"
-        if spec.mesh(mesh_name) is not None:
-            raise ValueError(f"the spec already has a mesh named {mesh_name!r}")
-        mesh = spec.add_mesh(
-            name=mesh_name,
-            uservert=vertices.ravel().tolist(),
-            userface=faces.ravel().tolist(),
-        )
-        mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
+        mesh_name = part_mesh_name(vertices, faces)
+        if spec.mesh(mesh_name) is None:
+            mesh = spec.add_mesh(
+                name=mesh_name,
+                uservert=vertices.ravel().tolist(),
+                userface=faces.ravel().tolist(),
+            )
+            mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
         body.add_geom(
             name=f"{name}/geom{i}",
             type=mujoco.mjtGeom.mjGEOM_MESH,

@@ -124,6 +124,8 @@ class CameraImage:
         depth: ``(H, W)`` float32 metres along the optical axis; 0 where invalid.
         intrinsics: 3x3 pinhole matrix ``K``.
         pose: 4x4 camera-to-world transform of the OpenCV camera frame.
+        geom_id: ``(H, W)`` int32 id of the geom seen at each pixel (MuJoCo's segmentation
+            render), -1 where no geom is seen.
     """
 
     name: str
@@ -131,6 +133,7 @@ class CameraImage:
     depth: np.ndarray
     intrinsics: np.ndarray
     pose: np.ndarray
+    geom_id: np.ndarray | None = None
 
 
 # ----------------------------------------------------------------------------------------
@@ -298,22 +301,26 @@ class CameraHeightmapper:
             self._renderer.enable_depth_rendering()
             depth = self._renderer.render().astype(np.float64)
             self._renderer.disable_depth_rendering()
+            self._renderer.enable_segmentation_rendering()
+            seg = self._renderer.render()
+            self._renderer.disable_segmentation_rendering()
+            geom_id = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1).astype(np.int32)
             if std > 0:
                 depth += rng.normal(0.0, std, size=depth.shape)  # type: ignore[union-attr]
             valid = (depth >= self.config.near) & (depth <= self.config.far)
             depth = np.where(valid, depth, 0.0).astype(np.float32)
             pose = opencv_camera_pose(data.cam_xpos[cam_id], data.cam_xmat[cam_id])
             images.append(
-                CameraImage(name=name, color=color, depth=depth, intrinsics=intrinsics.copy(), pose=pose)
+                CameraImage(name=name, color=color, depth=depth, intrinsics=intrinsics.copy(), pose=pose, geom_id=geom_id)
             )
         return images
 
     def heightmaps(self, data: mujoco.MjData, rng: np.random.Generator | None = None) -> Heightmaps:
-        """Fused colour/depth heightmaps of all cameras (``geom_id`` is ``None``); ``rng``
-        as in :meth:`render`."""
+        """Fused colour/depth heightmaps of all cameras, with the geom seen at each pixel from
+        the segmentation render (``geom_id``); ``rng`` as in :meth:`render`."""
         maps = [
             heightmap_from_rgbd(
-                img.color, img.depth, img.intrinsics, img.pose, self.workspace, self.config.background_color
+                img.color, img.depth, img.intrinsics, img.pose, self.workspace, self.config.background_color, img.geom_id
             )
             for img in self.render(data, rng)
         ]

@@ -1,7 +1,10 @@
 """``MPGEnv``: one Gymnasium env class; each registered id is a :class:`StageSpec`.
 
-Life of a step: decode the pixel-wise action, run the primitive in the world, observe the
-new heightmaps, check occlusion and change, score the stage's reward, decide termination.
+Life of a step, as named hooks: decode the pixel-wise action, run the primitive in the world,
+observe (heightmaps, target mask, occlusion, visible fraction), ``evaluate`` what the step did
+(a :class:`~mpg_envs.step_evaluation.StepEvaluation`), ``step_reward`` it, and decide the end
+(:func:`~mpg_envs.stages.episode_end`). A reset's scene comes from ``_load_scene``: a scene
+file, the shipped test set of the seed, or a fresh drop (:mod:`mpg_envs.scene_source`).
 """
 
 from __future__ import annotations
@@ -15,26 +18,21 @@ import numpy as np
 from mpg_envs.actions import PixelActionSpace
 from mpg_envs.config import OBS_MODES, EnvConfig, observation_space
 from mpg_envs.objects import ObjectAsset, load_object_set
-from mpg_envs.occlusion import change_detected, is_occluded, surrounded_sectors
+from mpg_envs.occlusion import change_detected, check_band, is_occluded, visible_fraction
 from mpg_envs.primitives import PrimitiveResult, Primitives
 from mpg_envs.rewards import StepOutcome
+from mpg_envs.scene_source import draw_scene, shipped_scene
+from mpg_envs.step_evaluation import StepEvaluation, action_info
 from mpg_envs.robot import ArmIK
-from mpg_envs.scene_io import (
-    SceneFile,
-    SceneFileError,
-    SceneObject,
-    kept_target,
-    objects_outside,
-    read_scene,
-    resolve_outside,
-)
-from mpg_envs.scenes import SCENES, InvalidSceneError, keep_inside
-from mpg_envs.stages import END_REASONS, STAGES, StageSpec, episode_end
+from mpg_envs.scene_io import SceneFile, SceneFileError, read_scene
+from mpg_envs.scene_loading import apply_scene, scene_of
+from mpg_envs.scenes import InvalidSceneError
+from mpg_envs.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
 from mpg_envs.world import World, WorldCheckpoint
 
-__all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "MPGEnv", "observation_space"]
+__all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "InvalidSceneError", "MPGEnv", "StepEvaluation", "observation_space"]
 
-RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside")
+RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside", "num_objects")
 GraspScorer = Callable[[dict[str, np.ndarray]], float]
 
 
@@ -55,20 +53,21 @@ class MPGEnv(gym.Env):
         world: the :class:`~mpg_envs.world.World` of the current episode (``None`` before
             the first reset).
 
-    Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
-    workspace (objects that roll out are dropped again on the pile, deterministically from
-    the seed), and meets the stage's start condition (Occluded: the target is one of the
-    first five dropped and is occluded; Stage 5: the first or second dropped). When that
-    cannot be made in ``config.scene_tries`` draws, reset raises
-    :class:`~mpg_envs.scenes.InvalidSceneError` rather than return a lesser scene.
-    ``reset(options=...)`` takes ``scene`` (a scene file, ours or a VPG test case),
-    ``mesh_dir`` (meshes for a VPG case) and ``drop_outside`` (leave out, with a warning,
-    the file's objects outside the workspace instead of raising
-    :class:`~mpg_envs.scene_io.SceneFileError`). Reset's ``info`` has ``objects_left`` (the
-    scene's object count), ``occluded``, ``target``, ``num_motions`` and ``is_success``.
+    Keywords beyond the stage: ``wrong_grasp`` (``"remove"``, the paper's protocol, or
+    ``"fail"``: strict retrieval, a mis-pick ends the episode), ``visible_range`` (a band of
+    the target's visible fraction at reset), ``use_test_set`` (load the shipped scenes of the
+    test seeds; ``False`` generates every scene).
 
-    Step ``info`` has ``end_reason``: ``None`` until the episode's last step, then one of
-    :data:`END_REASONS`.
+    Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
+    workspace, and meets the start condition (the stage's occlusion or surround, the visible
+    band); else :class:`~mpg_envs.scenes.InvalidSceneError`, never a lesser scene.
+    ``reset(options=...)`` takes ``scene`` (a scene file, ours or a peer's, or a
+    :class:`~mpg_envs.scene_io.SceneFile`), ``mesh_dir`` (meshes for a peer's file),
+    ``drop_outside`` (leave out, with a warning, the file's objects outside the workspace
+    instead of raising :class:`~mpg_envs.scene_io.SceneFileError`) and ``num_objects`` (this
+    episode's count). Reset's ``info`` has ``objects_left``, ``occluded``,
+    ``visible_fraction``, ``target``, ``num_motions`` and ``is_success``; a step's also
+    ``end_reason`` (``None`` until the last step, then one of :data:`END_REASONS`).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -84,14 +83,25 @@ class MPGEnv(gym.Env):
         render_mode: str | None = None,
         config: EnvConfig = EnvConfig(),
         camera_config: Any = None,
+        wrong_grasp: str | None = None,
+        visible_range: tuple[float, float] | None = None,
+        use_test_set: bool = True,
     ):
         self.stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
         if not isinstance(self.stage, StageSpec):
             raise ValueError(f"unknown stage {stage!r}; valid: {sorted(STAGES)}")
         stage_spec = self.stage
-        self.num_objects = stage_spec.num_objects if num_objects is None else num_objects
-        if not isinstance(self.num_objects, (int, np.integer)) or not stage_spec.min_objects <= self.num_objects <= 60:
-            raise ValueError(f"num_objects must be an integer in {stage_spec.min_objects}..60 for {stage_spec.name}, got {num_objects!r}")
+        self.num_objects = self._checked_num_objects(stage_spec.num_objects if num_objects is None else num_objects)
+        self.default_num_objects = self.num_objects
+        self.wrong_grasp = stage_spec.wrong_grasp if wrong_grasp is None else wrong_grasp
+        if self.wrong_grasp not in WRONG_GRASP_RULES:
+            raise ValueError(f"wrong_grasp must be one of {WRONG_GRASP_RULES}, got {wrong_grasp!r}")
+        if self.wrong_grasp == "fail" and stage_spec.mask_all_objects:
+            raise ValueError(f"wrong_grasp='fail' needs a target; {stage_spec.env_id} has none (every object is a target)")
+        self.visible_range = check_band(stage_spec.visible_range if visible_range is None else visible_range)
+        if self.visible_range is not None and stage_spec.mask_all_objects:
+            raise ValueError(f"visible_range needs a target; {stage_spec.env_id} has none (every object is a target)")
+        self.use_test_set = bool(use_test_set)
         self.max_motions = stage_spec.max_motions if max_motions is None else max_motions
         if not isinstance(self.max_motions, (int, np.integer)) or self.max_motions < 1:
             raise ValueError(f"max_motions must be a positive integer, got {max_motions!r}")
@@ -124,6 +134,7 @@ class MPGEnv(gym.Env):
         self.target: int | None = None
         self._obs: dict[str, np.ndarray] | None = None
         self._score: tuple[dict, float] | None = None  # (observation, its grasp score)
+        self._visible: float | None = None  # the target's visible fraction in the last observation
         self.num_motions = 0
 
     # ------------------------------------------------------------ gym API
@@ -133,11 +144,8 @@ class MPGEnv(gym.Env):
         unknown = sorted(set(options) - set(RESET_OPTIONS))
         if unknown:
             raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
-        if options.get("scene") is not None:
-            scene = read_scene(options["scene"], options.get("mesh_dir"), self.config.object_set_seed)
-            self._apply_scene(scene, drop_outside=bool(options.get("drop_outside", False)))
-        else:
-            self._generate_scene()
+        self.num_objects = self._checked_num_objects(options.get("num_objects", self.default_num_objects))
+        self._load_scene(seed, options)
         self.num_motions = 0
         self._obs = self._observe()
         self._score = None
@@ -148,58 +156,80 @@ class MPGEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         primitive, rotation, row, col = self.action_space.decode(action)
         before = self._obs
-        occluded_before = bool(before["occluded"][0])
         score_before = self._grasp_score(before) if primitive != "grasp" else None
         result = self._primitives.execute(primitive, rotation, row, col, before["depth"], self.target)
         self.num_motions += 1
         sim_warnings = self._check_physics()
-        obs = self._observe()
-        self._obs = obs
-        target_grasped = self._target_grasped(result)
-        target_out = self.target is not None and self._target_out()
-        occluded = bool(obs["occluded"][0])
-        changed = change_detected(before["depth"], obs["depth"], before["mask"], result.grasp_success, self.config.change)
-        move_success = primitive == "move" and occluded_before and not occluded and not target_grasped and not target_out
-        gain = 0.0
-        if score_before is not None:
-            gain = self._grasp_score(obs) - score_before
-        outcome = StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain)
-        reward = float(self.stage.reward(outcome, self.config.reward))
-        objects_left = self._objects_left()
-        is_success = objects_left == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
+        self._obs = self._observe()
+        evaluation = self.evaluate(primitive, before, result, score_before)
+        reward = self.step_reward(evaluation)
         terminated, truncated, end_reason = episode_end(
             self.stage,
-            is_success=is_success,
-            target_out=target_out,
-            move_success=move_success,
+            is_success=evaluation.is_success,
+            target_out=evaluation.target_out,
+            move_success=evaluation.outcome.move_success,
             primitive=primitive,
             num_motions=self.num_motions,
             max_motions=self.max_motions,
+            wrong_object=evaluation.ends_wrong_object,
         )
-        info = {
-            "primitive": primitive,
-            "rotation": int(rotation),
-            "pixel": (int(row), int(col)),
-            "position": tuple(float(v) for v in result.position),
-            "grasp_success": bool(result.grasp_success),
-            "target_grasped": bool(target_grasped),
-            "wrong_grasp": bool(primitive == "grasp" and result.grasp_success and not target_grasped),
-            "grasp_failure": result.grasp_failure,  # why a grasp or move held nothing (GRASP_FAILURES), else None
-            "unreachable": bool(result.unreachable),  # the arm could not reach the pose: nothing moved
-            "change_detected": bool(changed),
-            "occluded_before": occluded_before,
-            "occluded": occluded,
-            "move_success": bool(move_success),
-            "num_motions": self.num_motions,
-            "is_success": bool(is_success),
-            "objects_left": objects_left,
-            "target_out_of_workspace": bool(target_out),
-            "grasp_q_gain": float(gain),
-            "physics_steps": int(result.physics_steps),
-            "sim_warnings": sim_warnings,
-            "end_reason": end_reason,
-        }
-        return self._copy_obs(obs), reward, bool(terminated), bool(truncated), info
+        info = {**action_info(primitive, rotation, row, col, result), **evaluation.info()}
+        info.update(num_motions=self.num_motions, sim_warnings=sim_warnings, end_reason=end_reason)
+        return self._copy_obs(self._obs), reward, bool(terminated), bool(truncated), info
+
+    # ------------------------------------------------------------ task hooks
+    def _load_scene(self, seed: int | None, options: dict[str, Any]) -> None:
+        """Build this episode's world and target: a scene file, else the shipped test set's
+        scene of ``seed``, else objects dropped afresh (:mod:`mpg_envs.scene_source`)."""
+        scene = options.get("scene")
+        if scene is not None:
+            if not isinstance(scene, SceneFile):
+                scene = read_scene(scene, options.get("mesh_dir"), self.config.object_set_seed)
+            self._apply_scene(scene, drop_outside=bool(options.get("drop_outside", False)))
+            return
+        fixed = shipped_scene(self, seed)
+        if fixed is not None:
+            self._apply_scene(fixed, drop_outside=False)
+        else:
+            draw_scene(self)
+
+    def evaluate(self, primitive: str, before: dict[str, np.ndarray], result: PrimitiveResult, score_before: float | None) -> StepEvaluation:
+        """What the step did, judged on the new state (success, mis-pick, move success,
+        occlusion, visibility, change); the reward and the episode's end are read off it."""
+        obs, world, target = self._obs, self.world, self.target
+        if self.stage.mask_all_objects:
+            target_grasped = bool(result.grasp_success)
+        else:
+            target_grasped = bool(result.grasp_success and result.grasped_object == target)
+        target_out = target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
+        occluded_before = bool(before["occluded"][0])
+        occluded = bool(obs["occluded"][0])
+        changed = change_detected(before["depth"], obs["depth"], before["mask"], result.grasp_success, self.config.change)
+        move_success = primitive == "move" and occluded_before and not occluded and not target_grasped and not target_out
+        gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
+        wrong = bool(primitive == "grasp" and result.grasp_success and not target_grasped)
+        if self.stage.mask_all_objects:
+            is_success = self.world.objects_left() == 0
+        else:
+            is_success = bool(target_grasped and primitive == "grasp")
+        return StepEvaluation(
+            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain),
+            wrong_grasp=wrong,
+            ends_wrong_object=wrong and self.wrong_grasp == "fail",
+            is_success=is_success,
+            target_out=bool(target_out),
+            occluded_before=occluded_before,
+            occluded=occluded,
+            visible_fraction=self._visible,
+            objects_left=self.world.objects_left(),
+        )
+
+    def step_reward(self, evaluation: StepEvaluation) -> float:
+        """The stage's reward of the step; under strict retrieval a mis-pick earns
+        ``RewardConfig.wrong_object`` instead."""
+        if evaluation.ends_wrong_object:
+            return float(self.config.reward.wrong_object)
+        return float(self.stage.reward(evaluation.outcome, self.config.reward))
 
     def try_step(self, action):
         """What ``step(action)`` returns, with the episode then put back exactly as it was.
@@ -254,7 +284,9 @@ class MPGEnv(gym.Env):
 
             cam_cfg = self.camera_config or CameraConfig()
             hook = lambda spec: add_cameras(spec, cam_cfg)  # noqa: E731
-        world = World(assets, self.config.workspace, self.config.robot, self.config.physics, extra_spec_hook=hook)
+        # The arm's visual meshes matter only to pictures: leave them out unless something renders.
+        visual = self.render_mode is not None or self.obs_mode == "camera"
+        world = World(assets, self.config.workspace, self.config.robot, self.config.physics, extra_spec_hook=hook, robot_visual=visual)
         self.world = world
         self._primitives = Primitives(world, self.config.primitives, self._ik)
         # Heightmappers are bound to one compiled model.
@@ -269,85 +301,18 @@ class MPGEnv(gym.Env):
             self._raycaster = RaycastHeightmapper(world.model, self.config.workspace, num_threads=self.config.raycast_threads)
         return world
 
-    def _generate_scene(self) -> None:
-        """Draw scenes until one is valid (see the class docstring); sets world and target."""
-        rng = self.np_random
-        stage = self.stage
-        scene_fn = SCENES[stage.scene]
-        astray_draws = 0
-        for _ in range(self.config.scene_tries):
-            picks = rng.integers(len(self.object_set), size=self.num_objects)
-            world = self._build_world([self.object_set[int(k)] for k in picks])
-            layout = scene_fn(world, rng, self.config.scene)
-            redropped = keep_inside(world, rng, layout, self.config.scene)
-            if redropped is None:
-                astray_draws += 1
-                continue
-            if not layout.targets:
-                self.target = None
-                return
-            # Re-dropped objects landed on the pile afterwards: no longer "the n-th dropped".
-            target = self._first_acceptable_target([t for t in layout.targets if t not in redropped])
-            if target is not None:
-                self.target = target
-                return
-        raise InvalidSceneError(
-            f"{stage.env_id}: no valid scene of {self.num_objects} objects in {self.config.scene_tries} draws "
-            f"({astray_draws} with objects left outside the workspace or not at rest after "
-            f"{self.config.scene.redrop_rounds} re-drop rounds, the others with no candidate target meeting the "
-            f"start condition: occluded={stage.start_occluded}, surrounded sectors>={stage.start_surrounded}). "
-            f"Raise EnvConfig.scene_tries or use fewer objects."
-        )
-
-    def _first_acceptable_target(self, candidates: Sequence[int]) -> int | None:
-        """The first candidate meeting the stage's start condition (occlusion, surround)."""
-        stage = self.stage
-        if stage.start_occluded is None and not stage.start_surrounded:
-            return candidates[0] if candidates else None
-        depth = self._heightmaps().depth
-        for target in candidates:
-            mask, occluded = self._target_view(depth, target)
-            if stage.start_occluded is not None and occluded != stage.start_occluded:
-                continue
-            if surrounded_sectors(depth, mask) >= stage.start_surrounded:
-                return target
-        return None
-
     def _apply_scene(self, scene: SceneFile, drop_outside: bool) -> None:
-        """Build the world of a scene file; objects outside the workspace raise
-        :class:`SceneFileError` or, with ``drop_outside``, are left out with a warning."""
-        ws = self.config.workspace
-        dropped = objects_outside(scene, ws)
-        resolve_outside(scene, dropped, ws, drop_outside, "in the file")
-        world = self._build_world([obj.asset for obj in scene.objects])
-        for i, obj in enumerate(scene.objects):
-            if obj.active and i not in dropped:
-                world.set_object_pose(i, obj.position, obj.quat)
-        world.forward()
-        if scene.settle:
-            world.settle(4 * world.physics.settle_max_steps)
-            moved_out = sorted(set(world.objects_out_of_room().tolist()) | set(world.objects_outside_workspace().tolist()))
-            positions = np.array([world.object_position(i) for i in moved_out]).reshape(-1, 3)
-            resolve_outside(scene, moved_out, ws, drop_outside, "after settling", positions)
-            for i in moved_out:
-                world.remove_object(i)
-            world.forward()
-            dropped = dropped + moved_out
-        self.target = kept_target(scene, set(dropped))
+        """Build the world of a scene file (:func:`mpg_envs.scene_loading.apply_scene`)."""
+        _, self.target = apply_scene(self._build_world, scene, self.config.workspace, drop_outside)
         if self.target is None and not self.stage.mask_all_objects:
             raise SceneFileError(f"scene {scene.source!r} has no target; {self.stage.env_id} needs one")
 
     def current_scene(self) -> SceneFile:
         """The current scene (every object's asset, pose and state, the target), as
         :func:`mpg_envs.scene_io.save_scene` writes it."""
-        world = self.world
-        if world is None:
+        if self.world is None:
             raise RuntimeError("call reset() before current_scene()")
-        objects = tuple(
-            SceneObject(asset, *world.object_pose(i), active=bool(world.active[i]), label=f"object {i} ({asset.name!r})")
-            for i, asset in enumerate(world.assets)
-        )
-        return SceneFile(objects, self.target, "", self.stage.name, self.config.object_set_seed)
+        return scene_of(self.world, self.target, self.stage.name, self.config.object_set_seed)
 
     def _heightmaps(self):
         """Colour and depth heightmaps of the current state (ray-cast or camera)."""
@@ -376,9 +341,17 @@ class MPGEnv(gym.Env):
             occluded = is_occluded(depth, mask, world.object_top(target), self.config.occlusion)
         return (mask > 0).astype(np.uint8), bool(occluded)
 
+    def _visible_fraction(self, maps, mask: np.ndarray, target: int | None) -> float | None:
+        """Share of ``target``'s footprint ``mask`` where the target is the top surface, from
+        the geom seen at each pixel (ray casts, or the camera mode's segmentation render)."""
+        if target is None or self.stage.mask_all_objects or not self.world.active[target] or maps.geom_id is None:
+            return None
+        return visible_fraction(mask, maps.geom_id, self.world.object_geom_ids[target])
+
     def _observe(self) -> dict[str, np.ndarray]:
         hm = self._heightmaps()
         mask, occluded = self._target_view(hm.depth, self.target)
+        self._visible = self._visible_fraction(hm, mask, self.target)
         return {
             "color": hm.color,
             "depth": hm.depth.astype(np.float32),
@@ -394,44 +367,28 @@ class MPGEnv(gym.Env):
             self._score = (obs, float(self.grasp_scorer(self._copy_obs(obs))))
         return self._score[1]
 
-    def _target_grasped(self, result: PrimitiveResult) -> bool:
-        if self.stage.mask_all_objects:
-            return bool(result.grasp_success)
-        return bool(result.grasp_success and result.grasped_object == self.target)
-
-    def _target_out(self) -> bool:
-        world = self.world
-        if self.target is None or not world.active[self.target]:
-            return False
-        return self.target in set(world.objects_outside_workspace().tolist())
-
     def _check_physics(self) -> dict[str, int]:
-        """Deal with what the physics may have done wrong; returns MuJoCo's warning counts."""
-        sim_warnings = self.world.warnings_raised()
+        """MuJoCo's warnings of the step (logged, and reported in info); objects thrown out
+        of the room leave the scene (info's ``objects_left`` shows the loss)."""
+        sim_warnings = self.world.take_warnings()
         if sim_warnings:
-            # Reported in info and cleared, so each step's count is its own.
             gym.logger.warn(f"MuJoCo warnings during step {self.num_motions}: {sim_warnings}")
-            for w in self.world.data.warning:
-                w.number = 0
-        bad = self.world.objects_out_of_room()
-        if len(bad):
-            # An unstable contact threw something out of the room: take it out of the scene so
-            # it can't poison later steps; the info's objects_left reflects the loss.
-            for i in bad:
-                self.world.remove_object(int(i))
-            self.world.forward()
+        self.world.remove_strays()
         return sim_warnings
 
-    def _objects_left(self) -> int:
-        """Objects still in the scene and inside the workspace."""
-        return int(self.world.active.sum() - len(self.world.objects_outside_workspace()))
+    def _checked_num_objects(self, n: Any) -> int:
+        stage = self.stage
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not stage.min_objects <= n <= 60:
+            raise ValueError(f"num_objects must be an integer in {stage.min_objects}..60 for {stage.env_id}, got {n!r}")
+        return int(n)
 
     def _reset_info(self) -> dict[str, Any]:
         occluded = bool(self._obs["occluded"][0])
         return {
             "num_motions": 0,
             "occluded": occluded,
-            "objects_left": self._objects_left(),
+            "visible_fraction": self._visible,
+            "objects_left": self.world.objects_left(),
             "target": self.target,
             "is_success": False,
         }

@@ -1,8 +1,10 @@
-"""Occlusion check and change detection on heightmaps (pure functions).
+"""Occlusion, visibility and change detection on heightmaps (pure functions).
 
 Occlusion (paper, Stage III): crop the depth heightmap with the target mask and compare
 its highest value with the target's own highest point taken from the simulator; the
-target is occluded when something in its footprint stands higher than it.
+target is occluded when something in its footprint stands higher than it. That is a flag:
+a target with one corner under a neighbour counts as occluded. The visible fraction
+measures it: the share of the target's footprint where the target is the top surface.
 
 Change detection (VPG convention): enough pixels changed height by a plausible amount
 anywhere, or around the target, or an object was grasped.
@@ -54,6 +56,62 @@ def is_occluded(depth: np.ndarray, target_mask: np.ndarray, target_top: float, c
     if not inside.any():
         return False
     return bool(depth[inside].max() > target_top + config.tolerance)
+
+
+def visible_fraction(target_mask: np.ndarray, top_geom: np.ndarray, target_geoms: np.ndarray) -> float | None:
+    """Share of the target's footprint where the target itself is the top surface.
+
+    ``target_mask`` is the target's whole footprint seen from above (covered parts
+    included: the ``mask`` observation), ``top_geom`` the id of the geom seen first from
+    above at each pixel (-1 where none), ``target_geoms`` the target's geom ids. 1.0 means
+    nothing lies on the target, 0.0 that every footprint pixel shows something else.
+    ``None`` when the footprint is empty (no target in view).
+    """
+    _check_same_shape(top_geom, target_mask)
+    inside = target_mask > 0
+    count = int(inside.sum())
+    if count == 0:
+        return None
+    on_target = np.isin(top_geom[inside], np.asarray(target_geoms).reshape(-1))
+    return float(on_target.sum()) / count
+
+
+VISIBILITY_BANDS: tuple[tuple[float, float], ...] = ((0.0, 0.1), (0.1, 0.3), (0.3, 0.6), (0.6, 1.0))
+"""Bands of the target's visible fraction at reset that results are reported by: each
+includes its lower bound and excludes its upper one, except the last, which ends at 1."""
+
+
+def visibility_band(value: float | None) -> str | None:
+    """The :data:`VISIBILITY_BANDS` label (``"0.1-0.3"``) of a visible fraction, ``None`` for none."""
+    if value is None:
+        return None
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"a visible fraction lies in [0, 1], got {value!r}")
+    for low, high in VISIBILITY_BANDS:
+        if low <= value < high or value == high == VISIBILITY_BANDS[-1][1]:
+            return f"{low:g}-{high:g}"
+    raise AssertionError("the bands cover [0, 1]")
+
+
+def in_band(value: float | None, band: tuple[float, float] | None) -> bool:
+    """Whether ``value`` lies in the closed interval ``band`` (always true without a band)."""
+    if band is None:
+        return True
+    return value is not None and band[0] <= value <= band[1]
+
+
+def check_band(band: object, name: str = "visible_range") -> tuple[float, float] | None:
+    """``band`` as a ``(low, high)`` pair of fractions with 0 <= low <= high <= 1, or ``None``;
+    raises ``ValueError`` naming ``name`` otherwise."""
+    if band is None:
+        return None
+    try:
+        low, high = (float(v) for v in band)  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a (low, high) pair of fractions, got {band!r}") from None
+    if not 0.0 <= low <= high <= 1.0:
+        raise ValueError(f"{name} must satisfy 0 <= low <= high <= 1, got {band!r}")
+    return (low, high)
 
 
 def changed_pixels(before: np.ndarray, after: np.ndarray, config: ChangeConfig = ChangeConfig()) -> np.ndarray:

@@ -3,7 +3,10 @@
 Observations never need OpenGL (heightmaps are ray cast). Headless Linux machines render
 through EGL or OSMesa: :func:`choose_gl_backend` (run when :mod:`mpg_envs` is imported,
 before mujoco) sets ``MUJOCO_GL=egl`` when ``MUJOCO_GL`` is unset, there is no display and
-libEGL loads, else ``osmesa`` when libOSMesa loads. An explicit ``MUJOCO_GL`` is respected.
+libEGL loads, else ``osmesa`` when libOSMesa loads. An explicit ``MUJOCO_GL`` is respected:
+set it (``egl``, ``osmesa`` or ``glfw``) before the first ``import mpg_envs`` or ``import
+mujoco`` to choose the backend yourself. Nothing is set when mujoco was imported first, off
+Linux, or when a display is present (``DISPLAY`` / ``WAYLAND_DISPLAY``).
 
 Without a working backend, rendering raises :class:`RenderUnavailableError` and the process
 carries on: the first failure is remembered and later attempts raise it again without

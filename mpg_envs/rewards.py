@@ -30,6 +30,9 @@ class RewardConfig:
     # as "no change". Without it, fingers that close beside the occluder and nudge it off the
     # target earn the full move reward, and the move net learns to nudge rather than to carry.
     move_needs_lift: bool = False
+    # Strict retrieval (the env's wrong_grasp="fail"): a grasp that lifts a non-target object
+    # ends the episode with this reward instead of its primitive's.
+    wrong_object: float = -1.0
 
 
 def reward_grasp_any(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:

@@ -55,6 +55,7 @@ def heightmap_from_rgbd(
     cam_pose: np.ndarray,
     workspace: Workspace | None = None,
     background_color: Sequence[int] = (0, 0, 0),
+    segmentation: np.ndarray | None = None,
 ) -> Heightmaps:
     """Back-project an RGB-D image into colour/depth heightmaps (as a real camera would).
 
@@ -68,6 +69,9 @@ def heightmap_from_rgbd(
             y down, z forward).
         workspace: the heightmap grid; the default :class:`Workspace` if ``None``.
         background_color: RGB of heightmap pixels that receive no point.
+        segmentation: optional ``(H, W)`` integer label image registered to ``depth``
+            (a simulator's geom ids, say); each heightmap pixel then carries the label of
+            the point it keeps, in ``geom_id`` (-1 where no point lands).
 
     Points outside the workspace footprint or above ``z_max`` are dropped; points below the
     table are kept at height 0 (so sensor noise around the table plane does not punch
@@ -81,6 +85,8 @@ def heightmap_from_rgbd(
     intrinsics = np.asarray(intrinsics, dtype=np.float64)
     cam_pose = np.asarray(cam_pose, dtype=np.float64)
     _check_rgbd(color, depth, intrinsics, cam_pose)
+    if segmentation is not None and (np.shape(segmentation) != depth.shape or not np.issubdtype(np.asarray(segmentation).dtype, np.integer)):
+        raise ValueError(f"segmentation must be an integer (H, W) array matching depth {depth.shape}, got {np.shape(segmentation)}")
     background = np.asarray(background_color)
     if background.shape != (3,) or np.any(background < 0) or np.any(background > 255):
         raise ValueError(f"background_color must be 3 values in 0..255, got {background_color!r}")
@@ -89,6 +95,7 @@ def heightmap_from_rgbd(
     out_depth = np.zeros(rows * cols, dtype=np.float32)
     out_color = np.empty((rows * cols, 3), dtype=np.uint8)
     out_color[:] = background.astype(np.uint8)
+    out_label = np.full(rows * cols, -1, dtype=np.int32)
 
     with np.errstate(invalid="ignore"):
         valid = np.isfinite(depth) & (depth > 0)
@@ -122,7 +129,10 @@ def heightmap_from_rgbd(
         seen = winner >= 0
         out_depth[seen] = best[seen]
         out_color[seen] = color[v[winner[seen]], u[winner[seen]]]
-    return Heightmaps(color=out_color.reshape(rows, cols, 3), depth=out_depth.reshape(rows, cols))
+        if segmentation is not None:
+            out_label[seen] = segmentation[v[winner[seen]], u[winner[seen]]]
+    labels = out_label.reshape(rows, cols) if segmentation is not None else None
+    return Heightmaps(color=out_color.reshape(rows, cols, 3), depth=out_depth.reshape(rows, cols), geom_id=labels)
 
 
 def fuse_heightmaps(maps: Sequence[Heightmaps]) -> Heightmaps:

@@ -1,19 +1,17 @@
 """Scene files: read and write them, and say what is wrong with them.
 
 This module only reads and writes files; :meth:`mpg_envs.env.MPGEnv.reset` (option
-``scene``) applies a :class:`SceneFile` to a world, and :meth:`MPGEnv.current_scene` makes
-one from the current episode.
+``scene``) applies a :class:`SceneFile` to a world (:mod:`mpg_envs.scene_loading`), and
+:meth:`MPGEnv.current_scene` makes one from the current episode.
 
 Our format is JSON (``.json``): the object set, each object's asset, pose and state, and
-the target. VPG's plain-text test cases (``.txt``, one ``mesh r g b x y z rx ry rz`` line per
-object, poses in VPG's frame) load too: VPG's workspace is ours rotated 180 degrees about z,
-so a VPG pose ``(x, y)`` maps to ``(-x, -y)``; its Euler angles are CoppeliaSim's
-(``R = Rx(rx) Ry(ry) Rz(rz)``) of the mesh frame. The first object of a VPG case is the
-target. Mesh files are read from ``mesh_dir``, else from a ``blocks`` folder beside the
-test-case folder (VPG's layout), else mapped onto our blocks set (:data:`VPG_TO_BLOCKS`).
+the target. The peers' plain-text files (``.txt``, poses in VPG's frame) load too: VPG's
+test cases (``mesh r g b x y z rx ry rz`` per line, the first object is the target) and
+Grasping the Invisible's presets (``name mesh x y z rx ry rz``, the target named by its
+colour); :mod:`mpg_envs.vpg_scenes` reads them and says how their poses map onto ours.
 
 Errors (:class:`SceneFileError`, a ``ValueError``) name the file, the object (its index and,
-for VPG cases, its line) and what is wrong: an unreadable file, an unknown mesh or asset, a
+for text files, its line) and what is wrong: an unreadable file, an unknown mesh or asset, a
 missing or out-of-range target, an object outside the workspace. Objects outside the
 workspace can be dropped instead (``drop_outside=True``; a warning names them).
 """
@@ -22,12 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
 from mpg_envs.objects import ObjectAsset, blocks_object_set, load_mesh_folder
@@ -37,18 +33,6 @@ SCENE_FORMAT = "mpg-scene"
 SCENE_VERSION = 1
 BELOW_TABLE = -0.02
 """An object whose centre is this far below the table top (m) has fallen off it."""
-
-VPG_TO_BLOCKS: dict[str, str] = {
-    "0": "triangular_prism",
-    "1": "arch",
-    "2": "disc",
-    "3": "long_box",
-    "4": "cube",
-    "6": "tall_box",
-    "7": "flat_box",
-    "8": "cylinder",
-}
-"""VPG block mesh stem -> the blocks-set shape it resembles (by size and shape)."""
 
 
 class SceneFileError(ValueError):
@@ -196,16 +180,19 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
 
 # ------------------------------------------------------------------------------ reading
 def read_scene(path: str | Path, mesh_dir: str | Path | None = None, object_set_seed: int = 0) -> SceneFile:
-    """Read a scene file (ours ``.json`` or VPG's ``.txt``); ``object_set_seed`` is used for
-    VPG cases (ours carry their own)."""
+    """Read a scene file: ours (``.json``), or a VPG test case or Grasping the Invisible
+    preset (``.txt``, see :mod:`mpg_envs.vpg_scenes`); ``object_set_seed`` is used for the
+    text files (ours carry their own)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
     if path.suffix.lower() == ".txt":
-        return _read_vpg_case(path, mesh_dir, object_set_seed)
+        from mpg_envs.vpg_scenes import read_vpg_text  # it builds on this module's types
+
+        return read_vpg_text(path, mesh_dir, object_set_seed)
     if path.suffix.lower() == ".json":
         return _read_json_scene(path, mesh_dir)
-    raise SceneFileError(f"scene file {str(path)!r}: expected a .json scene or a VPG .txt test case")
+    raise SceneFileError(f"scene file {str(path)!r}: expected a .json scene, or a VPG test case or Grasping the Invisible preset (.txt)")
 
 
 def _read_json_scene(path: Path, mesh_dir: str | Path | None) -> SceneFile:
@@ -247,58 +234,3 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None) -> SceneFile:
         if not objects[target].active:
             raise SceneFileError(f"scene file {str(path)!r}: the target {objects[target].label} is not in the scene (inactive)")
     return SceneFile(tuple(objects), target, str(path), doc.get("stage"), seed)
-
-
-def _read_vpg_case(path: Path, mesh_dir: str | Path | None, seed: int) -> SceneFile:
-    folder = Path(mesh_dir) if mesh_dir is not None else path.parent.parent / "blocks"
-    by_name: dict[str, ObjectAsset]
-    if folder.is_dir():
-        by_name = {a.name: a for a in load_mesh_folder(folder, seed=seed)}
-        mapping = None
-    else:
-        if mesh_dir is not None:
-            raise FileNotFoundError(f"mesh_dir {str(mesh_dir)!r} does not exist")
-        by_name = {a.name: a for a in blocks_object_set(seed=seed)}
-        mapping = VPG_TO_BLOCKS
-    objects = []
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        fields = line.split()
-        if len(fields) != 10:
-            raise SceneFileError(f"{path}:{lineno}: expected 'mesh r g b x y z rx ry rz', got {len(fields)} fields")
-        stem = Path(fields[0]).stem
-        name = mapping.get(stem, stem) if mapping else stem
-        if name not in by_name:
-            where = str(folder) if mapping is None else f"the blocks set (VPG meshes known: {sorted(mapping)})"
-            raise SceneFileError(f"{path}:{lineno}: unknown mesh {fields[0]!r}, not in {where}")
-        try:
-            r, g, b, x, y, z, rx, ry, rz = (float(v) for v in fields[1:])
-        except ValueError as exc:
-            raise SceneFileError(f"{path}:{lineno}: {exc}") from exc
-        asset = dataclasses.replace(by_name[name], rgba=(r, g, b, 1.0))
-        rot = _rot_z(math.pi) @ _rot_x(rx) @ _rot_y(ry) @ _rot_z(rz)
-        # The VPG pose is the mesh frame's; our body frame sits at the parts' centre of mass.
-        position = np.array([-x, -y, z]) + rot @ np.asarray(asset.mesh_offset)
-        quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, rot.ravel())
-        label = f"object {len(objects)} ({fields[0]}, line {lineno})"
-        objects.append(SceneObject(asset, position, quat, True, label))
-    if not objects:
-        raise SceneFileError(f"VPG test case {str(path)!r} lists no objects")
-    return SceneFile(tuple(objects), 0, str(path), None, seed, settle=True, target_is_first_kept=True)
-
-
-def _rot_x(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def _rot_y(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-
-
-def _rot_z(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])

@@ -56,6 +56,8 @@ class SceneConfig:
     test_cluster_radius: float = 0.075  # test scenes (15 or 30 objects)
     max_point_tries: int = 200
     redrop_rounds: int = 4  # rounds of re-dropping the objects that left the workspace
+    buried_occluders: int = 3  # buried scenes: objects dropped right onto the target after it
+    bury_offset: float = 0.015  # ... each landing within this of the target's centre
 
 
 def random_quat(rng: np.random.Generator) -> np.ndarray:
@@ -159,6 +161,29 @@ def test_scene(world: World, rng: np.random.Generator, cfg: SceneConfig) -> Scen
     return SceneLayout(tuple(int(k) for k in first), lambda: _cluster_point(center, cfg.test_cluster_radius, rng))
 
 
+def _buried(world: World, rng: np.random.Generator, cfg: SceneConfig, radius: float) -> SceneLayout:
+    """The target (object 0) dropped flat at a cluster's centre, ``cfg.buried_occluders``
+    objects dropped onto it, the rest around it within ``radius``."""
+    center = _uniform_point(world, rng, cfg.edge_margin + radius)
+    world.drop_object(0, center, yaw_quat(rng))
+    for i in range(1, world.num_objects):
+        if i <= cfg.buried_occluders:
+            world.drop_object(i, center + _cluster_point(np.zeros(2), cfg.bury_offset, rng), random_quat(rng))
+        else:
+            world.drop_object(i, _cluster_point(center, radius, rng), random_quat(rng))
+    return SceneLayout((0,), lambda: _cluster_point(center, radius, rng))
+
+
+def buried_cluster(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+    """Stage V's cluster with the target buried: occluders dropped onto it by construction."""
+    return _buried(world, rng, cfg, cfg.cluster_radius)
+
+
+def buried_test_scene(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+    """The test scenes' cluster with the target buried: occluders dropped onto it by construction."""
+    return _buried(world, rng, cfg, cfg.test_cluster_radius)
+
+
 def objects_astray(world: World) -> np.ndarray:
     """Objects that make a scene invalid: inactive, left the room, or centre outside the workspace."""
     astray = set(np.flatnonzero(~world.active).tolist())
@@ -200,4 +225,9 @@ SCENES: dict[str, SceneFn] = {
     "surrounded_target": surrounded_target,
     "clustered": clustered,
     "test_scene": test_scene,
+    "buried_cluster": buried_cluster,
+    "buried_test_scene": buried_test_scene,
 }
+
+BURIED: dict[str, str] = {"clustered": "buried_cluster", "test_scene": "buried_test_scene"}
+"""A generator -> its variant that buries the target (for bands of low visibility)."""

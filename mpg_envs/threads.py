@@ -3,7 +3,7 @@
 Users run evaluations, vector envs and trainings side by side. A process that starts as many
 busy threads as the machine has cores, while other processes use them too, gets its threads
 descheduled in the middle of parallel regions; the others then wait (or spin) at the barrier
-and a decision costs several times its fair share (issue 12: 4x on 2 shared cores). Three
+and a decision costs several times its fair share (4x was measured on 2 shared cores). Three
 measures keep the slowdown close to fair sharing:
 
 - :func:`choose_threads`: threads from the cores this process may use (its CPU affinity)
@@ -16,6 +16,18 @@ measures keep the slowdown close to fair sharing:
   which get their parallelism from the number of processes.
 
 Nothing here imports torch: :func:`set_torch_threads` imports it when called.
+
+Environment variables, read and written:
+
+- ``MPG_NUM_THREADS`` (read): fixes the thread count of :func:`num_threads` (torch threads of
+  the command lines, ray-cast threads of an env); unset or empty means automatic.
+- ``OMP_NUM_THREADS`` (read): an explicit value is respected when ``MPG_NUM_THREADS`` is unset.
+- ``OMP_WAIT_POLICY`` (written by :func:`use_passive_openmp_wait`, which ``import mpg_agents``
+  calls): set to ``PASSIVE`` only when unset; set it yourself before importing to choose
+  another policy. ``import mpg_envs`` does not touch it.
+- :func:`worker_init` sets ``OMP_NUM_THREADS=1`` and ``MPG_NUM_THREADS=1`` in the worker
+  process it runs in (and ``OMP_WAIT_POLICY=PASSIVE`` when unset); it is meant for worker
+  processes only.
 """
 
 from __future__ import annotations

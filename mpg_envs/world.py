@@ -75,6 +75,10 @@ class World:
     Objects are numbered in the order given. An object can be *active* (in the scene) or
     *removed* (grasped and taken away): removed objects stop colliding and float,
     compensated for gravity, far below the floor, where nothing sees them.
+
+    ``robot_visual=False`` compiles the robot without its visual-only meshes (same
+    dynamics, several times faster to build; the robot then renders as its collision
+    shapes): for worlds nothing renders.
     """
 
     PARK_DEPTH = -10.0
@@ -86,6 +90,7 @@ class World:
         robot: RobotConfig = RobotConfig(),
         physics: PhysicsConfig = PhysicsConfig(),
         extra_spec_hook: Callable[[mujoco.MjSpec], None] | None = None,
+        robot_visual: bool = True,
     ):
         self.workspace = workspace
         self.physics = physics
@@ -95,7 +100,7 @@ class World:
         with warnings.catch_warnings():
             # The arena already carries the gripper's impratio/cone; the attach only notices.
             warnings.filterwarnings("ignore", message="Attach conflict")
-            spec.attach(robot_spec(robot), site=spec.site("robot_mount"), prefix=ROBOT_PREFIX)
+            spec.attach(robot_spec(robot, visual=robot_visual), site=spec.site("robot_mount"), prefix=ROBOT_PREFIX)
         for i, asset in enumerate(self.assets):
             pos = (self.workspace.center[0], self.workspace.center[1], self.PARK_DEPTH - i)
             body = add_object_body(spec, spec.worldbody, asset, name=f"object{i}", pos=pos)
@@ -293,6 +298,27 @@ class World:
             elif g2 in a and g1 in b:
                 pairs.append((g2, g1))
         return pairs
+
+    def objects_left(self) -> int:
+        """Objects still in the scene and inside the workspace."""
+        return int(self.active.sum() - len(self.objects_outside_workspace()))
+
+    def take_warnings(self) -> dict[str, int]:
+        """MuJoCo's warning counts since the last call (then cleared, so each call's are its own)."""
+        counts = self.warnings_raised()
+        for w in self.data.warning:
+            w.number = 0
+        return counts
+
+    def remove_strays(self) -> np.ndarray:
+        """Take out of the scene the objects an unstable contact threw out of the room (so they
+        cannot poison later steps); returns their indices."""
+        bad = self.objects_out_of_room()
+        for i in bad:
+            self.remove_object(int(i))
+        if len(bad):
+            self.forward()
+        return bad
 
     def warnings_raised(self) -> dict[str, int]:
         """MuJoCo warnings counted in ``data.warning`` (nonzero means the simulation struggled)."""

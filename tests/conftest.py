@@ -19,6 +19,7 @@ EXPECTED_PRIMITIVES = {
     "MPG-Stage4-v0": ("push", "grasp"),
     "MPG-Stage5-v0": ("move", "push", "grasp"),
     "MPG-Occluded-v0": ("move", "push", "grasp"),
+    "MPG-OccludedHard-v0": ("move", "push", "grasp"),
 }
 """The contract (ENV.md): each registered id and its primitives in action order."""
 

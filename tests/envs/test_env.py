@@ -11,7 +11,7 @@ import pytest
 import mpg_envs
 from mpg_envs.env import MPGEnv
 from mpg_envs.occlusion import change_detected, is_occluded, surrounded_sectors
-from mpg_envs.policies import OraclePolicy
+from mpg_envs.oracle import OraclePolicy
 from mpg_envs.rewards import RewardConfig, StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
 from mpg_envs.scene_io import save_scene
 
@@ -23,7 +23,7 @@ INFO_KEYS = {
 }
 
 
-def test_six_ids_registered_with_their_primitives(expected_primitives):
+def test_every_id_registered_with_its_primitives(expected_primitives):
     assert set(ALL_IDS) == set(expected_primitives)
     for env_id, prims in expected_primitives.items():
         env = gym.make(env_id)
@@ -380,7 +380,7 @@ def test_an_unreachable_trial_of_the_oracle_returns_instead_of_raising():
     import gymnasium as gym
 
     from mpg_envs.robot import UnreachablePoseError
-    from mpg_envs.sim_trial import try_primitive
+    from mpg_envs.oracle import try_primitive
 
     env = gym.make("MPG-Stage2-v0")
     obs, _ = env.reset(seed=3)

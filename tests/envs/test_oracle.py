@@ -20,8 +20,8 @@ from mpg_envs.grasp_geometry import (
     polygon_mask,
     region_max,
 )
-from mpg_envs.policies import ActionMemory, OracleConfig, OraclePolicy, Policy
-from mpg_envs.sim_trial import try_primitive
+from mpg_envs.oracle import ActionMemory, OracleConfig, OraclePolicy, Policy
+from mpg_envs.oracle import try_primitive
 from mpg_envs.workspace import Workspace
 
 # ----------------------------------------------------------------- geometry (hand-checked)

@@ -1,0 +1,113 @@
+"""Generate the shipped test sets (``mpg_envs/test_scenes/*.npz``) of the test envs.
+
+Every seed's scene is dropped as a fresh reset does (``use_test_set=False``), then rebuilt
+from the saved poses in a second env and checked to give the identical observation (colour,
+depth, mask, occlusion flag) and visible fraction, so the file reproduces the generated
+start state exactly. Seeds run on a local process pool, one scene per task.
+
+    python benchmarks/make_test_sets.py --envs MPG-Occluded-v0 MPG-OccludedHard-v0 \\
+        --objects 15 30 --count 500 --workers 16 [--out mpg_envs/test_scenes]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("MPG_NUM_THREADS", "1")
+
+import gymnasium as gym  # noqa: E402
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+import mpg_envs  # noqa: E402,F401
+from mpg_envs.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet  # noqa: E402
+
+_ENVS: dict[tuple[str, int, bool], gym.Env] = {}
+
+
+def _env(env_id: str, num_objects: int, fixed: bool):
+    key = (env_id, num_objects, fixed)
+    if key not in _ENVS:
+        _ENVS[key] = gym.make(env_id, num_objects=num_objects, use_test_set=False).unwrapped
+    return _ENVS[key]
+
+
+def make_scene(task: tuple[str, int, int]) -> dict:
+    """Drop the scene of one seed and check that its saved poses reproduce it."""
+    env_id, num_objects, seed = task
+    start = time.perf_counter()
+    env = _env(env_id, num_objects, False)
+    obs, info = env.reset(seed=seed)
+    scene = env.current_scene()
+    check = _env(env_id, num_objects, True)
+    obs2, info2 = check.reset(seed=seed, options={"scene": scene})
+    same = all(np.array_equal(obs[k], obs2[k]) for k in obs) and info["visible_fraction"] == info2["visible_fraction"]
+    if not same:
+        raise RuntimeError(f"{env_id} {num_objects} objects seed {seed}: the saved poses do not reproduce the scene")
+    return {
+        "seed": seed,
+        "assets": [o.asset.name for o in scene.objects],
+        "positions": np.array([o.position for o in scene.objects], np.float64),
+        "quats": np.array([o.quat for o in scene.objects], np.float64),
+        "target": scene.target,
+        "visible_fraction": info["visible_fraction"],
+        "seconds": time.perf_counter() - start,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--envs", nargs="+", default=["MPG-Occluded-v0", "MPG-OccludedHard-v0"])
+    parser.add_argument("--objects", type=int, nargs="+", default=[15, 30])
+    parser.add_argument("--count", type=int, default=500, help="scenes per env and object count")
+    parser.add_argument("--seed", type=int, default=TEST_SEED_START, help="first seed")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--out", default=str(Path(mpg_envs.__file__).parent / "test_scenes"))
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    tasks = [(e, n, args.seed + i) for e in args.envs for n in args.objects for i in range(args.count)]
+    start = time.perf_counter()
+    with ProcessPoolExecutor(args.workers) as pool:
+        scenes = list(pool.map(make_scene, tasks, chunksize=1))
+    for env_id in args.envs:
+        stage = gym.spec(env_id).kwargs["stage"]
+        name = mpg_envs.STAGES[stage].test_set
+        for n in args.objects:
+            rows = [s for (e, m, _), s in zip(tasks, scenes) if e == env_id and m == n]
+            test_set = TestSet(
+                name=name,
+                num_objects=n,
+                seeds=np.array([r["seed"] for r in rows]),
+                assets=np.array([r["assets"] for r in rows]),
+                positions=np.stack([r["positions"] for r in rows]),
+                quats=np.stack([r["quats"] for r in rows]),
+                targets=np.array([r["target"] for r in rows]),
+                visible_fraction=np.array([r["visible_fraction"] for r in rows], np.float32),
+                meta={
+                    "env_id": env_id,
+                    "generator_version": str(GENERATOR_VERSION),
+                    "package_version": getattr(mpg_envs, "__version__", "unknown"),
+                    "mujoco_version": mujoco.__version__,
+                },
+            )
+            path = test_set.save(out / f"{name}_{n}.npz")
+            secs = np.array([r["seconds"] for r in rows])
+            vis = test_set.visible_fraction
+            print(
+                f"{path}: {len(rows)} scenes, generation median {np.median(secs):.2f} s/scene; visible fraction "
+                f"median {np.median(vis):.2f}, quartiles {np.quantile(vis, 0.25):.2f}-{np.quantile(vis, 0.75):.2f}, "
+                f"max {vis.max():.2f}; {path.stat().st_size / 1024:.0f} kB",
+                flush=True,
+            )
+    print(f"{len(tasks)} scenes in {time.perf_counter() - start:.0f} s with {args.workers} workers")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
