@@ -6,7 +6,7 @@ reports the median wall time, the physics steps used, and the share of wall time
 inside ``mj_step`` (the rest is our overhead: IK, bookkeeping). Then the observation time
 of the GL-free ray-cast mode and, when OpenGL is available, of the camera mode.
 
-Goals (issue 2): every primitive under 150 ms median, at least 70% of its time in
+Goals: every primitive under 150 ms median, at least 70% of its time in
 ``mj_step``; the GL-free observation under 15 ms. The last output line is one JSON object.
 
     python benchmarks/env_speed.py [--trials 20]
@@ -30,7 +30,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from mpg_envs.env import MPGEnv  # noqa: E402
-from mpg_envs.policies import footprint_rect, angle_to_rotation  # noqa: E402
+from mpg_envs.oracle import footprint_rect, angle_to_rotation  # noqa: E402
 from mpg_envs.workspace import world_to_pixel  # noqa: E402
 
 

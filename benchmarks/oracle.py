@@ -1,8 +1,9 @@
 """The scripted oracle on held-out ``MPG-Occluded-v0`` episodes: success, motions, and why it failed.
 
-Episode ``i`` of a cell is reset with seed ``--seed + i`` (the same scenes for any run). For
-each object count: the success rate, the mean motions per episode, and every failed episode
-categorised:
+Episode ``i`` of a cell is reset with seed ``--seed + i`` (the same scenes for any run; the
+episodes and their metrics are ``mpg-eval``'s, :mod:`mpg_agents.evaluate`). For each object
+count: the success rate and the mean motions per episode with their 95% intervals, and every
+failed episode categorised:
 
 * ``target_not_graspable`` -- the oracle's last look found no collision-free grasp angle;
 * ``slip`` -- its last attempt was a grasp of the target that held nothing;
@@ -12,9 +13,9 @@ categorised:
 
 The env's own ``info["end_reason"]`` is printed too when the env reports it. The oracle tries
 its candidate grasps and preparations in a checkpointed copy of the simulation before acting
-(see :mod:`mpg_envs.policies`); ``--geometric`` plans by geometry alone, without trials. Goals (issue
-13): >= 97% success in <= 2.8 mean motions at 15 objects, >= 93% in <= 3.7 at 30. The last
-output line is JSON.
+(see :mod:`mpg_envs.oracle`); ``--geometric`` plans by geometry alone, without trials. Goals:
+>= 97% success in <= 2.8 mean motions at 15 objects, >= 93% in <= 3.7 at 30. The last output
+line is JSON.
 
     OMP_NUM_THREADS=1 python benchmarks/oracle.py --episodes 100 --objects 15 30 --seed 90000 [--verbose]
 """
@@ -27,12 +28,13 @@ import sys
 import time
 from collections import Counter
 from dataclasses import dataclass
+from typing import Any
 
+import gymnasium as gym
 
-import gymnasium as gym  # noqa: E402
-
-import mpg_envs  # noqa: E402,F401  (registers the envs)
-from mpg_envs.policies import OracleConfig, OraclePolicy  # noqa: E402
+import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.evaluate import EpisodeRecord, run_episodes, summarise
+from mpg_envs.oracle import OracleConfig, OraclePolicy
 
 ENV_ID = "MPG-Occluded-v0"
 GOALS = {15: (0.97, 2.8), 30: (0.93, 3.7)}
@@ -64,52 +66,70 @@ def classify(last_info: dict, oracle: OraclePolicy, steps: list[tuple[str, dict]
     return "motion_cap"
 
 
-def run_episode(env: gym.Env, oracle: OraclePolicy, seed: int) -> Episode:
-    obs, info = env.reset(seed=seed)
-    oracle.reset()
-    steps: list[tuple[str, dict]] = []
-    plans: list[str] = []
-    terminated = truncated = False
-    while not (terminated or truncated):
-        action = oracle.act(obs)
-        plans.append(str((oracle.last_plan or {}).get("kind", "")))
-        obs, _, terminated, truncated, info = env.step(action)
-        steps.append((info["primitive"], info))
-    success = bool(info.get("is_success"))
+class PlanLog:
+    """The oracle acting, with the kind of plan behind each of its motions in the episode."""
+
+    def __init__(self, oracle: OraclePolicy) -> None:
+        self.oracle, self.name = oracle, oracle.name
+        self.plans: list[str] = []
+
+    def reset(self) -> None:
+        self.oracle.reset()
+        self.plans = []
+
+    def act(self, obs: Any) -> int:
+        action = self.oracle.act(obs)
+        self.plans.append(str((self.oracle.last_plan or {}).get("kind", "")))
+        return action
+
+
+def episode_of(record: EpisodeRecord, plans: list[str], steps: list[tuple[str, dict]], oracle: OraclePolicy) -> Episode:
+    """An evaluation record with the oracle's view: its plans and, for a failure, why."""
     # "+": it uncovered or took the target; "!why": the grasp or move held nothing (info grasp_failure).
     actions = [
         f"{k}{'+' if i.get('target_grasped') or i.get('move_success') else ''}{'!' + i['grasp_failure'] if i.get('grasp_failure') else ''}"
         for k, (_, i) in zip(plans, steps)
     ]
-    category = None if success else classify(info, oracle, steps)
-    return Episode(seed, success, len(steps), category, str(info.get("end_reason", "unreported")), actions)
+    category = None if record.success else classify(steps[-1][1], oracle, steps)
+    return Episode(record.seed, record.success, record.motions, category, record.end_reason, actions)
 
 
 def run_cell(num_objects: int, episodes: int, seed: int, verbose: bool = False, config: OracleConfig = OracleConfig()) -> dict:
     env = gym.make(ENV_ID, num_objects=num_objects).unwrapped
-    oracle = OraclePolicy(env, config)
-    results = []
-    start = time.perf_counter()
-    for i in range(episodes):
-        ep = run_episode(env, oracle, seed + i)
+    oracle = PlanLog(OraclePolicy(env, config))
+    steps: list[tuple[str, dict]] = []
+    results: list[Episode] = []
+
+    def on_reset(index: int, obs: dict) -> None:
+        steps.clear()
+
+    def on_step(index: int, reward: float, info: dict) -> None:
+        steps.append((info["primitive"], info))
+
+    def on_record(record: EpisodeRecord) -> None:
+        ep = episode_of(record, oracle.plans, steps, oracle.oracle)
         results.append(ep)
         if verbose or not ep.success:
             outcome = "ok  " if ep.success else "FAIL"
             print(f"  {num_objects} objects seed {ep.seed}: {outcome} {ep.motions} motions [{' '.join(ep.actions)}] "
                   f"{ep.category or ''} (end_reason {ep.end_reason})", flush=True)
+
+    start = time.perf_counter()
+    records = run_episodes(oracle, env, range(episodes), seed, on_record=on_record, on_reset=on_reset, on_step=on_step)
+    wall = time.perf_counter() - start
     env.close()
-    n = len(results)
-    success = sum(r.success for r in results) / n
-    motions = sum(r.motions for r in results) / n
+    result = summarise(records, oracle.name, ENV_ID, num_objects, seed, wall)
     categories = Counter(r.category for r in results if r.category)
     return {
-        "episodes": n,
-        "success": round(success, 4),
-        "motions": round(motions, 3),
+        "episodes": result.episodes,
+        "success": round(result.task_success_rate, 4),
+        "success_interval": [round(v, 4) for v in result.success_interval],
+        "motions": round(result.average_motions, 3),
+        "motions_interval": None if result.motions_interval is None else [round(v, 3) for v in result.motions_interval],
         "failures": {c: categories.get(c, 0) for c in CATEGORIES},
-        "end_reasons": dict(Counter(r.end_reason for r in results)),
+        "end_reasons": result.end_reasons,
         "failed_seeds": [r.seed for r in results if not r.success],
-        "seconds_per_episode": round((time.perf_counter() - start) / n, 2),
+        "seconds_per_episode": round(wall / result.episodes, 2),
     }
 
 

@@ -14,7 +14,7 @@ Measures, for the ``small`` and ``large`` variants:
 - ``train_step_s``: one training step, a batch of 4 on the grasp branch (chosen rotation only),
   Huber loss, backward, Adam step;
 - ``loaded_decision_s`` / ``loaded_ratio`` (first variant): the decision while ``--busy``
-  busy-looping processes share the cores, and its ratio to the quiet decision (issue 12: 4.0
+  busy-looping processes share the cores, and its ratio to the quiet decision (4.0
   before the thread choice and passive OpenMP waiting of :mod:`mpg_envs.threads`; target
   <= 2.5). Fair sharing of 2 cores among this process and two loops gives 1.5-2x;
 
@@ -51,7 +51,7 @@ from torch.nn import functional as F  # noqa: E402
 
 from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics
 from mpg_agents.regions import region_max
-from mpg_agents.policy import MPGNetPolicy
+from mpg_agents.sb3 import MPGNetPolicy
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
 from mpg_envs.actions import PRIMITIVES, PixelActionSpace
 

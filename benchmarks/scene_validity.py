@@ -1,5 +1,5 @@
-"""Valid scenes at every reset (issue 13.1): reset each registered env N times and count the
-scenes that break the contract.
+"""Valid scenes at every reset: reset each registered env N times and count the
+scenes that break the start conditions below.
 
 A scene is invalid when it has fewer active objects than the env's ``num_objects``, any
 object outside the workspace or not at rest, ``info["objects_left"]`` differing from the

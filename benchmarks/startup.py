@@ -1,4 +1,4 @@
-"""Start-up time of the command lines: ``--help`` and a mistyped flag (issue 12).
+"""Start-up time of the command lines: ``--help`` and a mistyped flag.
 
 Each CLI imports only argparse-level modules before it parses its arguments (``mpg_agents``
 loads torch and Stable-Baselines3 lazily), so help and argument errors should answer in

@@ -3,7 +3,7 @@
 Per env id: the median reset time and the median step time (OraclePolicy actions, so the
 primitives do real work). Then the OraclePolicy on MPG-Occluded-v0 with 15 and with 30
 objects over ``--episodes`` seeded episodes: task success (target grasped within 10
-motions) and mean motions per episode. The issue asks for >= 80% success on 15 objects. Then ``--random-actions``
+motions) and mean motions per episode. The goal is >= 80% success on 15 objects. Then ``--random-actions``
 uniformly random actions per env, counting NaNs, objects out of the room and MuJoCo warnings.
 The last output line is one JSON object.
 
@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402
 from mpg_agents.evaluate import evaluate  # noqa: E402
-from mpg_envs.policies import OraclePolicy  # noqa: E402
+from mpg_envs.oracle import OraclePolicy  # noqa: E402
 
 
 def time_env(env_id: str, resets: int) -> tuple[float, float]:

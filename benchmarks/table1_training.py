@@ -18,7 +18,7 @@ each run then gets ``MPG_NUM_THREADS = cores // N``). A finished run (its ``pipe
 exists) is skipped and an interrupted one resumes, so the command can simply be run again.
 Each run's output goes to ``<out>/<run>/train.log``. Then the table and the curves:
 
-    python benchmarks/table1.py --policies runs/table1/mpgnet/Stage5/weights.safetensors ... --objects 15 30
+    python benchmarks/tables.py --track table1 --policies runs/table1/mpgnet/Stage5/weights.safetensors ... --objects 15 30
     mpg-plot runs/table1/mpgnet runs/table1/no-multistage runs/table1/no-alternating runs/table1/no-both \\
         --stage Stage5 --labels "MPGNet,w/o multi-stage,w/o alternating,w/o both" --out ablations.png
 

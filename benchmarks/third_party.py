@@ -299,7 +299,7 @@ def main(argv: list[str] | None = None) -> dict:
     import torch
 
     import mpg_envs  # noqa: F401
-    from mpg_agents.baselines import make_policy
+    from mpg_agents.policy_zoo import make_policy
     from mpg_envs.config import EnvConfig
 
     torch.set_num_threads(1)

@@ -3,7 +3,7 @@
 One iteration = decide (the coordinated greedy decision, or exploration) + act (the
 primitive and the new observation, inside ``env.step``) + store the transition + one
 learning step (double-DQN target on a prioritised batch, backward, Adam). The first
-``--warmup`` iterations (PyTorch picks its kernels then) are not counted. Goal (issue 5):
+``--warmup`` iterations (PyTorch picks its kernels then) are not counted. Goal:
 under 1 s per iteration on 2 cores; VPG needed about 5 s per iteration on a GPU.
 The last output line is one JSON object.
 
@@ -22,7 +22,8 @@ import time
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from mpg_agents.learner import Learner, TrainConfig  # noqa: E402
+from mpg_agents.learner import Learner  # noqa: E402
+from mpg_agents.train_config import TrainConfig  # noqa: E402
 
 
 def main() -> None:

@@ -4,7 +4,7 @@ Both run random valid actions (``action_space.sample()``) with ``raycast_threads
 count every motion; episode resets (a new scene is dropped: about as long as 4-8 motions)
 happen inside the timed loop in both, as they do in training. The first reset is not timed.
 
-What kept two workers from scaling (issue 11 measured 2.41 -> 3.23 steps/s) and what this
+What kept two workers from scaling (an earlier measurement: 2.41 -> 3.23 steps/s with two workers) and what this
 benchmark does about it:
 
 - threads: by default an env ray-casts with up to 2 threads, and numpy/torch may start an

@@ -1,37 +1,45 @@
-"""MPGNet agents: the move/push/grasp Q-networks, their SB3 policy, replay and training step.
+"""MPGNet agents: the move/push/grasp Q-networks, the agent acting with them, its training and
+its Stable-Baselines3 adapter.
 
 Public entry points (``ARCHITECTURE.md`` maps every module):
 
 - :class:`MPGNet` (``mpg_agents.mpgnet``) / :class:`MPGNetConfig` (``mpg_agents.mpgnet_config``):
   the three-branch network; ``save_mpgnet`` / ``load_mpgnet`` (``mpg_agents.weights``).
-- :class:`MPGNetPolicy` (``mpg_agents.policy``): ``stable_baselines3.DQN(MPGNetPolicy, env)``,
-  deciding with :func:`choose_primitive` (``mpg_agents.coordination``).
-- :class:`MPGDQN` (``mpg_agents.dqn``): SB3 DQN training with :func:`td_step` (``mpg_agents.td_step``).
+- :class:`MPGAgent` (``mpg_agents.agent``): the network deciding with :func:`choose_primitive`
+  (``mpg_agents.coordination``) and Q*_g (:class:`GraspThreshold`, ``mpg_agents.grasp_threshold``).
+- :class:`MPGNetPolicy` / :class:`MPGDQN` (``mpg_agents.sb3``): ``stable_baselines3.DQN(MPGNetPolicy, env)``,
+  and SB3's DQN training with :func:`td_step` (``mpg_agents.td_step``).
 - :class:`PrioritizedHeightmapReplayBuffer` (``mpg_agents.replay``): compact SB3 replay buffer.
 - :data:`TRAINING_STAGES` (``mpg_agents.training_stages``): the paper's stages as data.
 - :func:`save_qmap_png` (``mpg_agents.visualize``): Q-map pictures.
 """
 
+from mpg_envs._version import __version__  # one version for both packages
 from mpg_envs.threads import use_passive_openmp_wait
 
-use_passive_openmp_wait()  # before torch loads OpenMP: idle threads sleep, not spin (issue 12)
+use_passive_openmp_wait()  # before torch loads OpenMP: idle threads sleep, not spin, so runs side by side share the cores
 
 # The public names load on first use (PEP 562), so ``mpg-eval --help`` and argument errors do not
-# wait for torch and Stable-Baselines3 to import.
+# wait for torch, and only the SB3 adapter's names import Stable-Baselines3.
 _LAZY = {
     'COORDINATIONS': 'mpg_agents.coordination',
-    'Decision': 'mpg_agents.policy',
-    'GraspScorer': 'mpg_agents.grasp_scorer',
-    'MPGDQN': 'mpg_agents.dqn',
+    'Decision': 'mpg_agents.decision',
+    'Discriminator': 'mpg_agents.discriminator',
+    'GraspThreshold': 'mpg_agents.grasp_threshold',
+    'MPGAgent': 'mpg_agents.agent',
+    'MPGDQN': 'mpg_agents.sb3',
     'MPGNet': 'mpg_agents.mpgnet',
     'MPGNetConfig': 'mpg_agents.mpgnet_config',
-    'MPGNetPolicy': 'mpg_agents.policy',
-    'MPGQNetwork': 'mpg_agents.policy',
+    'MPGNetPolicy': 'mpg_agents.sb3',
+    'MPGQFunction': 'mpg_agents.q_function',
+    'MPGQNetwork': 'mpg_agents.sb3',
     'MobileNetV3Features': 'mpg_agents.mobilenet',
     'PrioritizedHeightmapReplayBuffer': 'mpg_agents.replay',
     'TDStepConfig': 'mpg_agents.td_step',
     'TRAINING_STAGES': 'mpg_agents.training_stages',
+    'TrainConfig': 'mpg_agents.train_config',
     'TrainingStage': 'mpg_agents.training_stages',
+    'calibrate_q_star': 'mpg_agents.grasp_threshold',
     'choose_primitive': 'mpg_agents.coordination',
     'flat_q': 'mpg_agents.mpgnet',
     'load_mpgnet': 'mpg_agents.weights',
@@ -60,19 +68,25 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
+    "__version__",
     "COORDINATIONS",
     "Decision",
-    "GraspScorer",
+    "Discriminator",
+    "GraspThreshold",
+    "MPGAgent",
     "MPGDQN",
     "MPGNet",
     "MPGNetConfig",
     "MPGNetPolicy",
+    "MPGQFunction",
     "MPGQNetwork",
     "MobileNetV3Features",
     "PrioritizedHeightmapReplayBuffer",
     "TDStepConfig",
     "TRAINING_STAGES",
+    "TrainConfig",
     "TrainingStage",
+    "calibrate_q_star",
     "choose_primitive",
     "flat_q",
     "load_mpgnet",

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from mpg_agents.coordination import COORDINATIONS
+from mpg_agents.env_options import parse_env_options
 
 
 class UsageError(Exception):
@@ -44,7 +45,7 @@ def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
     """The ``TrainConfig`` and the stage table a ``--config`` file (TOML or JSON) describes:
     ``TrainConfig`` fields at the top level, ``[stages.StageN]`` tables of stage fields."""
     from mpg_agents import training_stages as ts
-    from mpg_agents.learner import TrainConfig
+    from mpg_agents.train_config import TrainConfig
 
     settings = _read_config(path)
     stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
@@ -110,7 +111,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--variant", choices=("small", "large"), help="MobileNetV3 trunks (default small)")
     parser.add_argument("--num-objects", type=int, help="a fixed object count (default: the stage's)")
     parser.add_argument("--q-star", type=float, help="the grasp threshold Q*_g (default: from --init or calibrated)")
-    parser.add_argument("--discriminator", help="fixed grasp-net checkpoint scoring states (Stages III-V)")
+    parser.add_argument("--discriminator", help="the discriminator: a fixed grasp-net checkpoint scoring states (Stages III-V)")
     parser.add_argument("--stages", help="pipeline: which stages, by name or position, e.g. 1,2")
     parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: only Stage V, from scratch")
     parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")
@@ -123,7 +124,9 @@ def train_main(argv: Sequence[str] | None = None) -> int:
 
     set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
     try:
-        from mpg_agents.learner import Learner, TrainConfig, json_safe
+        from mpg_agents.grasp_threshold import as_record
+        from mpg_agents.learner import Learner
+        from mpg_agents.train_config import TrainConfig, json_safe
         from mpg_agents import training_stages as ts
 
         base, stages = training_settings(args.config)
@@ -148,7 +151,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         _check_env_id(args.env)
         learner = Learner(base, ts.stage_for_env(args.env, stages), args.out, init=args.init)
         summary = learner.run()
-        print(json.dumps(json_safe(summary)))
+        print(json.dumps({**json_safe(summary), "q_star": as_record(learner.policy.q_star)}))  # the Q*_g its weights carry
         return 0
     except (UsageError, FileNotFoundError) as exc:
         return _fail(exc)
@@ -185,10 +188,16 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
     parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="with --workers > 1: Ray (default) or a local process pool (no Ray start-up)")
     parser.add_argument("--quiet", action="store_true", help="no line per episode")
+    parser.add_argument("--env-option", action="append", metavar="KEY=VALUE",
+                        help="an env keyword, e.g. wrong_grasp=fail, obs_mode=camera, 'visible_range=(0, 0.3)' (repeatable; recorded in the JSON)")
+    parser.add_argument("--cases", help="run a case set instead of seeded episodes: challenge | epg | gti, or a scene file or folder "
+                        "(strict retrieval, a mis-pick ends a run as a failure, unless --env-option wrong_grasp=remove)")
+    parser.add_argument("--runs", type=int, default=1, help="with --cases: runs per case (run 0 as written, the others jittered)")
+    parser.add_argument("--peers", help="with --cases epg or gti: the folder holding the peers' files (vpg/, gti/)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.baselines import BUILTIN
-        from mpg_agents.parallel import EvalJob, evaluate_parallel
+        from mpg_agents.policy_zoo import BUILTIN
+        from mpg_agents.eval_runner import EvalJob, evaluate_parallel
 
         _check_env_id(args.env)
         if args.policy not in BUILTIN:
@@ -204,17 +213,43 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             extra += (("avoid_repeats", True),)
         if args.q_star is not None:
             extra += (("q_star", args.q_star),)
-        job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra)
+        env_options = parse_env_options(args.env_option)
+        if args.cases is not None:
+            return _eval_cases(args, dict(extra), env_options)
+        job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra, tuple(env_options.items()))
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
         result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend)
     except (UsageError, FileNotFoundError, ValueError) as exc:
         return _fail(exc)
+    return _report(result, args.json)
+
+
+def _report(result: Any, json_path: str | None) -> int:
+    """Print a result's table and, with ``--json``, write its ``to_dict()``."""
     print(result.table())
-    if args.json:
-        path = Path(args.json)
+    if json_path:
+        path = Path(json_path)
         path.write_text(json.dumps(result.to_dict(), indent=1, sort_keys=True))
         print(f"metrics written to {path.resolve()}")
     return 0
+
+
+def _eval_cases(args: argparse.Namespace, policy_kwargs: dict[str, Any], env_options: dict[str, Any]) -> int:
+    """``mpg-eval --cases``: every case of a set, ``--runs`` runs each, one row per case
+    (strict retrieval unless ``--env-option wrong_grasp=...`` says otherwise)."""
+    from mpg_agents.case_runs import run_case_set
+    from mpg_envs.cases import load_cases
+
+    if args.workers not in (None, 1) or args.ray_address is not None:
+        raise UsageError("--cases runs in this process: leave out --workers and --ray-address")
+    if args.runs < 1:
+        raise UsageError(f"--runs must be >= 1, got {args.runs}")
+    if args.peers is not None and not Path(args.peers).is_dir():
+        raise UsageError(f"--peers {args.peers!r} is not a folder")
+    case_set = load_cases(args.cases, args.peers)
+    on_record = None if args.quiet else (lambda case, record: print(f"  {case.name}: {record.describe()}", flush=True))
+    result = run_case_set(args.policy, case_set, args.runs, args.seed, args.env, env_options, policy_kwargs, on_record)
+    return _report(result, args.json)
 
 
 # ----------------------------------------------------------------------- calibrate
@@ -239,8 +274,8 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
-        from mpg_agents.baselines import make_policy
-        from mpg_agents.calibration import calibrate_q_star, calibration_dict
+        from mpg_agents.grasp_threshold import calibrate_q_star, calibration_dict
+        from mpg_agents.policy_zoo import make_policy
 
         _check_env_id(args.env)
         if args.policy != "shipped":

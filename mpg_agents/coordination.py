@@ -13,7 +13,7 @@ Rules (:data:`COORDINATIONS`):
 - ``"grasp_first"``: the workflow, but the grasp is asked first: a grasp whose best Q is at
   least Q*_g is taken even when the target is occluded (a partly covered target the grasp
   net already scores graspable needs no move); otherwise occluded -> move, else push. Not
-  the paper's rule; a measured lever (README). Until Q*_g is calibrated it is the workflow.
+  the paper's rule; measured against it on the Experiments page of the documentation. Until Q*_g is calibrated it is the workflow.
 - ``"max_q"``: the primitive with the largest best Q (the paper's "w/o alternating training"
   ablation).
 

@@ -1,11 +1,17 @@
-"""Evaluation with the paper's metrics (Table I): task success within 10 motions, motions.
+"""Evaluation with the paper's metrics (Table I) and the ones that separate methods.
+
+The paper's: task success within the motion cap and mean motions per episode, and the grasp
+success rate (target grasps / grasp attempts). Beside them: success without a mis-pick (no
+grasp lifted a non-target object on the way; under strict retrieval every success is one),
+mis-picks per episode, and success by the target's visible fraction at reset
+(:data:`mpg_envs.occlusion.VISIBILITY_BANDS`). Every rate has its 95% Wilson interval.
 
 An evaluation is a list of per-episode records, then one summary. Episode ``i`` is the
 seeded reset ``reset(seed=seed + i)`` run until the env ends it (target grasped, motion
 cap, target out of the workspace, ...). Before it starts, the env's action space and the
 policy (if it has ``seed(s)``) are seeded with the same ``seed + i`` and the policy is
 ``reset()``, so an episode's actions depend only on its index: any split of the episodes
-over workers (:mod:`mpg_agents.parallel`) gives the same records.
+over workers (:mod:`mpg_agents.eval_runner`) gives the same records.
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_agents.stats import bootstrap_mean_interval, wilson_interval
+from mpg_envs.occlusion import VISIBILITY_BANDS, visibility_band
 
 PRIMITIVES = ("move", "push", "grasp")
 UNREPORTED = "unreported"  # an env that does not (yet) put end_reason in the last step's info
@@ -37,6 +44,7 @@ class EpisodeRecord:
     target_grasps: int  # grasps that lifted the target
     wrong_grasps: int  # grasps that lifted another object
     objects_left: int | None
+    visible_fraction: float | None = None  # the target's visible fraction at reset
     # The actions taken, to replay or compare an episode: flat indices, or for a wrapped env
     # with a continuous action space (mpg_envs.wrappers.ContinuousAction) tuples of floats.
     actions: tuple[int | tuple[float, ...], ...] = ()
@@ -46,6 +54,11 @@ class EpisodeRecord:
         data = asdict(self)
         del data["seconds"]
         return data
+
+    @property
+    def clean_success(self) -> bool:
+        """Succeeded without a mis-pick (no grasp lifted another object first)."""
+        return self.success and self.wrong_grasps == 0
 
     def describe(self) -> str:
         outcome = "success" if self.success else "failure"
@@ -75,6 +88,13 @@ class EvalResult:
     seconds_per_motion: float
     wall_seconds: float = 0.0
     workers: int = 1
+    clean_success_rate: float = 0.0  # success without a mis-pick
+    clean_success_interval: tuple[float, float] = (0.0, 1.0)  # Wilson 95%
+    mispicks_per_episode: float = 0.0  # grasps that lifted a non-target object, per episode
+    # visibility band at reset -> {"episodes", "successes", "rate", "interval"}
+    success_by_visibility: dict[str, dict[str, Any]] = field(default_factory=dict)
+    env_options: dict[str, Any] = field(default_factory=dict)  # keywords the env was made with
+    versions: dict[str, str] = field(default_factory=dict)  # package and env versions
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready data; wall time and the worker count are left out so one seed gives one file."""
@@ -91,12 +111,15 @@ class EvalResult:
             motions += f" [{self.motions_interval[0]:.2f}, {self.motions_interval[1]:.2f}]"
         rows = [
             ("policy", self.policy),
-            ("env", f"{self.env_id} ({self.num_objects} objects)"),
+            ("env", f"{self.env_id} ({self.num_objects} objects)" + "".join(f", {k}={v}" for k, v in self.env_options.items())),
             ("episodes", f"{self.episodes} (seeds {self.seed}..{self.seed + self.episodes - 1})"),
             ("task success rate", f"{100 * self.task_success_rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"),
             ("average motion number", motions),
             ("  in successful episodes", "n/a" if self.average_motions_success is None else f"{self.average_motions_success:.2f}"),
+            ("  without a mis-pick", f"{100 * self.clean_success_rate:.1f}% [{100 * self.clean_success_interval[0]:.1f}, {100 * self.clean_success_interval[1]:.1f}]"),
+            ("mis-picks per episode", f"{self.mispicks_per_episode:.2f}"),
             ("grasp success rate", "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.1f}% of {self.grasp_attempts}"),
+            ("success by visibility", ", ".join(f"{band}: {c['successes']}/{c['episodes']}" for band, c in self.success_by_visibility.items()) or "n/a"),
             ("primitives used", ", ".join(f"{p} {n}" for p, n in self.primitive_counts.items())),
             ("episodes ended by", ", ".join(f"{r} {n}" for r, n in self.end_reasons.items())),
             ("seconds per motion", f"{self.seconds_per_motion:.2f} ({self.workers} worker{'s' if self.workers > 1 else ''}, {self.wall_seconds:.1f} s)"),
@@ -116,8 +139,9 @@ def env_id_of(env: gym.Env) -> str:
     return stage.env_id
 
 
-def start_episode(policy, env: gym.Env, episode_seed: int) -> tuple[dict, dict]:
-    """Seed the action space and the policy with ``episode_seed``, reset both, reset the env."""
+def start_episode(policy, env: gym.Env, episode_seed: int, options: dict[str, Any] | None = None) -> tuple[dict, dict]:
+    """Seed the action space and the policy with ``episode_seed``, reset both, reset the env
+    (with reset ``options``, e.g. a scene file to load)."""
     env.action_space.seed(episode_seed)
     seed = getattr(policy, "seed", None)
     if callable(seed):
@@ -125,7 +149,7 @@ def start_episode(policy, env: gym.Env, episode_seed: int) -> tuple[dict, dict]:
     reset = getattr(policy, "reset", None)
     if callable(reset):
         reset()
-    return env.reset(seed=episode_seed)
+    return env.reset(seed=episode_seed, options=options)
 
 
 def _recorded(action: Any) -> int | tuple[float, ...]:
@@ -143,11 +167,14 @@ def run_episode(
     seed: int,
     on_reset: Callable[[int, dict], None] | None = None,
     on_step: Callable[[int, float, dict], None] | None = None,
+    reset_options: dict[str, Any] | None = None,
 ) -> EpisodeRecord:
-    """Run episode ``index`` (reset seed ``seed + index``) to its end and record it."""
+    """Run episode ``index`` (reset seed ``seed + index``, with ``reset_options``) to its end
+    and record it."""
     start = time.perf_counter()
     episode_seed = seed + index
-    obs, info = start_episode(policy, env, episode_seed)
+    obs, info = start_episode(policy, env, episode_seed, reset_options)
+    visible = info.get("visible_fraction")
     if on_reset is not None:
         on_reset(index, obs)
     primitives = dict.fromkeys(PRIMITIVES, 0)
@@ -176,6 +203,7 @@ def run_episode(
         target_grasps=target_grasps,
         wrong_grasps=wrong_grasps,
         objects_left=None if info.get("objects_left") is None else int(info["objects_left"]),
+        visible_fraction=None if visible is None else float(visible),
         actions=tuple(actions),
         seconds=time.perf_counter() - start,
     )
@@ -189,8 +217,10 @@ def summarise(
     seed: int,
     wall_seconds: float,
     workers: int = 1,
+    env_options: dict[str, Any] | None = None,
 ) -> EvalResult:
-    """The metrics over ``records`` (episodes 0..n-1 of one evaluation, in any order)."""
+    """The metrics over ``records`` (episodes 0..n-1 of one evaluation, in any order);
+    ``env_options``: the keywords the env was made with, for the record."""
     ordered = sorted(records, key=lambda r: r.index)
     if not ordered:
         raise ValueError("no episode records to summarise")
@@ -205,6 +235,7 @@ def summarise(
     for r in ordered:
         end_reasons[r.end_reason] = end_reasons.get(r.end_reason, 0) + 1
     primitive_counts = {p: sum(r.primitives.get(p, 0) for r in ordered) for p in PRIMITIVES}
+    clean = sum(r.clean_success for r in ordered)
     return EvalResult(
         policy=policy,
         env_id=env_id,
@@ -224,7 +255,47 @@ def summarise(
         seconds_per_motion=sum(r.seconds for r in ordered) / max(1, sum(motions)),
         wall_seconds=wall_seconds,
         workers=workers,
+        clean_success_rate=clean / len(ordered),
+        clean_success_interval=wilson_interval(clean, len(ordered)),
+        mispicks_per_episode=sum(r.wrong_grasps for r in ordered) / len(ordered),
+        success_by_visibility=success_by_visibility(ordered),
+        env_options=dict(env_options or {}),
+        versions=versions(env_id),
     )
+
+
+def success_by_visibility(records: Sequence[EpisodeRecord]) -> dict[str, dict[str, Any]]:
+    """Task success per band of the target's visible fraction at reset (episodes whose
+    env reports none are left out)."""
+    cells: dict[str, dict[str, Any]] = {}
+    for low, high in VISIBILITY_BANDS:
+        label = f"{low:g}-{high:g}"
+        band = [r for r in records if r.visible_fraction is not None and visibility_band(r.visible_fraction) == label]
+        if band:
+            k = sum(r.success for r in band)
+            cells[label] = {"episodes": len(band), "successes": k, "rate": k / len(band), "interval": list(wilson_interval(k, len(band)))}
+    return cells
+
+
+def versions(env_id: str) -> dict[str, str]:
+    """The package version and the env id's version (``v0`` of ``MPG-Occluded-v0``)."""
+    import mpg_envs
+
+    return {"package": str(getattr(mpg_envs, "__version__", "unknown")), "env": env_id.rsplit("-", 1)[-1]}
+
+
+def env_options_of(env: gym.Env) -> dict[str, Any]:
+    """The keywords ``env`` was made with besides its registered ones (from its spec),
+    JSON-ready (other values by ``repr``)."""
+    spec = env.unwrapped.spec
+    if spec is None:
+        return {}
+    options = {}
+    for key, value in spec.kwargs.items():
+        if key in ("stage", "num_objects"):  # the env and the object count are recorded apart
+            continue
+        options[key] = value if isinstance(value, (bool, int, float, str, type(None), list, tuple)) else repr(value)
+    return options
 
 
 def run_episodes(
@@ -235,11 +306,13 @@ def run_episodes(
     on_record: Callable[[EpisodeRecord], None] | None = None,
     on_reset: Callable[[int, dict], None] | None = None,
     on_step: Callable[[int, float, dict], None] | None = None,
+    reset_options: dict[str, Any] | None = None,
 ) -> list[EpisodeRecord]:
-    """Records of the episodes ``indices`` (each seeded ``seed + index``) on one env and policy."""
+    """Records of the episodes ``indices`` (each seeded ``seed + index``, reset with
+    ``reset_options``) on one env and policy."""
     records = []
     for index in indices:
-        record = run_episode(policy, env, index, seed, on_reset=on_reset, on_step=on_step)
+        record = run_episode(policy, env, index, seed, on_reset=on_reset, on_step=on_step, reset_options=reset_options)
         records.append(record)
         if on_record is not None:
             on_record(record)
@@ -259,7 +332,7 @@ def evaluate(
 
     ``on_reset(episode, obs)`` and ``on_step(episode, reward, info)`` let a caller (the demo)
     watch the episodes without keeping its own tally of the metrics. For several worker
-    processes see :func:`mpg_agents.parallel.evaluate_parallel` (same records).
+    processes see :func:`mpg_agents.eval_runner.evaluate_parallel` (same records).
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
@@ -273,4 +346,5 @@ def evaluate(
         num_objects=int(env.unwrapped.num_objects),
         seed=seed,
         wall_seconds=time.perf_counter() - start,
+        env_options=env_options_of(env),
     )

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from mpg_agents.heuristics import heuristic_grasp
-from mpg_agents.policy import Decision
+from mpg_agents.decision import Decision
 from mpg_agents.regions import footprint_top, target_pixels
 from mpg_envs.actions import encode_action
 from mpg_envs.workspace import NUM_ROTATIONS

@@ -1,11 +1,16 @@
 """The DQN learner of MPGNet for one training stage (paper Sections III-C and III-D).
 
-One iteration: observe, decide (the policy's coordination; Stage IV's forced grasp after its
-push budget), explore (:mod:`mpg_agents.exploration`), act, store the transition, and take one
-gradient step (:func:`mpg_agents.td_step.td_step`) on a prioritised batch with the stage's
-frozen branches left out. What the stage trains comes from its
-:class:`~mpg_agents.training_stages.TrainingStage`; the algorithm's settings from
-:class:`TrainConfig`.
+One iteration: observe, decide (the agent's coordination, :class:`~mpg_agents.agent.MPGAgent`;
+Stage IV's forced grasp after its push budget), explore (:mod:`mpg_agents.exploration`), act,
+store the transition, and take one gradient step (:func:`mpg_agents.td_step.td_step`) on a
+prioritised batch with the stage's frozen branches left out. What the stage trains comes from
+its :class:`~mpg_agents.training_stages.TrainingStage`; the algorithm's settings from
+:class:`~mpg_agents.train_config.TrainConfig`.
+
+Q*_g (:mod:`mpg_agents.grasp_threshold`): a run starts with ``TrainConfig.q_star`` or else the
+starting checkpoint's; a stage with ``calibration_episodes`` calibrates it in its own scenes,
+one with ``calibrates_q_star`` estimates it from its own greedy grasps at its end. The weights
+carry it.
 
 Everything needed to continue is saved every ``checkpoint_every`` iterations and when the
 process is asked to stop (SIGINT/SIGTERM) (:mod:`mpg_agents.run_state`): a killed run resumes
@@ -36,83 +41,23 @@ import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.calibration import calibrate_q_star, write_calibration
+from mpg_agents.agent import MPGAgent
 from mpg_agents.demonstrations import collect_demonstrations
+from mpg_agents.discriminator import Discriminator
 from mpg_agents.exploration import Choice, Explorer, linear_epsilon
-from mpg_agents.grasp_scorer import GraspScorer
-from mpg_agents.policy import MPGNetPolicy
+from mpg_agents.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
+from mpg_agents.q_function import MPGQFunction
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.run_state import load_run_state, save_run_state, state_folder
 from mpg_agents.seeds import episode_seed
-from mpg_agents.td_step import TDStepConfig, td_step
+from mpg_agents.td_step import td_step
+from mpg_agents.train_config import TrainConfig, json_safe
 from mpg_agents.train_log import IterationRecord, TrainingLog
-from mpg_agents.training_stages import TrainingStage, check_fields, stage_for_env
-from mpg_agents.weights import load_mpgnet_weights, save_mpgnet
+from mpg_agents.training_stages import TrainingStage, stage_for_env
+from mpg_agents.weights import load_mpgnet_weights
 from mpg_envs.actions import PRIMITIVES
 from mpg_envs.config import EnvConfig
 from mpg_envs.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
-
-
-@dataclass
-class TrainConfig:
-    """The algorithm's settings for a stage; defaults are the paper's where it gives them.
-
-    What the stage trains (env, branches, curriculum, alternation, ...) is its
-    :class:`~mpg_agents.training_stages.TrainingStage`.
-    """
-
-    steps: int | None = None  # training iterations (one env step + one gradient step); None: the stage's
-    seed: int = 0
-    variant: str = "small"
-    num_objects: int | None = None  # a fixed object count; None: the stage's curriculum or the env's count
-    # Paper, Training Details.
-    gamma: float = 0.5
-    learning_rate: float = 1e-4
-    weight_decay: float = 2**-5
-    betas: tuple[float, float] = (0.9, 0.99)
-    epsilon_start: float = 0.5
-    epsilon_end: float = 0.1
-    epsilon_decay_steps: int | None = None  # None: over the whole run
-    # Replay and updates.
-    batch_size: int = 2
-    replay_capacity: int = 5000
-    priority_alpha: float = 1.0
-    target_update_every: int = 100
-    grasp_symmetry: bool = True
-    max_grad_norm: float | None = None  # the paper clips nothing (see td_step.TDStepConfig)
-    q_bounds: tuple[float, float] | None = None  # clamp TD targets to the feasible returns (see td_step.TDStepConfig)
-    # Training aids (paper, Simulation Experiments).
-    heuristic_after_failed_grasps: int = 2
-    q_star: float = float("nan")
-    # Not the paper's (pure RL): oracle episodes whose transitions seed the replay of a fresh run (0: none).
-    demonstration_episodes: int = 0
-    # The fixed Stage II grasp net that scores states for the move/push rewards.
-    discriminator: str | None = None
-    # Bookkeeping.
-    checkpoint_every: int = 100
-    window: int = 200  # grasp success rate per this many iterations (paper)
-    torch_threads: int = 2
-    net_config: dict[str, Any] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        data = asdict(self)
-        data["betas"] = list(self.betas)
-        data["q_bounds"] = list(self.q_bounds) if self.q_bounds is not None else None
-        return data
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "TrainConfig":
-        check_fields(cls, data, "training")
-        data = dict(data)
-        for key in ("betas", "q_bounds"):
-            if data.get(key) is not None:
-                data[key] = tuple(data[key])
-        return cls(**data)
-
-    def step_config(self) -> TDStepConfig:
-        return TDStepConfig(
-            gamma=self.gamma, grasp_symmetry=self.grasp_symmetry, max_grad_norm=self.max_grad_norm, target_bounds=self.q_bounds
-        )
 
 
 @dataclass
@@ -127,7 +72,8 @@ class Counters:
     gradient_steps: int = 0
     window_grasps: int = 0
     window_target_grasps: int = 0
-    successful_grasp_q: list[float] = field(default_factory=list)  # for Q*_g calibration
+    # The Q of the last 200 greedy grasps that took the target (a calibrates_q_star stage's estimate).
+    successful_grasp_q: list[float] = field(default_factory=list)
     calibrated_at: int = -1  # iteration of the last in-scene Q*_g calibration (-1: none)
     grasp_trials: int = 0  # grasps tried in the simulation and undone (TrainingStage.grasp_trials)
     grasp_trial_targets: int = 0  # of those, the ones that took the target
@@ -169,31 +115,23 @@ class Learner:
         self.env = self._make_env(self._objects_now(0))
         env = self.env.unwrapped
         self.primitives: tuple[str, ...] = tuple(env.primitives)
-        self.policy = MPGNetPolicy(
-            env.observation_space,
-            env.action_space,
-            lambda _: config.learning_rate,
-            variant=config.variant,
-            branches=self.stage.branches or PRIMITIVES,
-            coordination=self.stage.coordination,
-            q_star=config.q_star,
-            net_config=config.net_config,
-            optimizer_kwargs={"weight_decay": config.weight_decay, "betas": tuple(config.betas)},
+        # The online agent, then the target network: their initial weights come from the seed in this order.
+        self.policy = MPGAgent.build(
+            env.observation_space, env.action_space, variant=config.variant, branches=self.stage.branches or PRIMITIVES,
+            coordination=self.stage.coordination, net_config=config.net_config,
         )
+        self.target_q = MPGQFunction(self.policy.net_config, self.policy.action_primitives)
+        self.target_q.set_training_mode(False)
         # What the agent acts with: the env's primitives it has a branch for.
         self.trainable = self.stage.trainable if self.stage.trainable is not None else self.policy.usable_primitives
         self.net = self.policy.q_net.mpgnet
-        self.target = self.policy.q_net_target.mpgnet
-        self.optimizer = self.policy.optimizer
-        if init is not None:
-            header = load_mpgnet_weights(self.net, init, strict_branches=False)
-            if math.isnan(config.q_star) and header.get("q_star") is not None:
-                self.policy.set_q_star(float(header["q_star"]))
+        self.target = self.target_q.mpgnet
+        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.learning_rate, **config.optimizer_kwargs())
+        header = load_mpgnet_weights(self.net, init, strict_branches=False) if init is not None else {}
+        self.policy.set_q_star(starting_q_star(config.q_star, from_header(header)))
         for to, source in self.stage.branch_init:
             self.net.branches[to].load_state_dict(self.net.branches[source].state_dict())
         self.target.load_state_dict(self.net.state_dict())
-        if not math.isnan(config.q_star):
-            self.policy.set_q_star(config.q_star)
         self.replay = PrioritizedHeightmapReplayBuffer(
             config.replay_capacity, env.observation_space, env.action_space, device="cpu", alpha=config.priority_alpha, seed=config.seed
         )
@@ -217,7 +155,7 @@ class Learner:
         if num_objects is not None:
             kwargs["num_objects"] = num_objects
         if self.config.discriminator is not None:
-            kwargs["grasp_scorer"] = GraspScorer.from_weights(self.config.discriminator)
+            kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator)
         if self.stage.reward:
             kwargs["config"] = EnvConfig(reward=self.stage.reward_config())
         return gym.make(self.stage.env_id, **kwargs)
@@ -229,7 +167,7 @@ class Learner:
         return self.stage.objects_at(iteration / max(1, self.steps))
 
     def _saved_config(self) -> dict[str, Any]:
-        return json_safe({**self.config.to_dict(), "stage": self.stage.to_dict(), "q_star_now": self.policy.q_star})
+        return json_safe({**self.config.to_dict(), "stage": self.stage.to_dict()})
 
     def _resume(self) -> None:
         folder = state_folder(self.out)
@@ -243,12 +181,12 @@ class Learner:
                 f"asked for {self.stage.env_id} ({self.config.variant}): use another --out"
             )
         self.resumed = True
-        counters, saved = load_run_state(
+        counters, _, q_star = load_run_state(
             folder, online=self.net, target=self.target, optimizer=self.optimizer, replay=self.replay, rng=self.rng
         )
         self.counters = Counters(**counters)
-        if saved.get("q_star_now") is not None:
-            self.policy.set_q_star(saved["q_star_now"])
+        if not math.isnan(q_star):  # the Q*_g the saved weights carry
+            self.policy.set_q_star(q_star)
         self.log(f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})")
 
     def save_state(self) -> None:
@@ -257,10 +195,7 @@ class Learner:
             self.out, online=self.net, target=self.target, q_star=self.policy.q_star, optimizer=self.optimizer,
             replay=self.replay, rng=self.rng, counters=asdict(self.counters), config=self._saved_config(),
         )
-        save_mpgnet(
-            self.net, self.out / "weights.safetensors", q_star=self.policy.q_star,
-            extra={"env_id": self.stage.env_id, "coordination": self.stage.coordination},
-        )
+        self.policy.save_weights(self.out / "weights.safetensors", extra={"env_id": self.stage.env_id})
 
     # ------------------------------------------------------------------ loop
     def run(self) -> dict[str, Any]:
@@ -290,16 +225,20 @@ class Learner:
                 signal.signal(s, h)
         if self.stage.calibrate_every and self.counters.calibrated_at != self.counters.iteration:
             self.calibrate_in_scenes(self.stage.calibration_episodes)  # the weights ship with it
-        summary = {"iteration": self.counters.iteration, "episodes": self.counters.episode, "q_star": self.calibrated_q_star()}
+        if self.stage.calibrates_q_star:
+            self.calibrate_from_own_grasps()
+        summary = {"iteration": self.counters.iteration, "episodes": self.counters.episode}
         if self.stage.grasp_trials:
             summary.update(grasp_trials=self.counters.grasp_trials, grasp_trial_targets=self.counters.grasp_trial_targets)
         return summary
 
     def calibrate_in_scenes(self, episodes: int) -> float:
-        """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.calibration.calibrate_q_star`,
+        """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.grasp_threshold.calibrate_q_star`,
         at the stage's ``calibration_quantile``) and save the state (a resumed run keeps it);
         ``calibration.json`` in the run folder keeps every value of the stage.
-        Raises ``RuntimeError`` when no grasp took the target.
+
+        Raises:
+            RuntimeError: no grasp took the target.
         """
         if self._calibration_env is None:  # its own env: a training episode in progress is left as it is
             self._calibration_env = self._make_env(self.env.unwrapped.num_objects)
@@ -319,6 +258,22 @@ class Learner:
         self.save_state()
         return measured.q_star
 
+    def calibrate_from_own_grasps(self) -> float:
+        """A ``calibrates_q_star`` stage at its end: Q*_g estimated from the Q of its recent
+        greedy grasps that took the target (:func:`~mpg_agents.grasp_threshold.estimate_q_star`
+        at the stage's ``calibration_quantile``), and the state saved; unchanged when no greedy
+        grasp took the target. Returns Q*_g."""
+        taken = self.counters.successful_grasp_q
+        if not taken:
+            self.log(f"{self.stage.name}: no greedy grasp took the target; Q*_g stays {self.policy.q_star:.4g}")
+            return self.policy.q_star
+        before = self.policy.q_star
+        self.policy.set_q_star(estimate_q_star(taken, self.stage.calibration_quantile))
+        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {self.policy.q_star:.4g} from its last {len(taken)} "
+                 "greedy grasps that took the target")
+        self.save_state()
+        return self.policy.q_star
+
     def add_demonstrations(self) -> None:
         """Fill the replay with the oracle's transitions on this stage's env and save the state
         (a resumed run keeps them and collects none). Every primitive the net has a branch for
@@ -336,10 +291,8 @@ class Learner:
     def _reset_episode(self) -> dict[str, np.ndarray]:
         c = self.counters
         n = self._objects_now(c.iteration)
-        if n is not None and n != self.env.unwrapped.num_objects:
-            self.env.close()
-            self.env = self._make_env(n)
-        obs, _ = self.env.reset(seed=episode_seed(self.config.seed, c.episode))
+        options = None if n is None else {"num_objects": n}  # the curriculum's count, without rebuilding the env
+        obs, _ = self.env.reset(seed=episode_seed(self.config.seed, c.episode), options=options)
         c.episode_motions = c.failed_grasps_in_a_row = c.pushes_in_episode = 0
         return obs
 
@@ -432,21 +385,10 @@ class Learner:
             return float("nan")
         batch = self.replay.sample(min(self.config.batch_size, self.replay.size()))
         result = td_step(
-            self.policy.q_net, self.policy.q_net_target, self.optimizer, batch, self.config.step_config(),
-            self.active_branches(), self.replay,
+            self.policy.q_net, self.target_q, self.optimizer, batch, self.config.step_config(), self.active_branches(), self.replay,
         )
         if result.trained:
             self.counters.gradient_steps += 1
             if self.counters.gradient_steps % self.config.target_update_every == 0:
                 self.target.load_state_dict(self.net.state_dict())
         return result.loss
-
-    def calibrated_q_star(self) -> float:
-        """Q*_g: the median Q of the recent successful greedy target grasps (NaN if none)."""
-        values = self.counters.successful_grasp_q
-        return float(np.median(values)) if values else float("nan")
-
-
-def json_safe(data: dict[str, Any]) -> dict[str, Any]:
-    """``data`` with NaN floats (an uncalibrated Q*_g) as ``None``, which JSON can hold."""
-    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in data.items()}

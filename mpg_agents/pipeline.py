@@ -1,11 +1,12 @@
 """The paper's multi-stage training pipeline (Section III-C), driven by the stage table.
 
 The stages run in order (:data:`~mpg_agents.training_stages.TRAINING_STAGES` by default), each
-starting from the previous stage's weights. After a stage that ``calibrates_q_star`` the
-threshold Q*_g is taken from its successful grasps and its weights become the discriminator of
-the stages that ``use_discriminator``; a stage with ``calibration_episodes`` calibrates Q*_g
-again in its own scenes before it trains, and that value goes on. Ablations are changes of the table
-(:func:`~mpg_agents.training_stages.without_multistage`,
+starting from the previous stage's weights, and with them the Q*_g they carry (the run's
+``--q-star``, if given, is the first stage's). A stage that ``calibrates_q_star`` estimates Q*_g
+from its own successful grasps and its weights become the discriminator of the stages that
+``uses_discriminator``; a stage with ``calibration_episodes`` calibrates Q*_g again in its own
+scenes. ``pipeline.json`` records the final weights and the one Q*_g they carry. Ablations are
+changes of the table (:func:`~mpg_agents.training_stages.without_multistage`,
 :func:`~mpg_agents.training_stages.without_alternation`).
 
 Each stage writes to ``out/<stage name>/`` and resumes there if interrupted; finished stages
@@ -15,13 +16,15 @@ are skipped on a re-run.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
-from mpg_agents.learner import Learner, TrainConfig, json_safe
+from mpg_agents.grasp_threshold import UNCALIBRATED, as_record, from_header
+from mpg_agents.learner import Learner
+from mpg_agents.train_config import TrainConfig, json_safe
 from mpg_agents.training_stages import TRAINING_STAGES, TrainingStage
+from mpg_agents.weights import read_checkpoint_header
 
 
 @dataclass
@@ -33,14 +36,15 @@ class PipelineConfig:
 
 
 def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Run the stages in order; returns ``{stage: summary}`` plus the calibrated Q*_g."""
+    """Run the stages in order; returns ``{stage: summary}`` plus the final weights and their Q*_g."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict[str, Any] = {}
     weights = init
-    q_star = cfg.base.q_star
     discriminator: str | None = cfg.base.discriminator
-    for stage in cfg.stages:
+    for i, stage in enumerate(cfg.stages):
+        # A later stage starts with the Q*_g its starting weights carry.
+        q_star = cfg.base.q_star if i == 0 else UNCALIBRATED
         stage_cfg = replace(cfg.base, q_star=q_star, discriminator=discriminator if stage.uses_discriminator else None)
         stage_dir = out / stage.name
         done = stage_dir / "done.json"
@@ -50,24 +54,13 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
         else:
             learner = Learner(stage_cfg, stage, stage_dir, init=weights, log=log)
             log(f"{stage.name}: {learner.steps} iterations, training {learner.trainable}, init {weights}")
-            result = learner.run()
-            if stage.calibrates_q_star:
-                # Q*_g: where the Q of successful target grasps settled (paper, Stage II).
-                result["q_star"] = learner.calibrated_q_star()
-                if not math.isnan(result["q_star"]):
-                    learner.policy.set_q_star(result["q_star"])
-                    learner.save_state()
-            result = json_safe(result)
+            result = json_safe(learner.run())
             done.write_text(json.dumps(result))
         summary[stage.name] = result
         weights = str(stage_dir / "weights.safetensors")
         if stage.calibrates_q_star:
-            q_star = float(result["q_star"]) if result.get("q_star") is not None else float("nan")
             discriminator = weights
-        elif stage.calibration_episodes:
-            # Calibrated again in this stage's scenes before it trained: its weights carry it.
-            q_star = float(json.loads((stage_dir / "calibration.json").read_text())["q_star"])
-    summary["q_star"] = None if math.isnan(q_star) else q_star
+    summary["q_star"] = as_record(from_header(read_checkpoint_header(weights)) if weights is not None else UNCALIBRATED)
     summary["final_weights"] = weights
     # The record ships beside its weights: paths inside the run are written relative to it.
     record = {**summary, "final_weights": _relative_to(weights, out)}

@@ -96,7 +96,10 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
 
     Args:
         buffer_size: transitions kept (per env: ``buffer_size // n_envs``).
-        observation_space, action_space, device, n_envs: as in SB3.
+        observation_space: as in SB3.
+        action_space: as in SB3.
+        device: as in SB3.
+        n_envs: as in SB3.
         optimize_memory_usage: accepted for SB3's signature; frame sharing already stores
             each observation once, so it changes nothing.
         handle_timeout_termination: as in SB3 (truncations do not end the bootstrap).

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from safetensors.torch import load_file, save_file
 
+from mpg_agents.grasp_threshold import from_header
 from mpg_agents.mpgnet import MPGNet
 from mpg_agents.replay import Frame, PrioritizedHeightmapReplayBuffer
 from mpg_agents.weights import chmod_by_umask
@@ -152,11 +153,12 @@ def save_run_state(
     counters: dict[str, Any],
     config: dict[str, Any],
 ) -> None:
-    """Write everything a run needs to continue (atomically, see :func:`write_state`)."""
+    """Write everything a run needs to continue (atomically, see :func:`write_state`); Q*_g
+    goes into the online network's weights header."""
 
     def writer(tmp: Path) -> None:
         save_mpgnet(online, tmp / "online.safetensors", q_star=q_star)
-        save_mpgnet(target, tmp / "target.safetensors", q_star=q_star)
+        save_mpgnet(target, tmp / "target.safetensors")
         save_optimizer(optimizer, tmp)
         save_replay(replay, tmp / "replay.npz")
         rngs = {"numpy": rng.bit_generator.state, "replay": replay.rng_state, "torch": torch.get_rng_state().tolist()}
@@ -175,10 +177,10 @@ def load_run_state(
     optimizer: torch.optim.Optimizer,
     replay: PrioritizedHeightmapReplayBuffer,
     rng: np.random.Generator,
-) -> tuple[dict[str, Any], dict[str, Any]]:
+) -> tuple[dict[str, Any], dict[str, Any], float]:
     """Restore a :func:`save_run_state` folder into the given objects; returns the saved
-    ``(counters, config)``."""
-    load_mpgnet_weights(online, folder / "online.safetensors")
+    ``(counters, config, Q*_g)`` (Q*_g NaN when the run had none)."""
+    header = load_mpgnet_weights(online, folder / "online.safetensors")
     load_mpgnet_weights(target, folder / "target.safetensors")
     load_optimizer(optimizer, folder)
     load_replay(replay, folder / "replay.npz")
@@ -186,4 +188,5 @@ def load_run_state(
     rng.bit_generator.state = rngs["numpy"]
     replay.rng_state = rngs["replay"]
     torch.set_rng_state(torch.tensor(rngs["torch"], dtype=torch.uint8))
-    return json.loads((folder / "counters.json").read_text()), json.loads((folder / "config.json").read_text())
+    counters, config = json.loads((folder / "counters.json").read_text()), json.loads((folder / "config.json").read_text())
+    return counters, config, from_header(header)

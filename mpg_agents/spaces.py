@@ -46,7 +46,7 @@ def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | N
 def check_observation_space(space: spaces.Space, size: int) -> None:
     """Fail early, naming the key, when an env's observation space is not MPG-shaped."""
     if not isinstance(space, spaces.Dict):
-        raise TypeError(f"MPGNetPolicy needs a Dict observation space with color/depth/mask, got {space}")
+        raise TypeError(f"MPGNet needs a Dict observation space with color/depth/mask, got {space}")
     shapes = {
         "color": ((size, size, 3), (3, size, size)),
         "depth": ((size, size),),

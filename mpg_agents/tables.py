@@ -1,10 +1,13 @@
-"""The paper's Table I: cells (policy, object count) of measured metrics beside the paper's rows.
+"""The results tables: cells (policy, object count) of measured metrics, per track.
 
-The table (text or Markdown) has the paper's layout: one row per method, task success rate
-per object count, then average motion number per object count. A measured cell shows its
-95% intervals: Wilson for the success rate, a seeded bootstrap for mean motions.
-:func:`rows_json` gives the same cells as data, keyed by the policy as asked for (``oracle``,
-``shipped``, a checkpoint path), each with the name the policy gave itself.
+A track (:data:`TRACKS`) is an env and what its table shows. ``table1`` is the paper's
+Table I on ``MPG-Occluded-v0``: the paper's rows above the measured ones, task success rate
+per object count, then average motion number per object count. ``hard`` is the strict
+retrieval track ``MPG-OccludedHard-v0`` (target at most 30% visible, a mis-pick fails the
+episode), which adds mis-picks per episode and the grasp success rate (target grasps /
+grasp attempts). A measured cell shows its 95% intervals: Wilson for rates, a seeded
+bootstrap for mean motions. :func:`rows_json` gives the same cells as data, keyed by the
+policy's label, each with the name the policy gave itself.
 """
 
 from __future__ import annotations
@@ -15,6 +18,23 @@ from typing import Any, Mapping, Sequence
 from mpg_agents.evaluate import EvalResult
 
 ENV_ID = "MPG-Occluded-v0"
+
+
+@dataclass(frozen=True)
+class Track:
+    """One results table: the env its cells run on and whether the paper's rows head it."""
+
+    name: str
+    env_id: str
+    paper_rows: bool
+    strict_columns: bool  # mis-picks per episode and grasp success rate as columns
+
+
+TRACKS: dict[str, Track] = {
+    "table1": Track("table1", ENV_ID, paper_rows=True, strict_columns=False),
+    "hard": Track("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True),
+}
+"""The tracks by name: the paper's Table I and the strict, hidden-target hard track."""
 
 
 @dataclass(frozen=True)
@@ -47,8 +67,15 @@ def cell_json(result: EvalResult) -> dict[str, Any]:
         "motions_ci": None if result.motions_interval is None else list(result.motions_interval),
         "motions_success": result.average_motions_success,
         "grasp_success_rate": result.grasp_success_rate,
+        "grasp_attempts": result.grasp_attempts,
+        "clean_success": result.clean_success_rate,
+        "clean_success_ci": list(result.clean_success_interval),
+        "mispicks_per_episode": result.mispicks_per_episode,
+        "success_by_visibility": result.success_by_visibility,
         "end_reasons": dict(result.end_reasons),
         "primitive_counts": dict(result.primitive_counts),
+        "env_options": dict(result.env_options),
+        "versions": dict(result.versions),
     }
 
 
@@ -87,21 +114,41 @@ def _row_label(policy: str, results: Sequence[EvalResult]) -> str:
 
 
 def table_rows(
-    policies: Sequence[str], objects: Sequence[int], cells: Mapping[tuple[str, int], EvalResult]
+    policies: Sequence[str],
+    objects: Sequence[int],
+    cells: Mapping[tuple[str, int], EvalResult],
+    track: Track = TRACKS["table1"],
+    labels: Mapping[str, str] | None = None,
 ) -> tuple[list[str], list[list[str]], int]:
-    """Header, body rows (the paper's first, then the measured ones) and how many paper rows."""
+    """Header, body rows (the paper's first on a track that shows them, then the measured
+    ones) and how many paper rows. A row is named ``labels[policy]`` where given, else by
+    the name the policy gave itself."""
     header = ["Method"] + [f"success, {n} obj." for n in objects] + [f"motions, {n} obj." for n in objects]
+    if track.strict_columns:
+        header += [f"mis-picks/ep., {n} obj." for n in objects] + [f"grasp success, {n} obj." for n in objects]
     body = []
-    for row in PAPER_ROWS:
-        success = [f"{100 * row.success[n]:.0f}%" if n in row.success else "-" for n in objects]
-        motions = [f"{row.motions[n]:.2f}" if n in row.motions else "-" for n in objects]
-        body.append([f"{row.method} (paper)"] + success + motions)
+    if track.paper_rows:
+        for row in PAPER_ROWS:
+            success = [f"{100 * row.success[n]:.0f}%" if n in row.success else "-" for n in objects]
+            motions = [f"{row.motions[n]:.2f}" if n in row.motions else "-" for n in objects]
+            body.append([f"{row.method} (paper)"] + success + motions)
+    paper_count = len(body)
     for policy in policies:
         results = [cells[(policy, n)] for n in objects if (policy, n) in cells]
-        success = [_success_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
-        motions = [_motions_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
-        body.append([_row_label(policy, results)] + success + motions)
-    return header, body, len(PAPER_ROWS)
+        row = [labels[policy] if labels and policy in labels else _row_label(policy, results)]
+        row += [_success_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
+        row += [_motions_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
+        if track.strict_columns:
+            row += [f"{cells[(policy, n)].mispicks_per_episode:.2f}" if (policy, n) in cells else "-" for n in objects]
+            row += [_grasp_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
+        body.append(row)
+    return header, body, paper_count
+
+
+def _grasp_text(result: EvalResult) -> str:
+    if result.grasp_success_rate is None:
+        return "n/a"
+    return f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
 
 
 def format_text(header: list[str], body: list[list[str]], paper_rows: int) -> str:
@@ -112,7 +159,8 @@ def format_text(header: list[str], body: list[list[str]], paper_rows: int) -> st
         return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
 
     rule = "-" * len(line(header))
-    return "\n".join([line(header), rule] + [line(r) for r in body[:paper_rows]] + [rule] + [line(r) for r in body[paper_rows:]])
+    paper = [line(r) for r in body[:paper_rows]] + [rule] if paper_rows else []
+    return "\n".join([line(header), rule] + paper + [line(r) for r in body[paper_rows:]])
 
 
 def format_markdown(header: list[str], body: list[list[str]]) -> str:

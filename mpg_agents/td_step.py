@@ -25,7 +25,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from mpg_agents.policy import MPGQNetwork
+from mpg_agents.q_function import MPGQFunction
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class TDStepConfig:
         gamma: discount (paper: 0.5); a batch may carry its own per-sample discounts instead.
         grasp_symmetry: also train grasp rotation ``r + R/2`` with the target of ``r``.
         max_grad_norm: clip the gradient's global norm to this; ``None`` = no clipping. The
-            paper and ``AGENT.md`` name no clipping, so none is the default; SB3's ``DQN``
+            paper names no clipping, so none is the default; SB3's ``DQN``
             clips at 10 (its ``max_grad_norm`` default), which this project's SB3 path used
             before both paths shared this step.
         target_bounds: ``(low, high)``: clamp the TD targets to this range; ``None`` = no
@@ -74,8 +74,8 @@ class TDStepResult:
 
 
 def td_targets(
-    q_net: MPGQNetwork,
-    q_net_target: MPGQNetwork,
+    q_net: MPGQFunction,
+    q_net_target: MPGQFunction,
     next_observations: dict[str, Tensor],
     rewards: Tensor,
     dones: Tensor,
@@ -108,8 +108,8 @@ def td_targets(
 
 
 def td_step(
-    q_net: MPGQNetwork,
-    q_net_target: MPGQNetwork,
+    q_net: MPGQFunction,
+    q_net_target: MPGQFunction,
     optimizer: torch.optim.Optimizer,
     batch: Any,
     config: TDStepConfig = TDStepConfig(),
@@ -119,7 +119,8 @@ def td_step(
     """One gradient step on ``batch`` (SB3 replay samples: observations, actions, ...).
 
     Args:
-        q_net, q_net_target: online and target networks (:class:`MPGQNetwork`).
+        q_net: the online network (:class:`~mpg_agents.q_function.MPGQFunction`).
+        q_net_target: the target network (:class:`~mpg_agents.q_function.MPGQFunction`).
         optimizer: over ``q_net``'s parameters.
         batch: SB3 ``DictReplayBufferSamples``; per-sample ``discounts`` replace ``gamma`` when
             present; ``indices`` (prioritised buffers) are where priorities are written.
@@ -159,7 +160,7 @@ def td_step(
 
 
 def _with_turned_grasps(
-    q_net: MPGQNetwork, obs: dict[str, Tensor], acts: Tensor, ys: Tensor, prim: Tensor, rot: Tensor
+    q_net: MPGQFunction, obs: dict[str, Tensor], acts: Tensor, ys: Tensor, prim: Tensor, rot: Tensor
 ) -> tuple[dict[str, Tensor], Tensor, Tensor]:
     """The batch plus, for every grasp sample, the same grasp at the rotation turned by 180 degrees."""
     sym = torch.nonzero(prim == q_net.action_primitives.index("grasp")).flatten()

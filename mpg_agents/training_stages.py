@@ -40,20 +40,23 @@ class TrainingStage:
             (0: no finish), e.g. the grasp net alone after the three nets' alternation.
         finish_trainable: the branches that learn in the finish.
         coordination: how the primitive is chosen (:mod:`mpg_agents.coordination`).
-        calibrates_q_star: Q*_g is calibrated from this stage's successful grasps.
+        calibrates_q_star: at its end, the stage estimates Q*_g from the Q of its own recent
+            greedy grasps that took the target (at ``calibration_quantile``;
+            :mod:`mpg_agents.grasp_threshold`).
         calibration_episodes: before it trains, the stage calibrates Q*_g again in its own
             scenes from the Q of the greedy grasps that take the target in this many
             grasp-only episodes of the starting net, no learning (0: keep the Q*_g it is given).
             Q*_g from isolated targets (Stage II) sits above what a sure grasp in clutter
             scores, and the workflow then pushes instead of grasping.
-        calibration_quantile: which quantile of those grasps' Q becomes Q*_g: 0.5, the median
-            (where the Q of successful grasps settles, the paper's reading); a lower one
-            lets the workflow take more of the grasps that do succeed.
+        calibration_quantile: which quantile of those grasps' Q (either kind) becomes Q*_g:
+            0.5, the median (where the Q of successful grasps settles, the paper's reading); a
+            lower one lets the workflow take more of the grasps that do succeed.
         calibrate_every: with ``calibration_episodes``, calibrate again at the first episode
             end after every this many iterations and once at the stage's end, so Q*_g follows
             the grasp net's Q scale while it learns (0: only before training). A fixed Q*_g
             that the learning grasp Q drifts below turns the workflow into pushing.
-        uses_discriminator: the envs score states with the calibrated stage's grasp net.
+        uses_discriminator: the envs score states with the discriminator, the grasp net of the
+            stage that ``calibrates_q_star``.
         push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
         iterations: default number of training iterations.
         branches: the nets the agent has and acts with (``None``: all three); a baseline

@@ -181,13 +181,16 @@ def save_qmap_png(
 
 
 def save_policy_qmaps(path: str | Path, policy: Any, obs: Mapping[str, Any]) -> Path:
-    """:func:`save_qmap_png` for an ``MPGNetPolicy``'s decision on ``obs``, with the Q maps of
-    every primitive the network has (the decision itself may compute only some of them)."""
+    """:func:`save_qmap_png` for an agent's decision on ``obs`` (an
+    :class:`~mpg_agents.agent.MPGAgent` or SB3's ``MPGNetPolicy``), with the Q maps of every
+    primitive the network has (the decision itself may compute only some of them)."""
+    from mpg_agents.agent import batch_observation
+
     decision = policy.decide(obs)
-    obs_tensor, _ = policy.obs_to_tensor(dict(obs))
+    net = policy.q_net.mpgnet
+    obs_tensor, _ = batch_observation(obs, next(net.parameters()).device)
     notes = {}
     with torch.inference_mode():
-        net = policy.q_net.mpgnet
         enc = net.encode(obs_tensor)
         maps = {name: q[0] for name, q in net.maps_from(enc, policy.usable_primitives).items()}
         if "grasp" in maps and enc.grasp_fingers is not None:

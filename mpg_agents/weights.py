@@ -8,12 +8,12 @@ names any mismatch.
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from mpg_agents.coordination import check_coordination
+from mpg_agents.grasp_threshold import UNCALIBRATED, as_record, exported_q_star
 from mpg_agents.mpgnet import MPGNet
 from mpg_agents.mpgnet_config import MPGNetConfig
 from mpg_envs.actions import check_primitives
@@ -22,14 +22,20 @@ CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"
 
 
 def checkpoint_metadata(
-    net: MPGNet, q_star: float = float("nan"), extra: Mapping[str, Any] | None = None
+    net: MPGNet, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> dict[str, str]:
-    """The safetensors metadata header: one JSON document under key ``"mpgnet"``."""
+    """The safetensors metadata header: one JSON document under key ``"mpgnet"``; its
+    ``"q_star"`` is where a checkpoint stores Q*_g (:mod:`mpg_agents.grasp_threshold`), its
+    ``"package_version"`` the version of the package that wrote it (the env id, with its
+    version, a training run writes under ``extra``)."""
+    from mpg_envs import __version__
+
     header = {
         "format": CHECKPOINT_FORMAT,
+        "package_version": __version__,
         "variant": net.config.variant,
         "primitives": list(net.primitives),
-        "q_star": None if math.isnan(q_star) else float(q_star),
+        "q_star": as_record(q_star),
         "config": net.config.to_dict(),
     }
     if extra:
@@ -38,7 +44,7 @@ def checkpoint_metadata(
 
 
 def save_mpgnet(
-    net: MPGNet, path: str | Path, q_star: float = float("nan"), extra: Mapping[str, Any] | None = None
+    net: MPGNet, path: str | Path, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> None:
     """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header."""
     from safetensors.torch import save_file
@@ -51,7 +57,7 @@ def save_mpgnet(
 
 def chmod_by_umask(path: str | Path) -> None:
     """Give ``path`` the mode a plain ``open()`` would (0666 less the umask): safetensors
-    writes through a private temporary file and leaves 0600 (issue 12)."""
+    writes through a private temporary file and leaves 0600."""
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(path, 0o666 & ~umask)
@@ -167,7 +173,7 @@ def export_weights(
     ``coordination`` records the rule the copy acts with (:mod:`mpg_agents.coordination`;
     default: the checkpoint's), for checkpoints written before the learner recorded it.
     ``q_star`` replaces Q*_g (e.g. one measured under the new settings); the header's ``extra``
-    keeps training's as ``q_star_from_training``.
+    keeps training's as ``q_star_from_training`` (:func:`~mpg_agents.grasp_threshold.exported_q_star`).
     """
     settings = dict(settings or {})
     weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))
@@ -178,17 +184,10 @@ def export_weights(
         net.config = MPGNetConfig.from_checkpoint(net.config.to_dict(), **settings)
     if half:
         net = net.half()
-    trained_q_star = header.get("q_star")
-    extra = {**header.get("extra", {}), "exported_from": str(src), "float16": half}
-    if q_star is not None:
-        if not math.isfinite(q_star):
-            raise ValueError(f"q_star must be a finite number, got {q_star!r}")
-        extra.setdefault("q_star_from_training", trained_q_star)
-    else:
-        q_star = trained_q_star
+    q_star, extra = exported_q_star(header, q_star, {**header.get("extra", {}), "exported_from": str(src), "float16": half})
     if coordination is not None:
         extra["coordination"] = check_coordination(coordination)
     if settings:
         extra["settings_after_training"] = {**extra.get("settings_after_training", {}), **settings}
-    save_mpgnet(net, dst, q_star=float("nan") if q_star is None else float(q_star), extra=extra)
+    save_mpgnet(net, dst, q_star=q_star, extra=extra)
     return Path(dst)

@@ -8,7 +8,7 @@ import torch
 
 from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics
 from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_agents.policy import MPGNetPolicy
+from mpg_agents.sb3 import MPGNetPolicy
 
 from .fake_env import random_scene
 

@@ -50,7 +50,7 @@ def test_grasp_scorer_drives_stage4_rewards(build_policy):
     probe = make("MPG-Stage4-v0")
     policy = build_policy(probe.observation_space, probe.action_space)
     probe.close()
-    scorer = policy.grasp_scorer()
+    scorer = policy.discriminator()
     env = make("MPG-Stage4-v0", grasp_scorer=scorer)
     try:
         obs, _ = env.reset(seed=1)

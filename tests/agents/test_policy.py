@@ -78,7 +78,7 @@ def test_workflow_coordination(stage5_policy, rng):
         policy.set_q_star(-math.inf)
         d = policy.decide(clear)
         assert d.primitive == "grasp" and set(d.q_maps) == {"grasp"}
-        assert d.grasp_score == pytest.approx(policy.grasp_scorer()(clear), abs=1e-5)
+        assert d.grasp_score == pytest.approx(policy.discriminator()(clear), abs=1e-5)
         # Not graspable -> push.
         policy.set_q_star(math.inf)
         d = policy.decide(clear)

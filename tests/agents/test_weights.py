@@ -80,7 +80,7 @@ def test_a_checkpoint_acts_with_the_coordination_it_records(tmp_path, small_net)
     import gymnasium as gym
 
     import mpg_envs  # noqa: F401
-    from mpg_agents.policy import MPGNetPolicy
+    from mpg_agents.sb3 import MPGNetPolicy
     from mpg_agents.weights import export_weights, read_checkpoint_header
 
     env = gym.make("MPG-Occluded-v0", num_objects=5)

@@ -1,15 +1,16 @@
-"""Q*_g calibration (mpg_agents.calibration) and mpg-calibrate."""
+"""Q*_g calibration (mpg_agents.grasp_threshold) and mpg-calibrate."""
 
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import dataclass
 
 import pytest
 
-from mpg_agents.calibration import Calibration, calibrate_q_star, write_calibration
 from mpg_agents.cli import calibrate_main
+from mpg_agents.grasp_threshold import Calibration, calibrate_q_star, estimate_q_star, write_calibration
 from mpg_agents.seeds import episode_seed
 
 
@@ -130,3 +131,31 @@ def test_mpg_calibrate_measures_the_shipped_net_and_writes_every_target_grasp(tm
     assert record["episodes"] == 1 and record["grasps"] >= 1 and record["env_id"] == "MPG-Stage2-v0"
     assert record["q_star"] == pytest.approx(min(record["target_grasp_q"]))
     assert f"Q*_g {record['q_star']:.4f}: quantile 0 of the Q of" in capsys.readouterr().out
+
+
+def test_one_estimator_is_a_quantile_of_the_target_grasps_q():
+    assert estimate_q_star([0.2, 0.6], 0.5) == pytest.approx(0.4)
+    assert estimate_q_star([0.9, 0.1, 0.5], 0.0) == 0.1
+    with pytest.raises(ValueError, match="at least one grasp"):
+        estimate_q_star([], 0.5)
+    with pytest.raises(ValueError, match=r"quantile must be in \[0, 1\]"):
+        estimate_q_star([0.1], 2.0)
+
+
+def test_a_calibrates_q_star_stage_estimates_from_its_own_greedy_grasps_into_its_weights(tmp_path):
+    """Stage II's Q*_g: the same estimate over its last greedy grasps that took the target,
+    stored in its weights header (where the next stage and the pipeline read it)."""
+    from mpg_agents.learner import Learner
+    from mpg_agents.train_config import TrainConfig
+    from mpg_agents.training_stages import TRAINING_STAGES
+    from mpg_agents.weights import read_checkpoint_header
+
+    stage = TRAINING_STAGES[1]
+    assert stage.calibrates_q_star
+    tiny = dict(steps=1, batch_size=1, replay_capacity=8, net_config={"trunk_depth": 2}, torch_threads=1)
+    learner = Learner(TrainConfig(**tiny), stage, tmp_path, log=lambda s: None)
+    assert math.isnan(learner.calibrate_from_own_grasps())  # no greedy grasp took the target: still uncalibrated
+    learner.counters.successful_grasp_q = [0.3, 0.9, 0.5]
+    assert learner.calibrate_from_own_grasps() == pytest.approx(estimate_q_star([0.3, 0.9, 0.5], stage.calibration_quantile))
+    assert read_checkpoint_header(tmp_path / "weights.safetensors")["q_star"] == pytest.approx(0.5)
+    learner.env.close()

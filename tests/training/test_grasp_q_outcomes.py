@@ -1,15 +1,10 @@
-"""The ROC AUC and summary of benchmarks/grasp_q_outcomes.py on hand-checked cases."""
+"""The ROC AUC and summary of mpg_agents.grasp_outcomes on hand-checked cases."""
 
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "grasp_q_outcomes.py"
-spec = importlib.util.spec_from_file_location("grasp_q_outcomes", BENCH)
-bench = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(bench)
+from mpg_agents import grasp_outcomes as bench
 
 
 def test_auc_separates_and_ties():

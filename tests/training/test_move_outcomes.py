@@ -1,16 +1,8 @@
-"""The pixel classes and summary of benchmarks/move_outcomes.py on hand-checked cases."""
-
-import importlib.util
-import sys
-from pathlib import Path
+"""The pixel classes and summary of mpg_agents.move_outcomes on hand-checked cases."""
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "move_outcomes.py"
-sys.path.insert(0, str(BENCH.parent))  # as when run as a script: it imports grasp_q_outcomes
-spec = importlib.util.spec_from_file_location("move_outcomes", BENCH)
-bench = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(bench)
+from mpg_agents import move_outcomes as bench
 
 
 def test_a_pixel_is_table_target_occluder_or_other():

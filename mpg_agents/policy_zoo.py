@@ -1,10 +1,12 @@
-"""Policies by name for evaluation and the demo: a checkpoint or a built-in baseline.
+"""The policies ``mpg-eval``, the demo and the benchmarks ask for by name: a checkpoint or a
+built-in baseline (:func:`make_policy`). The learned baselines of Table I are stage tables
+(:data:`mpg_agents.training_stages.BASELINES`); once trained they load here as checkpoints.
 
-Every policy is a :class:`mpg_envs.policies.Policy`: ``name``, ``reset()`` at each episode's
+Every policy is a :class:`mpg_envs.policy.Policy`: ``name``, ``reset()`` at each episode's
 start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(path, obs)`` and
 ``primitives`` (what they act with).
 
-- ``oracle``: :class:`mpg_envs.policies.OraclePolicy` (reads the simulator: upper baseline).
+- ``oracle``: :class:`mpg_envs.oracle.OraclePolicy` (reads the simulator: upper baseline).
 - ``random``: uniform over the whole action space (seeded).
 - ``grasp-only``: the pixel-only heuristic grasp at the target mask, every step.
 - ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V) that
@@ -17,8 +19,6 @@ name, e.g. ``stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded
 """
 
 from __future__ import annotations
-
-import math
 
 from importlib import resources
 from pathlib import Path
@@ -81,8 +81,11 @@ class GraspOnlyBaseline:
 class NetworkPolicy:
     """An MPGNet checkpoint with the paper's coordination (greedy, no exploration).
 
-    ``primitives`` are the env's primitives the network has branches for; when that is fewer
-    than the env allows, ``name`` ends with e.g. ``(grasp-only net)``.
+    ``policy`` is the :class:`~mpg_agents.agent.MPGAgent` it acts with. ``primitives`` are the
+    env's primitives the network has branches for; when that is fewer than the env allows,
+    ``name`` ends with e.g. ``(grasp-only net)``. The keyword settings override the
+    checkpoint's: the coordination, Q*_g (:func:`~mpg_agents.grasp_threshold.check_override`)
+    and settings that change no weight.
 
     A greedy Q policy is a function of the observation: when an action changes nothing (a
     grasp that closes on air), it meets the same observation and takes the same action until
@@ -98,7 +101,8 @@ class NetworkPolicy:
     ):
         import torch
 
-        from mpg_agents.policy import MPGNetPolicy
+        from mpg_agents.agent import MPGAgent
+        from mpg_agents.grasp_threshold import check_override
 
         torch.set_flush_denormal(True)  # see mpg_agents.learner: denormals slow CPUs down
         path = Path(path)
@@ -111,13 +115,11 @@ class NetworkPolicy:
             overrides["move_region"] = move_region
         if grasp_fingers is not None:
             overrides["grasp_fingers"] = grasp_fingers
-        self.policy = MPGNetPolicy.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
+        self.policy = MPGAgent.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
         if coordination is not None:
             self.policy.set_coordination(coordination)
         if q_star is not None:
-            if not math.isfinite(q_star):
-                raise ValueError(f"q_star must be a finite number, got {q_star!r}")
-            self.policy.set_q_star(q_star)
+            self.policy.set_q_star(check_override(q_star))
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
         self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
         if grasp_region is not None:
@@ -168,7 +170,7 @@ def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
 def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
     """A policy by name (see the module docstring) for ``env``."""
     if name == "oracle":
-        from mpg_envs.policies import OraclePolicy
+        from mpg_envs.oracle import OraclePolicy
 
         return OraclePolicy(env)
     if name == "random":
@@ -181,3 +183,15 @@ def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
     if path.suffix == ".safetensors" or path.exists():
         return NetworkPolicy(path, env, **kwargs)
     raise ValueError(f"unknown policy {name!r}: use one of {BUILTIN} or the path of a .safetensors checkpoint")
+
+
+def make_network_policy(name: str, env: gym.Env, **kwargs: Any) -> NetworkPolicy:
+    """:func:`make_policy` for a name that must give an MPGNet checkpoint (``shipped`` or a path).
+
+    Raises:
+        ValueError: ``name`` is a built-in baseline without a network, or unknown.
+    """
+    policy = make_policy(name, env, **kwargs)
+    if not isinstance(policy, NetworkPolicy):
+        raise ValueError(f"--policy must be an MPGNet checkpoint (or 'shipped'), got {name!r}")
+    return policy

@@ -1,6 +1,6 @@
 """Evaluation episodes as Ray tasks: the same records for any number of workers.
 
-An :class:`EvalJob` names a policy (a :func:`mpg_agents.baselines.make_policy` name or a
+An :class:`EvalJob` names a policy (a :func:`mpg_agents.policy_zoo.make_policy` name or a
 checkpoint path), an env and a number of episodes. :func:`evaluate_jobs` splits every
 job's episode indices into ``workers`` interleaved chunks; each chunk is one Ray task that
 builds its env and policy once (building the MuJoCo scene and loading a net take seconds)
@@ -50,7 +50,7 @@ class EvalJob:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
         if self.num_objects is not None and self.num_objects < 1:
             raise ValueError(f"num_objects must be >= 1, got {self.num_objects}")
-        from mpg_agents.baselines import BUILTIN
+        from mpg_agents.policy_zoo import BUILTIN
 
         if self.policy not in BUILTIN and Path(self.policy).exists():
             # workers may start in another directory
@@ -114,13 +114,15 @@ def run_chunk(
     import gymnasium as gym
 
     import mpg_envs  # noqa: F401  (registers the envs in a fresh worker)
-    from mpg_agents.baselines import make_policy
+    from mpg_agents.policy_zoo import make_policy
 
     start = time.perf_counter()
     with _one_torch_thread():
         kwargs = dict(job.env_kwargs)
         if job.num_objects is not None:
             kwargs["num_objects"] = job.num_objects
+        if "max_motions" in kwargs:  # Gymnasium's TimeLimit must not cut an episode the env lets run on
+            kwargs.setdefault("max_episode_steps", kwargs["max_motions"])
         env = gym.make(job.env_id, **kwargs)
         try:
             policy = make_policy(job.policy, env, seed=job.seed, **dict(job.policy_kwargs))
@@ -289,7 +291,9 @@ def evaluate_jobs(
     for job, job_chunks, job_wall in zip(jobs, chunks, done_at):
         first = job_chunks[0]
         records = [r for c in job_chunks for r in c.records]
-        results.append(summarise(records, first.policy_name, first.env_id, first.num_objects, job.seed, job_wall, used_workers))
+        results.append(
+            summarise(records, first.policy_name, first.env_id, first.num_objects, job.seed, job_wall, used_workers, dict(job.env_kwargs))
+        )
     timing = RunTiming(
         wall_seconds=max(done_at),  # Ray's start-up and shutdown are not part of the run
         task_seconds=sum(c.seconds for job_chunks in chunks for c in job_chunks),

@@ -1,18 +1,16 @@
-"""The distributed Table I harness: same records for any number of workers, the table, the benchmark."""
+"""The distributed table harness: same records for any number of workers, the tables (Table I and
+the hard track), the policy file, the metrics that count mis-picks and visibility."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
 from mpg_agents.evaluate import EpisodeRecord, summarise
-from mpg_agents.parallel import EvalJob, chunk_indices, evaluate_jobs, start_ray
-from mpg_agents.table1 import PAPER_ROWS, format_markdown, format_text, paper_json, rows_json, table_rows
-
-BENCHMARK = Path(__file__).resolve().parents[2] / "benchmarks" / "table1.py"
+from mpg_agents.eval_runner import EvalJob, chunk_indices, evaluate_jobs, start_ray
+from mpg_agents.table_runs import PolicySpec, read_policy_specs, run_table
+from mpg_agents.tables import PAPER_ROWS, format_markdown, format_text, paper_json, rows_json, table_rows
 
 
 @pytest.fixture(scope="module")
@@ -88,20 +86,49 @@ def test_table_has_the_papers_rows_then_the_measured_cells_with_intervals():
     assert paper_json([15])["Grasping-Only"] == {"15": {"success": 0.26, "motions": 6.46}}
 
 
-def test_benchmark_prints_the_table_and_ends_with_its_json(ray_two_cpus, tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location("table1_benchmark", BENCHMARK)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    argv = ["--policies", "grasp-only", "--episodes", "2", "--objects", "15", "--max-motions", "1", "--workers", "2", "--out", str(tmp_path), "--speedup"]
-    report = module.main(argv)
-    lines = capsys.readouterr().out.strip().splitlines()
-    assert json.loads(lines[-1]) == json.loads((tmp_path / "table1.json").read_text()) == report
-    cell = report["rows"]["grasp-only"]["15"]
-    assert cell["episodes"] == 2 and 0.0 <= cell["success"] <= 1.0 and cell["motions"] == 1.0
-    assert cell["success_ci"][0] <= cell["success"] <= cell["success_ci"][1]
-    assert report["identical_to_serial"] is True and report["speedup"] > 0 and report["workers"] == 2
-    assert any("MPGNet (paper)" in line for line in lines) and any("parallelism" in line for line in lines)
-    assert "| grasp-only |" in (tmp_path / "table1.md").read_text()
+def test_a_table_run_gives_every_cell_with_its_label_settings_and_the_mis_pick_columns(ray_two_cpus, tmp_path):
+    specs = [PolicySpec("Heuristic", "grasp-only"), PolicySpec("Random, 1 motion", "random")]
+    report, text, markdown = run_table("hard", specs, [15], 2, 500000, workers=2, env_options={"max_motions": 1})
+    assert set(report["rows"]) == {"Heuristic", "Random, 1 motion"} and report["env"] == "MPG-OccludedHard-v0"
+    cell = report["rows"]["Heuristic"]["15"]
+    assert cell["episodes"] == 2 and cell["motions"] == 1.0 and cell["env_options"] == {"max_motions": 1}
+    assert cell["clean_success"] == cell["success"]  # strict retrieval: every success is clean
+    assert sum(c["episodes"] for c in cell["success_by_visibility"].values()) == 2
+    assert set(cell["success_by_visibility"]) <= {"0-0.1", "0.1-0.3"}  # the hard track's targets
+    assert cell["versions"]["env"] == "v0" and cell["versions"]["package"]
+    assert "mis-picks/ep., 15 obj." in text and "(paper)" not in text and "| Heuristic |" in markdown
+    with pytest.raises(ValueError, match="unknown track"):
+        run_table("easy", specs, [15], 1, 0, workers=1)
+    with pytest.raises(ValueError, match="labels must differ"):
+        run_table("hard", [specs[0], specs[0]], [15], 1, 0, workers=1)
+
+
+def test_a_policy_file_gives_labels_and_settings(tmp_path):
+    path = tmp_path / "policies.toml"
+    path.write_text('[[policy]]\nlabel = "GO"\npolicy = "x.safetensors"\ngrasp_fingers = "clear"\n[[policy]]\nlabel = "Oracle"\npolicy = "oracle"\n')
+    assert read_policy_specs(path) == [PolicySpec("GO", "x.safetensors", (("grasp_fingers", "clear"),)), PolicySpec("Oracle", "oracle")]
+    path.write_text('[[policy]]\nlabel = "no policy"\n')
+    with pytest.raises(ValueError, match="entry 0 needs"):
+        read_policy_specs(path)
+    from pathlib import Path
+
+    assert len(read_policy_specs(Path(__file__).resolve().parents[2] / "benchmarks" / "tables.toml")) == 7
+
+
+def test_mis_picks_and_visibility_bands_are_counted_per_episode():
+    records = [
+        EpisodeRecord(0, 0, True, 2, "target_grasped", {"move": 0, "push": 0, "grasp": 2}, 2, 1, 1, 10, visible_fraction=0.05),
+        EpisodeRecord(1, 1, True, 1, "target_grasped", {"move": 0, "push": 0, "grasp": 1}, 1, 1, 0, 10, visible_fraction=0.2),
+        EpisodeRecord(2, 2, False, 1, "wrong_object", {"move": 0, "push": 0, "grasp": 1}, 1, 0, 1, 10, visible_fraction=0.25),
+        EpisodeRecord(3, 3, True, 3, "target_grasped", {"move": 1, "push": 1, "grasp": 1}, 1, 1, 0, 10, visible_fraction=0.9),
+    ]
+    result = summarise(records, "p", "MPG-Occluded-v0", 15, 0, 1.0)
+    assert result.task_success_rate == 0.75 and result.clean_success_rate == 0.5 and result.mispicks_per_episode == 0.5
+    assert result.grasp_success_rate == 3 / 5
+    by_band = result.success_by_visibility
+    assert {band: (c["successes"], c["episodes"]) for band, c in by_band.items()} == {"0-0.1": (1, 1), "0.1-0.3": (1, 2), "0.6-1": (1, 1)}
+    assert by_band["0.1-0.3"]["interval"][0] < 0.5 < by_band["0.1-0.3"]["interval"][1]
+    assert "without a mis-pick" in result.table() and "0.1-0.3: 1/2" in result.table()
 
 
 def test_mpg_eval_json_is_the_same_for_one_and_two_workers_and_a_cluster(ray_two_cpus, tmp_path):
@@ -114,3 +141,23 @@ def test_mpg_eval_json_is_the_same_for_one_and_two_workers_and_a_cluster(ray_two
         assert eval_main(argv + extra + ["--json", str(tmp_path / f"{name}.json")]) == 0
     texts = {(tmp_path / f"{name}.json").read_bytes() for name in runs}
     assert len(texts) == 1
+
+
+def test_a_table_from_seed_blocks_pools_their_episodes(tmp_path):
+    from mpg_agents.table_runs import table_from_evals
+
+    def block(start: int, successes: list[bool]) -> str:
+        records = [
+            EpisodeRecord(i, start + i, ok, 1, "target_grasped" if ok else "wrong_object", {"move": 0, "push": 0, "grasp": 1}, 1, int(ok), int(not ok), 29, visible_fraction=0.05)
+            for i, ok in enumerate(successes)
+        ]
+        path = tmp_path / f"b{start}.json"
+        path.write_text(json.dumps(summarise(records, "oracle", "MPG-OccludedHard-v0", 30, start, 1.0).to_dict()))
+        return str(path)
+
+    report, text, _ = table_from_evals("hard", {"Oracle": [block(500000, [True, True]), block(500010, [True, False])]}, 30)
+    cell = report["rows"]["Oracle"]["30"]
+    assert cell["episodes"] == 4 and cell["success"] == 0.75 and cell["mispicks_per_episode"] == 0.25
+    assert report["episodes"] == {"Oracle": 4} and "Oracle" in text
+    with pytest.raises(ValueError, match="not MPG-OccludedHard-v0 with 15"):
+        table_from_evals("hard", {"Oracle": [block(500020, [True])]}, 15)

@@ -1,7 +1,7 @@
-"""The grasp scorer: a fixed grasp net that scores states for the move and push rewards.
+"""The discriminator: a fixed grasp net that scores states for the move and push rewards.
 
-Stages III-V hand it to the envs as ``grasp_scorer`` (the paper's discriminator: the Stage II
-grasp net, frozen).
+Stages III-V hand it to the envs as their ``grasp_scorer`` (the paper's discriminator: the
+Stage II grasp net, frozen).
 """
 
 from __future__ import annotations
@@ -15,20 +15,20 @@ from mpg_agents.mpgnet import MPGNet
 from mpg_agents.weights import load_mpgnet
 
 
-class GraspScorer:
-    """``callable(obs) -> float``: the best grasp Q inside the target region (for the envs).
+class Discriminator:
+    """``callable(obs) -> float``: the best grasp Q where a grasp may act (for the envs).
 
     Runs the grasp branch in eval mode without gradients and restores the network's mode.
     """
 
     def __init__(self, net: MPGNet) -> None:
         if "grasp" not in net.primitives:
-            raise ValueError(f"the grasp scorer needs a grasp branch; this MPGNet has {net.primitives}")
+            raise ValueError(f"the discriminator needs a grasp branch; this MPGNet has {net.primitives}")
         self.net = net
 
     @classmethod
-    def from_weights(cls, path: str | Path) -> "GraspScorer":
-        """A scorer from a saved MPGNet (e.g. the Stage II grasp net)."""
+    def from_weights(cls, path: str | Path) -> "Discriminator":
+        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net)."""
         net, _ = load_mpgnet(path, primitives=("grasp",))
         return cls(net)
 

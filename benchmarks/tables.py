@@ -1,0 +1,130 @@
+"""The results tables (the paper's Table I, the hard track), distributed on Ray.
+
+Every (policy, object count) cell runs ``--episodes`` episodes (episode i reset with seed
+``--seed + i``, so every policy meets the same scenes at a given object count) as Ray tasks:
+a local Ray with ``--workers`` CPUs by default, or the cluster at ``--ray-address``, or a
+local process pool (``--backend processes``). Results are identical for any ``--workers``.
+Prints the table (rates with their 95% Wilson intervals, mean motions with a 95% bootstrap
+interval) and the wall time, writes ``<track>.json`` and ``<track>.md`` to ``--out``; the
+last stdout line is the JSON.
+
+The parallelism printed is task seconds over wall seconds (how many tasks ran at once); it is
+not a speed-up, since tasks slow down when they share cores. ``--speedup`` measures the
+speed-up: it runs every cell again in one process, prints serial wall time over parallel wall
+time, and checks the two runs gave the same records.
+
+    python benchmarks/tables.py --track hard --policy-file benchmarks/tables.toml \\
+        --episodes 100 --objects 15 30 --seed 500000 --workers 2 [--backend processes] [--out DIR]
+    python benchmarks/tables.py --track table1 --policies oracle grasp-only random shipped [CKPT ...]
+    python benchmarks/tables.py --track hard --objects 30 --from-evals "Oracle=runs/hard30/oracle_*.json" ...
+
+``--from-evals LABEL=GLOB ...`` runs nothing: it makes the table of one object count from
+``mpg-eval --json`` files run in seed blocks (one row per label, its blocks pooled).
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+from mpg_agents.env_options import parse_env_options  # noqa: E402
+from mpg_agents.policy_zoo import BUILTIN  # noqa: E402
+from mpg_agents.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
+from mpg_agents.tables import TRACKS  # noqa: E402
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--track", choices=tuple(TRACKS), default="table1", help="table1: MPG-Occluded-v0 (paper protocol); hard: MPG-OccludedHard-v0")
+    parser.add_argument("--policies", nargs="+", help=f"{' | '.join(BUILTIN)} or checkpoint paths (default: oracle grasp-only random shipped)")
+    parser.add_argument("--policy-file", help="a TOML file of [[policy]] entries (label, policy, settings) instead of --policies")
+    parser.add_argument("--episodes", type=int, default=100, help="per cell")
+    parser.add_argument("--objects", type=int, nargs="+", default=[15, 30])
+    parser.add_argument("--seed", type=int, default=500000, help="first episode seed (500000 on: the held-out test scenes)")
+    parser.add_argument("--env-option", action="append", metavar="KEY=VALUE", help="an env keyword for every cell (repeatable)")
+    parser.add_argument("--workers", type=int, help="CPUs of a local Ray and chunks per cell (1: in this process); default 2, or the cluster's CPUs with --ray-address")
+    parser.add_argument("--ray-address", help="join this Ray cluster instead of starting a local one")
+    parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="ray (default; local or --ray-address) or processes (a local process pool, no Ray start-up)")
+    parser.add_argument("--out", default="runs/tables", help="folder for <track>.json and <track>.md")
+    parser.add_argument("--quiet", action="store_true", help="no line per finished episode")
+    parser.add_argument("--speedup", action="store_true", help="run the cells again with --workers 1: speed-up and equality")
+    parser.add_argument("--from-evals", nargs="+", metavar="LABEL=GLOB", help="run nothing: the table of one --objects count from mpg-eval --json files")
+    args = parser.parse_args(argv)
+    if args.from_evals:
+        if len(args.objects) != 1:
+            parser.error("--from-evals makes the table of one object count: give one --objects")
+        args.cells = {}
+        for item in args.from_evals:
+            label, sep, pattern = item.partition("=")
+            files = sorted(glob.glob(pattern))
+            if not sep or not files:
+                parser.error(f"--from-evals {item!r}: expected LABEL=GLOB matching mpg-eval JSON files")
+            args.cells[label] = files
+        return args
+    if args.workers is None and args.ray_address is None:
+        args.workers = 2
+    if args.episodes < 1 or (args.workers is not None and args.workers < 1):
+        parser.error(f"--episodes and --workers must be >= 1, got {args.episodes} and {args.workers}")
+    if args.policies and args.policy_file:
+        parser.error("give --policies or --policy-file, not both")
+    try:
+        args.specs = read_policy_specs(args.policy_file) if args.policy_file else [
+            PolicySpec(p, p) for p in (args.policies or ["oracle", "grasp-only", "random", "shipped"])
+        ]
+        args.env_options = parse_env_options(args.env_option)
+    except ValueError as exc:
+        parser.error(str(exc))
+    for spec in args.specs:
+        if spec.policy not in BUILTIN and not Path(spec.policy).is_file():
+            parser.error(f"policy {spec.label!r}: {spec.policy!r} is neither one of {BUILTIN} nor a checkpoint file")
+    return args
+
+
+def _write(out: Path, name: str, report: dict, markdown: str) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{name}.json").write_text(json.dumps(report, indent=1))
+    (out / f"{name}.md").write_text(markdown + "\n")
+    print(f"written: {(out / f'{name}.json').resolve()} and {(out / f'{name}.md').resolve()}")
+
+
+def main(argv: list[str] | None = None) -> dict:
+    args = parse_args(argv)
+    if args.from_evals:
+        report, text, markdown = table_from_evals(args.track, args.cells, args.objects[0])
+        print(text)
+        _write(Path(args.out), f"{args.track}_{args.objects[0]}", report, markdown)
+        return report
+
+    def on_record(job, record) -> None:
+        print(f"  [{Path(job.policy).name}, {job.num_objects} obj.] {record.describe()}", flush=True)
+
+    env_id = TRACKS[args.track].env_id
+    print(f"{args.track}: {len(args.specs) * len(args.objects)} cells x {args.episodes} episodes on {env_id}, seeds {args.seed}..{args.seed + args.episodes - 1}", flush=True)
+    report, text, markdown = run_table(
+        args.track, args.specs, args.objects, args.episodes, args.seed, args.workers, args.ray_address,
+        args.backend, args.env_options, on_record=None if args.quiet else on_record,
+    )
+    print()
+    print(text)
+    print("intervals: 95% (Wilson for rates, percentile bootstrap of the mean for motions)")
+    print(f"wall time {report['wall_seconds']:.1f} s (+ {report['startup_seconds']:.1f} s start-up), task time {report['task_seconds']:.1f} s "
+          f"on {report['workers']} worker(s): parallelism {report['parallelism']:.2f} (task seconds / wall seconds)")
+    if args.speedup:
+        print("--speedup: the same cells with --workers 1 ...", flush=True)
+        serial, _, _ = run_table(args.track, args.specs, args.objects, args.episodes, args.seed, 1, env_options=args.env_options)
+        report["identical_to_serial"] = serial["rows"] == report["rows"]
+        report["serial_wall_seconds"] = serial["wall_seconds"]
+        report["speedup"] = round(serial["wall_seconds"] / report["wall_seconds"], 3)
+        print(f"workers 1: wall time {serial['wall_seconds']:.1f} s; speed-up {report['speedup']:.2f}x; records identical: {report['identical_to_serial']}")
+    _write(Path(args.out), args.track, report, markdown)
+    print(json.dumps(report))
+    return report
+
+
+if __name__ == "__main__":
+    main()
