@@ -37,7 +37,7 @@ class EnvConfig:
 
 
 def observation_space(workspace: Workspace = Workspace()) -> spaces.Dict:
-    """The observation space of every MPG env (ENV.md): colour, depth and mask heightmaps
+    """The observation space of every MPG env (see the Environments page of the documentation): colour, depth and mask heightmaps
     and the occlusion flag."""
     size = workspace.shape
     return spaces.Dict(

@@ -242,12 +242,12 @@ class MPGEnv(gym.Env):
         if self.world is None or self._obs is None:
             raise RuntimeError("call reset() before try_step()")
         checkpoint = WorldCheckpoint(self.world)
-        saved = (self.num_motions, self._obs, self._score, self.np_random.bit_generator.state)
+        saved = (self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state)
         try:
             return self.step(action)
         finally:
             checkpoint.restore()
-            self.num_motions, self._obs, self._score, self.np_random.bit_generator.state = saved
+            self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state = saved
 
     def render(self):
         if self.render_mode != "rgb_array":

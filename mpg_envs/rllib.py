@@ -1,4 +1,4 @@
-"""The MPG envs for Ray RLlib: ``register()`` makes the six ids known to ``register_env``.
+"""The MPG envs for Ray RLlib: ``register()`` makes every registered id known to ``register_env``.
 
 ::
 
@@ -108,12 +108,14 @@ def make_env(env_id: str, env_config: Mapping[str, Any] | None = None) -> gym.En
     built = next(_built[worker_index])
     if vector_index == 0:
         vector_index = built  # new API stack: one EnvContext for all of a runner's envs
+    if "max_motions" in kwargs:  # Gymnasium's TimeLimit must not cut an episode the env lets run on
+        kwargs.setdefault("max_episode_steps", kwargs["max_motions"])
     env = apply_wrappers(gym.make(env_id, **kwargs), env_config.get("wrappers", []))
     return InitialSeed(env, base_seed + SEED_STRIDE * worker_index + vector_index)
 
 
 def register() -> tuple[str, ...]:
-    """Register the six MPG ids with ``ray.tune.registry.register_env``; returns them.
+    """Register the MPG ids with ``ray.tune.registry.register_env``; returns them.
 
     Call it in the driver before building the algorithm (RLlib ships the creators to
     the env runners itself).
