@@ -6,7 +6,10 @@ that reads the set's file), timed with the heightmaps on one thread; prints the 
 95th percentile, then compares a digest of every observation with a second process's. Goal:
 a reset from a test set in under 100 ms; identical observations in both processes.
 
-    python benchmarks/test_set_resets.py [--resets 20]
+    python benchmarks/test_set_resets.py [--resets 20] [--training-envs 50]
+
+``--training-envs N`` also prints the visible fraction of the target over N generated resets
+(seeds 0..N-1) of each training stage with a target.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ def digests(resets: int) -> dict[str, list[str]]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--resets", type=int, default=20)
+    parser.add_argument("--training-envs", type=int, default=0, help="resets per training stage for its visible fraction (0: none)")
     parser.add_argument("--digests", action="store_true", help=argparse.SUPPRESS)  # the second process
     args = parser.parse_args(argv)
     if args.digests:
@@ -58,6 +62,11 @@ def main(argv: list[str] | None = None) -> int:
         v = test_set.visible_fraction
         counts = [sum(visibility_band(float(x)) == f"{lo:g}-{hi:g}" for x in v) for lo, hi in VISIBILITY_BANDS]
         print(f"| {env_id} | {n} | {len(v)} | {np.median(v):.2f} [{np.quantile(v, 0.25):.2f}, {np.quantile(v, 0.75):.2f}] | " + " | ".join(map(str, counts)) + " |")
+    for env_id in ("MPG-Stage2-v0", "MPG-Stage3-v0", "MPG-Stage4-v0", "MPG-Stage5-v0")[: 4 if args.training_envs else 0]:
+        env = gym.make(env_id)
+        v = np.array([env.reset(seed=i)[1]["visible_fraction"] for i in range(args.training_envs)])
+        counts = [sum(visibility_band(float(x)) == f"{lo:g}-{hi:g}" for x in v) for lo, hi in VISIBILITY_BANDS]
+        print(f"| {env_id} | {env.unwrapped.num_objects} | {len(v)} generated | {np.median(v):.2f} [{np.quantile(v, 0.25):.2f}, {np.quantile(v, 0.75):.2f}] | " + " | ".join(map(str, counts)) + " |")
     print(f"load average {os.getloadavg()[0]:.2f} (timings want a quiet machine)")
     for env_id, n in CELLS:
         env = gym.make(env_id, num_objects=n)

@@ -290,15 +290,16 @@ class MPGEnv(gym.Env):
         self.world = world
         self._primitives = Primitives(world, self.config.primitives, self._ik)
         # Heightmappers are bound to one compiled model.
+        threads = self.config.raycast_threads or (self._raycaster.num_threads if self._raycaster else None)
         for name in ("_raycaster", "_camera"):
-            old = getattr(self, name)
-            if old is not None:
-                old.close()
+            if getattr(self, name) is not None:
+                getattr(self, name).close()
             setattr(self, name, None)
         if self.obs_mode == "raycast":
             from mpg_envs.heightmap import RaycastHeightmapper
 
-            self._raycaster = RaycastHeightmapper(world.model, self.config.workspace, num_threads=self.config.raycast_threads)
+            # The thread count is chosen once per env (choosing samples the machine's load).
+            self._raycaster = RaycastHeightmapper(world.model, self.config.workspace, num_threads=threads)
         return world
 
     def _apply_scene(self, scene: SceneFile, drop_outside: bool) -> None:
