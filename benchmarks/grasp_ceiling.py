@@ -19,97 +19,14 @@ import json
 import math
 import sys
 import time
-from collections import Counter
-from dataclasses import dataclass, field
 
-
-import numpy as np  # noqa: E402
 
 from mpg_envs.env import EnvConfig  # noqa: E402
-from mpg_envs.heightmap import RaycastHeightmapper  # noqa: E402
-from mpg_envs.objects import ObjectAsset, load_object_set  # noqa: E402
-from mpg_envs.grasp_geometry import angle_to_rotation, footprint_rect  # noqa: E402
-from mpg_envs.primitives import Primitives  # noqa: E402
+from mpg_envs.grasp_ceiling import DROPS, run_shape  # noqa: E402
+from mpg_envs.objects import load_object_set  # noqa: E402
 from mpg_envs.robot import ArmIK  # noqa: E402
-from mpg_envs.scenes import random_quat, yaw_quat  # noqa: E402
-from mpg_envs.workspace import world_to_pixel  # noqa: E402
-from mpg_envs.world import World  # noqa: E402
 
 GOAL = 0.98
-DROPS = ("yaw", "random")
-EDGE_MARGIN = 0.07  # placements stay this far inside the workspace edges (as the scenes do)
-
-
-@dataclass
-class ShapeResult:
-    """Grasp trials of one shape."""
-
-    name: str
-    trials: int = 0
-    successes: int = 0
-    failures: Counter = field(default_factory=Counter)
-
-    @property
-    def success_rate(self) -> float:
-        return self.successes / self.trials if self.trials else 0.0
-
-    def as_dict(self) -> dict:
-        return {"trials": self.trials, "success": round(self.success_rate, 4), "failures": dict(self.failures)}
-
-
-class GraspBench:
-    """One object alone on the table, the env's world, heightmapper and primitives."""
-
-    def __init__(self, asset: ObjectAsset, config: EnvConfig = EnvConfig(), ik: ArmIK | None = None):
-        self.config = config
-        self.world = World([asset], config.workspace, config.robot, config.physics)
-        self.primitives = Primitives(self.world, config.primitives, ik)
-        self.heightmapper = RaycastHeightmapper(self.world.model, config.workspace, num_threads=1)
-
-    def close(self) -> None:
-        self.heightmapper.close()
-
-    def trial(self, rng: np.random.Generator, drop: str = "yaw") -> str | None:
-        """Place the object at random, grasp it at its centre across its short axis.
-
-        Returns ``None`` on success, else the failure kind.
-        """
-        if drop not in DROPS:
-            raise ValueError(f"drop must be one of {DROPS}, got {drop!r}")
-        world, ws = self.world, self.config.workspace
-        world.reset()
-        xy = (rng.uniform(ws.x_min + EDGE_MARGIN, ws.x_max - EDGE_MARGIN), rng.uniform(ws.y_min + EDGE_MARGIN, ws.y_max - EDGE_MARGIN))
-        world.drop_object(0, xy, yaw_quat(rng) if drop == "yaw" else random_quat(rng))
-        if len(world.objects_outside_workspace()):
-            return "rolled_away"
-        depth = self.heightmapper(world.data).depth
-        centre, _, short_dir = footprint_rect(world.object_vertices(0)[:, :2])
-        row, col = world_to_pixel(ws, float(centre[0]), float(centre[1]))
-        try:
-            result = self.primitives.execute("grasp", angle_to_rotation(short_dir), row, col, depth, target=0)
-        except RuntimeError:
-            return "ik"
-        if result.grasp_success and result.grasped_object == 0:
-            return None
-        return result.grasp_failure or "other"
-
-
-def run_shape(asset: ObjectAsset, placements: int, seed: int, drop: str = "yaw", ik: ArmIK | None = None) -> ShapeResult:
-    """``placements`` seeded grasp trials of one shape."""
-    bench = GraspBench(asset, ik=ik)
-    out = ShapeResult(asset.name)
-    rng = np.random.default_rng([seed, sum(map(ord, asset.name))])
-    try:
-        for _ in range(placements):
-            failure = bench.trial(rng, drop)
-            out.trials += 1
-            if failure is None:
-                out.successes += 1
-            else:
-                out.failures[failure] += 1
-    finally:
-        bench.close()
-    return out
 
 
 def main(argv: list[str] | None = None) -> int:

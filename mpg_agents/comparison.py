@@ -10,7 +10,9 @@ episode pairs (:func:`~mpg_agents.stats.bootstrap_mean_interval` of the per-pair
 
 from __future__ import annotations
 
+import argparse
 import json
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -123,3 +125,24 @@ def _column(a: EvalRecords, b: EvalRecords, seeds: Iterable[int], key: str) -> n
 
 def _points(fraction: float) -> str:
     return f"{100 * fraction:+.1f}"
+
+
+def compare_main(argv: Sequence[str] | None = None) -> int:
+    """The command line of ``benchmarks/compare_evals.py``: A minus B, paired, from eval JSON files."""
+    parser = argparse.ArgumentParser(description="Two policies on the same episodes: paired differences of success and motions.")
+    parser.add_argument("--a", nargs="+", required=True, help="mpg-eval --json files of policy A")
+    parser.add_argument("--b", nargs="+", required=True, help="mpg-eval --json files of policy B")
+    parser.add_argument("--names", help="two labels, comma-separated (default: the policies' names)")
+    args = parser.parse_args(argv)
+    try:
+        a, b = load_eval_records(args.a), load_eval_records(args.b)
+        names = args.names.split(",") if args.names else [a.policy, b.policy]
+        if len(names) != 2:
+            raise ValueError(f"--names takes two labels, got {args.names!r}")
+        result = compare_paired(a, b)
+    except (ValueError, FileNotFoundError, KeyError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{a.env_id}, {a.num_objects} objects; A = {names[0]}, B = {names[1]}")
+    print(result.describe(names[0], names[1]))
+    return 0

@@ -3,25 +3,18 @@ across its short axis (benchmarks/grasp_ceiling.py runs 100 placements per shape
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
 
 from mpg_envs.objects import blocks_object_set
 from mpg_envs.robot import ArmIK
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "grasp_ceiling.py"
 
 
 @pytest.fixture(scope="module")
 def ceiling():
-    spec = importlib.util.spec_from_file_location("grasp_ceiling", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    import mpg_envs.grasp_ceiling
+
+    return mpg_envs.grasp_ceiling
 
 
 @pytest.fixture(scope="module")

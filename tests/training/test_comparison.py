@@ -3,15 +3,10 @@
 from __future__ import annotations
 
 import json
-import runpy
-import sys
-from pathlib import Path
 
 import pytest
 
-from mpg_agents.comparison import compare_paired, load_eval_records
-
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "compare_evals.py"
+from mpg_agents.comparison import compare_main, compare_paired, load_eval_records
 
 
 def write_eval(path, policy, episodes, env_id="MPG-Occluded-v0", num_objects=15):
@@ -73,12 +68,9 @@ def test_the_shipped_policy_by_name_or_by_file_is_one_policy(tmp_path):
     assert records.policy == "mpgnet_small.safetensors" and sorted(records.by_seed) == [1, 2]
 
 
-def test_the_benchmark_script_prints_a_minus_b(tmp_path, monkeypatch, capsys):
+def test_the_command_line_prints_a_minus_b(tmp_path, capsys):
     a = write_eval(tmp_path / "a.json", "A", [(1, True, 2), (2, True, 3)])
     b = write_eval(tmp_path / "b.json", "B", [(1, True, 3), (2, True, 5)])
-    monkeypatch.setattr(sys, "argv", ["compare_evals.py", "--a", str(a), "--b", str(b), "--names", "X,Y"])
-    with pytest.raises(SystemExit) as end:
-        runpy.run_path(str(SCRIPT), run_name="__main__")
-    assert end.value.code == 0
+    assert compare_main(["--a", str(a), "--b", str(b), "--names", "X,Y"]) == 0
     out = capsys.readouterr().out
     assert "A = X, B = Y" in out and "difference -1.50 [-2.00, -1.00]" in out
