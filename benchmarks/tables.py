@@ -5,8 +5,9 @@ Every (policy, object count) cell runs ``--episodes`` episodes (episode i reset 
 a local Ray with ``--workers`` CPUs by default, or the cluster at ``--ray-address``, or a
 local process pool (``--backend processes``). Results are identical for any ``--workers``.
 Prints the table (rates with their 95% Wilson intervals, mean motions with a 95% bootstrap
-interval) and the wall time, writes ``<track>.json`` and ``<track>.md`` to ``--out``; the
-last stdout line is the JSON.
+interval) and the wall time, writes ``<track>.json`` and ``<track>.md`` to ``--out`` and every
+cell's episodes to ``--out/cells/`` (``mpg-eval --json``'s format, for
+``benchmarks/compare_evals.py``); the last stdout line is the JSON.
 
 The parallelism printed is task seconds over wall seconds (how many tasks ran at once); it is
 not a speed-up, since tasks slow down when they share cores. ``--speedup`` measures the
@@ -121,7 +122,13 @@ def main(argv: list[str] | None = None) -> dict:
         report["serial_wall_seconds"] = serial["wall_seconds"]
         report["speedup"] = round(serial["wall_seconds"] / report["wall_seconds"], 3)
         print(f"workers 1: wall time {serial['wall_seconds']:.1f} s; speed-up {report['speedup']:.2f}x; records identical: {report['identical_to_serial']}")
+    cells = report.pop("cells")
     _write(Path(args.out), args.track, report, markdown)
+    for key, cell in cells.items():  # every episode, as mpg-eval --json writes it (for compare_evals.py)
+        label, n = key.rsplit("|", 1)
+        path = Path(args.out) / "cells" / f"{''.join(c if c.isalnum() else '_' for c in label).strip('_')}_{n}.json"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(cell))
     print(json.dumps(report))
     return report
 

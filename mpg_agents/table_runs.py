@@ -73,8 +73,9 @@ def run_table(
     env_options: Mapping[str, Any] | None = None,
     on_record: Callable[[EvalJob, Any], None] | None = None,
 ) -> tuple[dict[str, Any], str, str]:
-    """Every cell of ``track`` for ``policies`` at ``objects``: the report as data, the
-    table as text and as Markdown."""
+    """Every cell of ``track`` for ``policies`` at ``objects``: the report as data (``cells``
+    holds each cell's full evaluation, ``mpg-eval --json``'s format, keyed ``"label|objects"``),
+    the table as text and as Markdown."""
     if track not in TRACKS:
         raise ValueError(f"unknown track {track!r}; valid: {', '.join(TRACKS)}")
     labels = [p.label for p in policies]
@@ -103,6 +104,7 @@ def run_table(
         "task_seconds": round(timing.task_seconds, 2),
         "parallelism": round(timing.parallelism, 3),
     }
+    report["cells"] = {f"{label}|{n}": result.to_dict() for (label, n), result in by_cell.items()}
     return report, format_text(header, body, paper_rows), format_markdown(header, body)
 
 
