@@ -111,9 +111,7 @@ def run_chunk(
     job: EvalJob, indices: Sequence[int], on_record: Callable[[EpisodeRecord], None] | None = None
 ) -> ChunkResult:
     """Build ``job``'s env and policy once and run the episodes ``indices`` on one thread."""
-    import gymnasium as gym
-
-    import mpg_envs  # noqa: F401  (registers the envs in a fresh worker)
+    import mpg_envs  # registers the envs in a fresh worker
     from mpg_agents.policy_zoo import make_policy
 
     start = time.perf_counter()
@@ -121,9 +119,7 @@ def run_chunk(
         kwargs = dict(job.env_kwargs)
         if job.num_objects is not None:
             kwargs["num_objects"] = job.num_objects
-        if "max_motions" in kwargs:  # Gymnasium's TimeLimit must not cut an episode the env lets run on
-            kwargs.setdefault("max_episode_steps", kwargs["max_motions"])
-        env = gym.make(job.env_id, **kwargs)
+        env = mpg_envs.make(job.env_id, **kwargs)
         try:
             policy = make_policy(job.policy, env, seed=job.seed, **dict(job.policy_kwargs))
             records = run_episodes(policy, env, indices, job.seed, on_record=on_record)

@@ -30,8 +30,8 @@ def _register() -> None:
     """Register every stage's id (once), with ``max_episode_steps`` = the stage's motion cap.
 
     A cap passed to ``gymnasium.make(env_id, max_motions=n)`` changes the env's own cap; pass
-    ``max_episode_steps=n`` with it when ``n`` is larger than the stage's, or the
-    ``TimeLimit`` wrapper truncates at the stage's cap first.
+    ``max_episode_steps=n`` with it when ``n`` is larger than the stage's (or use :func:`make`),
+    or the ``TimeLimit`` wrapper truncates at the stage's cap first.
     """
     for name, stage in STAGES.items():
         if stage.env_id not in gym.registry:
@@ -41,6 +41,15 @@ def _register() -> None:
                 kwargs={"stage": name},
                 max_episode_steps=stage.max_motions,
             )
+
+
+def make(env_id: str, **kwargs) -> gym.Env:
+    """``gymnasium.make(env_id, **kwargs)`` whose ``TimeLimit`` follows a ``max_motions`` given
+    here (unless ``max_episode_steps`` is given too), so it never cuts an episode short of the
+    env's own cap."""
+    if "max_motions" in kwargs:
+        kwargs.setdefault("max_episode_steps", kwargs["max_motions"])
+    return gym.make(env_id, **kwargs)
 
 
 def env_primitives(env: gym.Env) -> tuple[str, ...]:
@@ -66,4 +75,5 @@ __all__ = [
     "decode_action",
     "encode_action",
     "env_primitives",
+    "make",
 ]

@@ -40,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.wrappers import DtypeObservation, RescaleObservation
 
-from mpg_envs import ENV_IDS
+from mpg_envs import ENV_IDS, make
 from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
 
 SEED_STRIDE = 1000
@@ -108,9 +108,7 @@ def make_env(env_id: str, env_config: Mapping[str, Any] | None = None) -> gym.En
     built = next(_built[worker_index])
     if vector_index == 0:
         vector_index = built  # new API stack: one EnvContext for all of a runner's envs
-    if "max_motions" in kwargs:  # Gymnasium's TimeLimit must not cut an episode the env lets run on
-        kwargs.setdefault("max_episode_steps", kwargs["max_motions"])
-    env = apply_wrappers(gym.make(env_id, **kwargs), env_config.get("wrappers", []))
+    env = apply_wrappers(make(env_id, **kwargs), env_config.get("wrappers", []))
     return InitialSeed(env, base_seed + SEED_STRIDE * worker_index + vector_index)
 
 

@@ -140,3 +140,11 @@ def _wrappers(env: gym.Env) -> list[gym.Env]:
     while isinstance(chain[-1], gym.Wrapper):
         chain.append(chain[-1].env)
     return chain
+
+
+def test_make_lets_a_larger_motion_cap_run_past_the_registered_time_limit():
+    import mpg_envs
+
+    env = mpg_envs.make("MPG-Stage2-v0", max_motions=12)
+    assert env.spec.max_episode_steps == 12 and env.unwrapped.max_motions == 12
+    assert mpg_envs.make("MPG-Stage2-v0").spec.max_episode_steps == 10
