@@ -35,7 +35,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from mpg_agents.seeds import episode_seed
+from mpg_agents.seeds import episode_seed, reset_first_valid
 
 if TYPE_CHECKING:
     from mpg_agents.agent import MPGAgent
@@ -135,8 +135,10 @@ def calibrate_q_star(
         raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
     taken: list[float] = []
     grasps = 0
-    for k in range(episodes):
-        obs, _ = env.reset(seed=episode_seed(seed, k, calibration=True))
+    k = -1
+    for n in range(episodes):
+        # A seed without a valid scene passes to the next one: the same scenes every calibration.
+        obs, _, k = reset_first_valid(env, lambda j: episode_seed(seed, j, calibration=True), k + 1)
         done = False
         while not done:
             decision = agent.decide(obs, "grasp")
@@ -146,7 +148,7 @@ def calibrate_q_star(
                 taken.append(float(decision.q_value))
             done = bool(terminated or truncated)
         if on_episode is not None:
-            on_episode(k, grasps, len(taken))
+            on_episode(n, grasps, len(taken))
     if not taken:
         raise RuntimeError(f"no grasp took the target in {episodes} calibration episodes ({grasps} grasps)")
     return Calibration(estimate_q_star(taken, quantile), quantile, episodes, grasps, tuple(taken))

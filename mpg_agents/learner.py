@@ -49,7 +49,7 @@ from mpg_agents.grasp_threshold import calibrate_q_star, estimate_q_star, from_h
 from mpg_agents.q_function import MPGQFunction
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.run_state import load_run_state, save_run_state, state_folder
-from mpg_agents.seeds import episode_seed
+from mpg_agents.seeds import episode_seed, reset_first_valid
 from mpg_agents.td_step import td_step
 from mpg_agents.train_config import TrainConfig, json_safe
 from mpg_agents.train_log import IterationRecord, TrainingLog
@@ -77,6 +77,7 @@ class Counters:
     calibrated_at: int = -1  # iteration of the last in-scene Q*_g calibration (-1: none)
     grasp_trials: int = 0  # grasps tried in the simulation and undone (TrainingStage.grasp_trials)
     grasp_trial_targets: int = 0  # of those, the ones that took the target
+    skipped_scenes: int = 0  # training episodes whose seed gave no valid scene (logged, see seeds.reset_first_valid)
 
 
 class StopRequested(Exception):
@@ -149,7 +150,6 @@ class Learner:
         self.resumed = False
         self._resume()
 
-    # ----------------------------------------------------------------- setup
     def _make_env(self, num_objects: int | None) -> gym.Env:
         kwargs: dict[str, Any] = {}
         if num_objects is not None:
@@ -292,9 +292,15 @@ class Learner:
         c = self.counters
         n = self._objects_now(c.iteration)
         options = None if n is None else {"num_objects": n}  # the curriculum's count, without rebuilding the env
-        obs, _ = self.env.reset(seed=episode_seed(self.config.seed, c.episode), options=options)
+        obs, _, c.episode = reset_first_valid(
+            self.env, lambda k: episode_seed(self.config.seed, k), c.episode, options, self._skipped_scene
+        )
         c.episode_motions = c.failed_grasps_in_a_row = c.pushes_in_episode = 0
         return obs
+
+    def _skipped_scene(self, k: int, error: Exception) -> None:
+        self.counters.skipped_scenes += 1
+        self.log(f"{self.stage.name}: episode {k} skipped, its seed gave no valid scene ({error})")
 
     def epsilon(self) -> float:
         cfg = self.config

@@ -1,6 +1,7 @@
 import pytest
 
-from mpg_agents.seeds import CALIBRATION_SEED_OFFSET, DEMONSTRATION_SEED_OFFSET, RUN_SEED_STRIDE, episode_seed
+from mpg_agents.seeds import CALIBRATION_SEED_OFFSET, DEMONSTRATION_SEED_OFFSET, MAX_SKIPPED_SEEDS, RUN_SEED_STRIDE, episode_seed, reset_first_valid
+from mpg_envs.scenes import InvalidSceneError
 
 
 def test_episode_seeds_by_hand():
@@ -32,3 +33,30 @@ def test_negative_episode_index_is_refused():
 def test_an_episode_is_a_demonstration_or_a_calibration():
     with pytest.raises(ValueError, match="not both"):
         episode_seed(0, 0, demonstration=True, calibration=True)
+
+
+class _SceneFailsFor:
+    """A stand-in env whose reset fails (no valid scene) for the seeds in ``bad``."""
+
+    def __init__(self, bad: set[int]):
+        self.bad, self.seeds = bad, []
+
+    def reset(self, seed=None, options=None):
+        self.seeds.append(seed)
+        if seed in self.bad:
+            raise InvalidSceneError(f"seed {seed}")
+        return {"seed": seed}, {}
+
+
+def test_reset_first_valid_passes_over_seeds_without_a_scene_and_reports_each():
+    env, skipped = _SceneFailsFor({12, 13}), []
+    obs, _, k = reset_first_valid(env, lambda j: 10 + j, 2, on_skip=lambda j, e: skipped.append(j))
+    assert (obs["seed"], k, skipped, env.seeds) == (14, 4, [2, 3], [12, 13, 14])
+    obs, _, k = reset_first_valid(env, lambda j: 10 + j, 0)
+    assert (obs["seed"], k) == (10, 0)
+
+
+def test_reset_first_valid_gives_up_after_a_long_run_of_invalid_seeds():
+    env = _SceneFailsFor(set(range(MAX_SKIPPED_SEEDS + 1)))
+    with pytest.raises(InvalidSceneError, match="seeds in a row from episode 0"):
+        reset_first_valid(env, lambda j: j, 0)
