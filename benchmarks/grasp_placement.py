@@ -26,7 +26,7 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.policy_zoo import NetworkPolicy
 from mpg_agents.heuristics import heuristic_grasp
 from mpg_envs.threads import set_torch_threads
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 
 def first_grasps(policy: NetworkPolicy, env: gym.Env, scenes: int, seed: int) -> dict[str, float]:

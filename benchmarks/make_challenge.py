@@ -35,7 +35,7 @@ from mpg_envs.cases import INDEX_FILE, challenge_dir, jitter_scene
 from mpg_envs.objects import blocks_object_set
 from mpg_envs.scene_io import SceneFile, SceneObject, read_scene, save_scene
 from mpg_envs.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 ENV_ID = "MPG-Occluded-v0"
 GAP = 0.0005  # a block is placed this far (m) above what it rests on, then settles

@@ -53,7 +53,7 @@ from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics
 from mpg_agents.regions import region_max
 from mpg_agents.sb3 import MPGNetPolicy
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
-from mpg_envs.actions import PRIMITIVES, PixelActionSpace
+from mpg_envs.grid.actions import PRIMITIVES, PixelActionSpace
 
 SIZE = 224
 

@@ -30,7 +30,7 @@ from mpg_agents.mpgnet_config import MPGNetConfig
 from mpg_agents.q_function import MPGQFunction, check_action_space
 from mpg_agents.spaces import check_observation_space, resolve_primitives
 from mpg_agents.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet
-from mpg_envs.actions import check_primitives
+from mpg_envs.grid.actions import check_primitives
 
 
 def agent_net_config(

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Sequence
 
-from mpg_envs.actions import check_primitives
+from mpg_envs.grid.actions import check_primitives
 
 COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "max_q")
 """Ways to pick the primitive: the paper's workflow, the workflow asking the grasp first, or

@@ -17,7 +17,7 @@ from mpg_agents.coordination import choose_primitive
 from mpg_agents.mpgnet import EncodedObs
 from mpg_agents.q_function import MPGQFunction, mask_outside
 from mpg_agents.regions import region_max
-from mpg_envs.actions import encode_action
+from mpg_envs.grid.actions import encode_action
 
 
 class Decision(NamedTuple):

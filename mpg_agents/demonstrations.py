@@ -19,7 +19,7 @@ from typing import Any, Callable, Sequence
 
 import gymnasium as gym
 
-from mpg_envs.actions import PixelActionSpace
+from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.oracle import OraclePolicy
 
 AddTransition = Callable[[dict[str, Any], dict[str, Any], int, float, bool], None]

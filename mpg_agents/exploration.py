@@ -22,8 +22,8 @@ import torch
 from mpg_agents.heuristics import heuristic_grasp
 from mpg_agents.decision import Decision
 from mpg_agents.regions import footprint_top, target_pixels
-from mpg_envs.actions import encode_action
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grid.actions import encode_action
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 PUSH_REACH_PX = 25
 """How far (pixels, 2 mm each) around the target's rectangle an exploratory push may start."""

@@ -13,7 +13,7 @@ how many moves lifted nothing), so the Q*_g rule's other branch is measured as w
 trials each grasp is also tried, before it is made, at the other gripper orientations at its
 pixel (``MPGEnv.try_step``, undone; the episode is unchanged), counting the grasps that missed
 the target where another angle would have taken it. Each grasp's finger blocking is recorded
-too (:func:`mpg_envs.grasp_geometry.fingers_blocked`), with the share of free (``<= 0``) and
+too (:func:`mpg_envs.grid.grasp_geometry.fingers_blocked`), with the share of free (``<= 0``) and
 blocked grasps that took the target and the ROC AUC of minus the blocking: what a grasp's
 geometry alone says.
 
@@ -31,9 +31,9 @@ import numpy as np
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.evaluate import run_episodes
 from mpg_agents.policy_zoo import NetworkPolicy, make_network_policy
-from mpg_envs.grasp_geometry import fingers_blocked, other_grasp_angles
+from mpg_envs.grid.grasp_geometry import fingers_blocked, other_grasp_angles
 from mpg_envs.primitives import PrimitiveConfig
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 
 def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:

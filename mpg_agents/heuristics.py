@@ -11,8 +11,8 @@ from typing import Mapping, Sequence
 import cv2
 import numpy as np
 
-from mpg_envs.actions import encode_action
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grid.actions import encode_action
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 
 def heuristic_grasp(obs: Mapping[str, np.ndarray]) -> tuple[int, int, int]:

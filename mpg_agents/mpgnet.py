@@ -6,7 +6,7 @@ concatenated on channels and go through two 1x1 convolutions with batch norm and
 Q channel, which is bilinearly upsampled back to the heightmap. Every heightmap is rotated to
 the 16 orientations first and all 16 go through the trunks as one batch.
 
-Rotation bookkeeping (conventions of :mod:`mpg_envs.workspace`): for rotation ``k`` the input
+Rotation bookkeeping (conventions of :mod:`mpg_envs.grid.workspace`): for rotation ``k`` the input
 is resampled so that the world direction ``theta_k`` (from +x = increasing column toward
 +y = increasing row) becomes the +column direction of the rotated image; the net therefore
 always "sees" its action along +column. The Q output of rotation ``k`` is resampled back
@@ -42,9 +42,9 @@ from mpg_agents.mpgnet_config import ROUGH_MASKED, MPGNetConfig
 from mpg_agents.primitive_net import PLANES, PrimitiveNet, run_in_batches
 from mpg_agents.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
 from mpg_agents.rotations import rotation_grids
-from mpg_envs.grasp_geometry import fingers_blocked
+from mpg_envs.grid.grasp_geometry import fingers_blocked
 from mpg_envs.primitives import PrimitiveConfig
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 
 @dataclass

@@ -7,8 +7,8 @@ from typing import Any, Mapping
 
 from mpg_agents.mobilenet import DEFAULT_BN_MOMENTUM, full_depth
 from mpg_agents.rotations import padded_side
-from mpg_envs.actions import HEIGHTMAP_SIZE, PRIMITIVES, check_primitives
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grid.actions import HEIGHTMAP_SIZE, PRIMITIVES, check_primitives
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 IMAGENET_MEAN: tuple[float, float, float] = (0.485, 0.456, 0.406)
 IMAGENET_STD: tuple[float, float, float] = (0.229, 0.224, 0.225)
@@ -79,7 +79,7 @@ class MPGNetConfig:
         move_band_m: height band of ``move_region="top"``, metres.
         grasp_fingers: which grasps may act: ``"any"`` (the paper) or ``"clear"``: only those
             (pixel, angle) pairs whose open fingers come down least blocked, read off the depth
-            heightmap with the 2F-85's geometry (:func:`mpg_envs.grasp_geometry.fingers_blocked`,
+            heightmap with the 2F-85's geometry (:func:`mpg_envs.grid.grasp_geometry.fingers_blocked`,
             the env's default grasp depth and workspace): the free ones when a grasp in the grasp
             region has free landing strips, else the least blocked in that region, each up to
             ``finger_tolerance_m`` more blocked (:func:`mpg_agents.regions.least_blocked`). Two

@@ -1,7 +1,7 @@
 """MPGNet on an env's action space: flat Q, Q at chosen actions, and greedy actions.
 
 An MPG action space indexes ``(primitive, rotation, row, col)`` in C order, primitives in the
-env's allowed subset of ``move, push, grasp`` (:mod:`mpg_envs.actions`). :class:`MPGQFunction`
+env's allowed subset of ``move, push, grasp`` (:mod:`mpg_envs.grid.actions`). :class:`MPGQFunction`
 gives MPGNet's Q maps in that order, the Q of chosen actions (the training path: only each
 sample's chosen rotation is computed) and the max-Q actions (the TD target's choice).
 
@@ -23,7 +23,7 @@ from torch import Tensor, nn
 from mpg_agents.coordination import usable_primitives
 from mpg_agents.mpgnet import EncodedObs, MPGNet, flat_q
 from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_envs.actions import check_primitives
+from mpg_envs.grid.actions import check_primitives
 
 
 def check_action_space(action_space: spaces.Discrete, primitives: Sequence[str], config: MPGNetConfig) -> None:

@@ -106,7 +106,7 @@ def least_blocked(blocked: Tensor, region: Tensor, tolerance: float) -> Tensor:
     """The grasps whose open fingers land least blocked, ``(B, R, H, W)`` bool.
 
     ``blocked (B, R, H, W)``: how far each grasp's finger strips are blocked (metres, ``<= 0``
-    free; :func:`mpg_envs.grasp_geometry.fingers_blocked`); ``region (B, H, W)``: where the
+    free; :func:`mpg_envs.grid.grasp_geometry.fingers_blocked`); ``region (B, H, W)``: where the
     grasp must land (the target). Kept: every grasp at most ``tolerance`` more blocked than
     the least blocked grasp in the region, counting a free one as 0 -- so the free grasps
     (within ``tolerance``) when the region has one, else the region's least blocked. Pixels

@@ -1,6 +1,6 @@
 """Rotation maths of MPGNet: the padded frame and the sampling grids of the 16 orientations.
 
-Conventions of :mod:`mpg_envs.workspace`: for rotation ``k`` the input is resampled so that
+Conventions of :mod:`mpg_envs.grid.workspace`: for rotation ``k`` the input is resampled so that
 the world direction ``theta_k = 2 pi k / R`` (from +x = increasing column toward +y =
 increasing row) becomes the +column direction of the rotated image. Pure functions (numpy in,
 tensors out), used by :class:`mpg_agents.mpgnet.MPGNet` and unit-tested on small frames.

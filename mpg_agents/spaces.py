@@ -8,13 +8,13 @@ from typing import Sequence
 import numpy as np
 from gymnasium import spaces
 
-from mpg_envs.actions import PRIMITIVES, check_primitives
+from mpg_envs.grid.actions import PRIMITIVES, check_primitives
 
 
 def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | None = None) -> tuple[str, ...]:
     """The primitives an action space indexes, in canonical order.
 
-    Read from ``action_space.primitives`` (``mpg_envs.actions.PixelActionSpace``), else from the
+    Read from ``action_space.primitives`` (``mpg_envs.grid.actions.PixelActionSpace``), else from the
     ``primitives`` argument, else inferred from the size: 3 -> all, 2 -> push and grasp; a
     one-primitive space is ambiguous and raises.
     """

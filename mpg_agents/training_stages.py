@@ -16,9 +16,9 @@ from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, Callable, Mapping, Sequence
 
 from mpg_agents.coordination import check_coordination
-from mpg_envs.actions import check_primitives
+from mpg_envs.grid.actions import check_primitives
 from mpg_envs.rewards import RewardConfig
-from mpg_envs.grasp_geometry import GRASP_ROTATIONS
+from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
 
 
 @dataclass(frozen=True)

@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import torch
 
-from mpg_envs.actions import PRIMITIVES, PixelAction, decode_action
-from mpg_envs.workspace import rotation_angle, rotation_direction
+from mpg_envs.grid.actions import PRIMITIVES, PixelAction, decode_action
+from mpg_envs.grid.workspace import rotation_angle, rotation_direction
 
 # Drawn lengths in pixels at the 2 mm heightmap resolution: the 10 cm push stroke and the
 # 2F-85's 85 mm opening across which the fingers close.

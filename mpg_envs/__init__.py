@@ -18,9 +18,9 @@ choose_gl_backend()  # before anything imports mujoco: EGL (or OSMesa) on headle
 
 import gymnasium as gym  # noqa: E402
 
-from mpg_envs.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
+from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
 from mpg_envs.stages import STAGES, StageSpec
-from mpg_envs.workspace import NUM_ROTATIONS, Workspace
+from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace
 from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
 
 ENV_IDS: tuple[str, ...] = tuple(spec.env_id for spec in STAGES.values())

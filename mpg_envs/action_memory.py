@@ -7,7 +7,7 @@ from typing import Protocol
 
 import numpy as np
 
-from mpg_envs.grasp_geometry import GRASP_ROTATIONS
+from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
 
 __all__ = ["ActionMemory", "RepeatConfig", "RepeatRule"]
 

@@ -30,7 +30,7 @@ import numpy as np
 from mpg_envs.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
 from mpg_envs.render import make_renderer
 from mpg_envs.rgbd import fuse_heightmaps, heightmap_from_rgbd
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 # OpenCV camera axes (x right, y down, z forward) expressed in MuJoCo's camera frame
 # (x right, y up, looking along -z): flip y and z.

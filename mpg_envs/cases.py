@@ -39,7 +39,7 @@ import mujoco
 import numpy as np
 
 from mpg_envs.scene_io import SceneFile, SceneFileError, kept_target, objects_outside, read_scene
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 CASE_SETS = ("challenge", "epg", "gti")
 """The named case sets."""

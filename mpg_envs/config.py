@@ -12,7 +12,7 @@ from mpg_envs.primitives import PrimitiveConfig
 from mpg_envs.rewards import RewardConfig
 from mpg_envs.robot import RobotConfig
 from mpg_envs.scenes import SceneConfig
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 from mpg_envs.world import PhysicsConfig
 
 OBS_MODES = ("raycast", "camera")

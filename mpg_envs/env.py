@@ -15,7 +15,7 @@ from typing import Any, Callable, Sequence
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.actions import PixelActionSpace
+from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.config import OBS_MODES, EnvConfig, observation_space
 from mpg_envs.objects import ObjectAsset, load_object_set
 from mpg_envs.occlusion import change_detected, check_band, is_occluded, visible_fraction

@@ -2,7 +2,7 @@
 
 A footprint is the set of heightmap pixels whose centre lies under a geom (pixel-centre
 sampling, exactly as :class:`~mpg_envs.heightmap.RaycastHeightmapper` samples), whatever lies
-on top of it. Grid conventions are :mod:`mpg_envs.workspace`'s.
+on top of it. Grid conventions are :mod:`mpg_envs.grid.workspace`'s.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import cv2
 import mujoco
 import numpy as np
 
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 _CIRCLE_SEGMENTS = 32
 """Polygon resolution used for round primitives (sphere, capsule, cylinder)."""
@@ -25,7 +25,7 @@ def world_to_pixel_coords(workspace: Workspace, xy: np.ndarray) -> np.ndarray:
 
     Integer values are pixel centres, so pixel ``(row, col)`` spans ``[col - 0.5,
     col + 0.5) x [row - 0.5, row + 0.5)``; ``floor(coord + 0.5)`` is the pixel index of
-    :func:`mpg_envs.workspace.world_to_pixel`.
+    :func:`mpg_envs.grid.workspace.world_to_pixel`.
     """
     xy = np.asarray(xy, dtype=np.float64)
     if xy.shape[-1] != 2:

@@ -17,13 +17,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mpg_envs.config import EnvConfig
-from mpg_envs.grasp_geometry import angle_to_rotation, footprint_rect
+from mpg_envs.grid.grasp_geometry import angle_to_rotation, footprint_rect
 from mpg_envs.heightmap import RaycastHeightmapper
 from mpg_envs.objects import ObjectAsset
 from mpg_envs.primitives import Primitives
 from mpg_envs.robot import ArmIK
 from mpg_envs.scenes import random_quat, yaw_quat
-from mpg_envs.workspace import world_to_pixel
+from mpg_envs.grid.workspace import world_to_pixel
 from mpg_envs.world import World
 
 DROPS = ("yaw", "random")

@@ -3,7 +3,7 @@
 RGB-D back-projection and fusion of camera views live in :mod:`mpg_envs.rgbd`; the target
 footprint mask in :mod:`mpg_envs.footprint`.
 
-All heightmaps follow :mod:`mpg_envs.workspace`: pixel ``(row, col)`` covers world
+All heightmaps follow :mod:`mpg_envs.grid.workspace`: pixel ``(row, col)`` covers world
 ``y`` (rows) and ``x`` (columns), ``row = floor((y - y_min) / res)``,
 ``col = floor((x - x_min) / res)``; a pixel is represented by its centre
 (:meth:`Workspace.pixel_centers`). Heights are metres above the table top
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 VISIBLE_GEOM_GROUPS: tuple[int, ...] = (0, 1)
 """Geom groups seen by the heightmaps: the table (0) and the objects (1)."""

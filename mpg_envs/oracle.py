@@ -30,7 +30,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_envs.action_memory import ActionMemory, RepeatRule
-from mpg_envs.grasp_geometry import (
+from mpg_envs.grid.grasp_geometry import (
     GRASP_ROTATIONS,
     JawGeometry,
     angle_gap,
@@ -42,7 +42,7 @@ from mpg_envs.grasp_geometry import (
 from mpg_envs.policy import Policy
 from mpg_envs.primitives import PrimitiveResult, Primitives
 from mpg_envs.world import WorldCheckpoint
-from mpg_envs.workspace import NUM_ROTATIONS, world_to_pixel
+from mpg_envs.grid.workspace import NUM_ROTATIONS, world_to_pixel
 
 __all__ = ["ActionMemory", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect", "try_primitive"]
 
@@ -64,7 +64,7 @@ class OracleConfig:
     """Geometry the oracle plans with (metres); the finger sizes are the 2F-85's."""
 
     max_grasp_width: float = 0.075  # wider than this across the fingers: not graspable
-    # The 2F-85's open fingers (mpg_envs.grasp_geometry.JawGeometry, shared with MPGNet's finger mask).
+    # The 2F-85's open fingers (mpg_envs.grid.grasp_geometry.JawGeometry, shared with MPGNet's finger mask).
     finger_open_inner: float = JawGeometry.finger_open_inner  # an open finger's inner face, from the jaw's centre
     finger_thickness: float = JawGeometry.finger_thickness  # a finger's thickness along the closing direction, with a margin
     finger_half_width: float = JawGeometry.finger_half_width  # half a pad's width across the jaw, with a margin

@@ -17,7 +17,7 @@ class Policy(Protocol):
     """What every policy in the suite is: a name, a per-episode reset and ``act(obs) -> action``.
 
     ``act`` returns a flat action index of the env's action space (see
-    :class:`mpg_envs.actions.PixelActionSpace`). Privileged policies (the oracle) may also read
+    :class:`mpg_envs.grid.actions.PixelActionSpace`). Privileged policies (the oracle) may also read
     the env they were built with; learned ones read ``obs`` alone.
     """
 

@@ -18,9 +18,9 @@ import cv2
 import mujoco
 import numpy as np
 
-from mpg_envs.actions import PRIMITIVES
+from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.robot import ArmIK, UnreachablePoseError, gripper_states
-from mpg_envs.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
+from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
 from mpg_envs.world import World, WorldCheckpoint
 
 

@@ -2,7 +2,7 @@
 
 The camera observation path (:mod:`mpg_envs.camera`) renders RGB-D images and goes through
 :func:`heightmap_from_rgbd`, which a real RGB-D camera can use as well; several views are
-merged with :func:`fuse_heightmaps`. Grid conventions are :mod:`mpg_envs.workspace`'s and
+merged with :func:`fuse_heightmaps`. Grid conventions are :mod:`mpg_envs.grid.workspace`'s and
 heights are those of :class:`~mpg_envs.heightmap.Heightmaps`.
 """
 
@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from mpg_envs.heightmap import Heightmaps
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 
 def _check_rgbd(color: np.ndarray, depth: np.ndarray, intrinsics: np.ndarray, cam_pose: np.ndarray) -> None:

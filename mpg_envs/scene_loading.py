@@ -21,7 +21,7 @@ import numpy as np
 
 from mpg_envs.assets import ObjectAsset
 from mpg_envs.scene_io import SceneFile, SceneObject, kept_target, objects_outside, resolve_outside
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 from mpg_envs.world import World
 
 LOAD_TOLERANCE_M = 0.006

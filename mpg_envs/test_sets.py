@@ -26,7 +26,7 @@ import numpy as np
 
 from mpg_envs.assets import ObjectAsset
 from mpg_envs.scene_io import SceneFile, SceneObject
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 GENERATOR_VERSION = 1
 """Version of scene generation the shipped sets were made with."""

@@ -20,7 +20,7 @@ import numpy as np
 
 from mpg_envs.objects import ObjectAsset, add_object_body
 from mpg_envs.robot import Robot, RobotConfig, robot_spec
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 ROBOT_PREFIX = "robot/"
 

@@ -30,8 +30,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from mpg_envs.actions import PixelAction, encode_action
-from mpg_envs.workspace import NUM_ROTATIONS, _is_int
+from mpg_envs.grid.actions import PixelAction, encode_action
+from mpg_envs.grid.workspace import NUM_ROTATIONS, _is_int
 
 IMAGE_CHANNELS = ("red", "green", "blue", "depth", "mask")
 """The planes of :class:`ImageObservation`'s image, in order (plus ``occluded`` when asked)."""

@@ -25,7 +25,7 @@ from mpg_agents.mpgnet_config import MPGNetConfig
 from mpg_agents.q_function import MPGQFunction, check_action_space
 from mpg_agents.spaces import check_observation_space, resolve_primitives
 from mpg_agents.train_config import TrainConfig
-from mpg_envs.actions import check_primitives
+from mpg_envs.grid.actions import check_primitives
 
 DEFAULTS = TrainConfig()
 """``mpg-train``'s settings, where the adapter's defaults come from."""

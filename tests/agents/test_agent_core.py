@@ -11,7 +11,7 @@ import torch
 
 from mpg_agents.agent import MPGAgent
 from mpg_agents.train_config import TrainConfig
-from mpg_envs.actions import PixelActionSpace
+from mpg_envs.grid.actions import PixelActionSpace
 
 from .conftest import TINY, calibrate_bn
 from .fake_env import FakeMPGEnv, observation_space, random_scene

@@ -14,7 +14,7 @@ import torch
 mpg_envs = pytest.importorskip("mpg_envs")
 
 from mpg_agents import MPGDQN, MPGNetPolicy, PrioritizedHeightmapReplayBuffer  # noqa: E402
-from mpg_envs.actions import decode_action  # noqa: E402
+from mpg_envs.grid.actions import decode_action  # noqa: E402
 
 from .conftest import TINY  # noqa: E402
 

@@ -10,7 +10,7 @@ import torch
 
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.td_step import TDStepConfig, td_step
-from mpg_envs.actions import PixelActionSpace, encode_action
+from mpg_envs.grid.actions import PixelActionSpace, encode_action
 
 from .fake_env import observation_space, random_scene
 

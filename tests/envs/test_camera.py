@@ -29,7 +29,7 @@ from mpg_envs.camera import (  # noqa: E402
     opencv_camera_pose,
 )
 from mpg_envs.heightmap import RaycastHeightmapper  # noqa: E402
-from mpg_envs.workspace import Workspace  # noqa: E402
+from mpg_envs.grid.workspace import Workspace  # noqa: E402
 
 WS = Workspace()
 BOX = mujoco.mjtGeom.mjGEOM_BOX

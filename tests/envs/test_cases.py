@@ -28,7 +28,7 @@ from mpg_envs.cases import (
 from mpg_envs.scene_io import SceneFileError, objects_outside, read_scene
 from mpg_envs.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
 from mpg_envs.vpg_scenes import GTI_COLOURS
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 PEERS = Path(__file__).resolve().parents[2] / ".." / "shared" / "peers"
 

@@ -34,7 +34,7 @@ def test_a_grasp_beside_the_object_fails_as_closed_empty(ceiling, ik) -> None:
     """The failure kinds are real: fingers closing 6 cm off the cube close on nothing."""
     import numpy as np
 
-    from mpg_envs.workspace import world_to_pixel
+    from mpg_envs.grid.workspace import world_to_pixel
 
     bench = ceiling.GraspBench(blocks_object_set()[0], ik=ik)
     try:

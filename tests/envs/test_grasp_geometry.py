@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mpg_envs.grasp_geometry import JawGeometry, finger_landing_kernel, fingers_blocked
+from mpg_envs.grid.grasp_geometry import JawGeometry, finger_landing_kernel, fingers_blocked
 from mpg_envs.oracle import OracleConfig
 
 RES = 0.002  # 2 mm pixels, the default workspace's

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_envs.grasp_geometry import (
+from mpg_envs.grid.grasp_geometry import (
     angle_gap,
     angle_to_rotation,
     extent_along,
@@ -22,7 +22,7 @@ from mpg_envs.grasp_geometry import (
 )
 from mpg_envs.oracle import ActionMemory, OracleConfig, OraclePolicy, Policy
 from mpg_envs.oracle import try_primitive
-from mpg_envs.workspace import Workspace
+from mpg_envs.grid.workspace import Workspace
 
 # ----------------------------------------------------------------- geometry (hand-checked)
 

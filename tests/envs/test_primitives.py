@@ -10,7 +10,7 @@ from conftest import flat_quat
 from mpg_envs.heightmap import RaycastHeightmapper
 from mpg_envs.primitives import Primitives
 from mpg_envs.world import World
-from mpg_envs.workspace import world_to_pixel
+from mpg_envs.grid.workspace import world_to_pixel
 
 
 @pytest.fixture(scope="module")

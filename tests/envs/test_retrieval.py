@@ -16,7 +16,7 @@ from mpg_envs.occlusion import VISIBILITY_BANDS, check_band, in_band, visibility
 from mpg_envs.scene_io import SceneFile, SceneObject
 from mpg_envs.scenes import InvalidSceneError
 from mpg_envs.test_sets import TEST_SEED_START, find_test_set, load_test_set, shipped_set_path
-from mpg_envs.workspace import world_to_pixel
+from mpg_envs.grid.workspace import world_to_pixel
 
 UPRIGHT = np.array([1.0, 0.0, 0.0, 0.0])
 

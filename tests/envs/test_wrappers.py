@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401  (registers the ids)
-from mpg_envs.actions import decode_action
+from mpg_envs.grid.actions import decode_action
 from mpg_envs.wrappers import (
     ContinuousAction,
     GridAction,

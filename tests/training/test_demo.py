@@ -52,7 +52,7 @@ def test_grasp_net_with_grasps_kept_on_the_target():
     import gymnasium as gym
 
     from mpg_agents.policy_zoo import make_policy
-    from mpg_envs.actions import decode_action
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     policy = make_policy(GRASP_NET, env, grasp_region="target")
@@ -71,7 +71,7 @@ def test_grasps_kept_off_the_target_rim():
 
     from mpg_agents.policy_zoo import make_policy
     from mpg_agents.regions import target_pixels
-    from mpg_envs.actions import decode_action
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Stage2-v0")
     policy = make_policy(GRASP_NET, env, grasp_region="target", target_margin_px=-8)
@@ -89,7 +89,7 @@ def test_moves_kept_on_the_occluders_top():
 
     from mpg_agents.policy_zoo import make_policy
     from mpg_agents.regions import footprint_top
-    from mpg_envs.actions import decode_action
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     # The paper's workflow sends an occluded target to the move net whatever the grasp Q
@@ -110,7 +110,7 @@ def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
     import gymnasium as gym
 
     from mpg_agents.policy_zoo import make_policy
-    from mpg_envs.actions import decode_action
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     obs, _ = env.reset(seed=700_003)
@@ -128,7 +128,7 @@ def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
 
 
 def encode(prims, a):
-    from mpg_envs.actions import encode_action
+    from mpg_envs.grid.actions import encode_action
 
     return encode_action(prims, a.primitive, a.rotation, a.row, a.col)
 
@@ -140,8 +140,8 @@ def test_shipped_grasps_land_where_the_fingers_are_least_blocked():
 
     from mpg_agents.policy_zoo import make_policy
     from mpg_agents.regions import least_blocked, target_pixels
-    from mpg_envs.actions import decode_action
-    from mpg_envs.grasp_geometry import fingers_blocked
+    from mpg_envs.grid.actions import decode_action
+    from mpg_envs.grid.grasp_geometry import fingers_blocked
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     policy = make_policy("shipped", env)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from mpg_envs.workspace import NUM_ROTATIONS, Workspace
+from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace
 
 GRASP_ROTATIONS = NUM_ROTATIONS // 2
 """Distinct grasp angles: a parallel jaw is the same turned by 180 degrees."""

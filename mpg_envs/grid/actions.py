@@ -13,7 +13,7 @@ from typing import Any, NamedTuple, Sequence
 import numpy as np
 from gymnasium import spaces
 
-from mpg_envs.workspace import NUM_ROTATIONS, _is_int
+from mpg_envs.grid.workspace import NUM_ROTATIONS, _is_int
 
 PRIMITIVES: tuple[str, ...] = ("move", "push", "grasp")
 """All primitives, in the fixed order every action space uses."""
