@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
-from mpg_envs.render import RenderUnavailableError
+from mpg_envs.perception.render import RenderUnavailableError
 
 PANEL_PX = 448
 TITLE_PX = 34

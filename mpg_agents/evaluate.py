@@ -4,7 +4,7 @@ The paper's: task success within the motion cap and mean motions per episode, an
 success rate (target grasps / grasp attempts). Beside them: success without a mis-pick (no
 grasp lifted a non-target object on the way; under strict retrieval every success is one),
 mis-picks per episode, and success by the target's visible fraction at reset
-(:data:`mpg_envs.occlusion.VISIBILITY_BANDS`). Every rate has its 95% Wilson interval.
+(:data:`mpg_envs.perception.occlusion.VISIBILITY_BANDS`). Every rate has its 95% Wilson interval.
 
 An evaluation is a list of per-episode records, then one summary. Episode ``i`` is the
 seeded reset ``reset(seed=seed + i)`` run until the env ends it (target grasped, motion
@@ -24,7 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_agents.stats import bootstrap_mean_interval, wilson_interval
-from mpg_envs.occlusion import VISIBILITY_BANDS, visibility_band
+from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
 
 PRIMITIVES = ("move", "push", "grasp")
 UNREPORTED = "unreported"  # an env that does not (yet) put end_reason in the last step's info

@@ -7,12 +7,12 @@ Each id carries its stage's motion cap as ``max_episode_steps``, so ``gymnasium.
 the env in Gymnasium's ``TimeLimit`` at the same cap the env enforces itself.
 
 Importing the package also picks an OpenGL backend for rendering when none is chosen
-(``MUJOCO_GL``; see :func:`mpg_envs.render.choose_gl_backend`). It imports no deep-learning
+(``MUJOCO_GL``; see :func:`mpg_envs.perception.render.choose_gl_backend`). It imports no deep-learning
 library.
 """
 
 from mpg_envs._version import __version__
-from mpg_envs.render import choose_gl_backend
+from mpg_envs.perception.render import choose_gl_backend
 
 choose_gl_backend()  # before anything imports mujoco: EGL (or OSMesa) on headless Linux
 

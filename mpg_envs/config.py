@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from mpg_envs.occlusion import ChangeConfig, OcclusionConfig
+from mpg_envs.perception.occlusion import ChangeConfig, OcclusionConfig
 from mpg_envs.primitives import PrimitiveConfig
 from mpg_envs.rewards import RewardConfig
 from mpg_envs.robot import RobotConfig

@@ -18,7 +18,7 @@ import numpy as np
 from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.config import OBS_MODES, EnvConfig, observation_space
 from mpg_envs.objects import ObjectAsset, load_object_set
-from mpg_envs.occlusion import change_detected, check_band, is_occluded, visible_fraction
+from mpg_envs.perception.occlusion import change_detected, check_band, is_occluded, visible_fraction
 from mpg_envs.primitives import PrimitiveResult, Primitives
 from mpg_envs.rewards import StepOutcome
 from mpg_envs.scene_source import draw_scene, shipped_scene
@@ -254,7 +254,7 @@ class MPGEnv(gym.Env):
             return None
         if self.world is None:
             raise RuntimeError("call reset() before render()")
-        from mpg_envs.render import render_overview
+        from mpg_envs.perception.render import render_overview
 
         if self._renderer is None or self._renderer.model is not self.world.model:
             if self._renderer is not None:
@@ -280,7 +280,7 @@ class MPGEnv(gym.Env):
     def _build_world(self, assets: Sequence[ObjectAsset]) -> World:
         hook = None
         if self.obs_mode == "camera":
-            from mpg_envs.camera import CameraConfig, add_cameras
+            from mpg_envs.perception.camera import CameraConfig, add_cameras
 
             cam_cfg = self.camera_config or CameraConfig()
             hook = lambda spec: add_cameras(spec, cam_cfg)  # noqa: E731
@@ -296,7 +296,7 @@ class MPGEnv(gym.Env):
                 getattr(self, name).close()
             setattr(self, name, None)
         if self.obs_mode == "raycast":
-            from mpg_envs.heightmap import RaycastHeightmapper
+            from mpg_envs.perception.heightmap import RaycastHeightmapper
 
             # The thread count is chosen once per env (choosing samples the machine's load).
             self._raycaster = RaycastHeightmapper(world.model, self.config.workspace, num_threads=threads)
@@ -319,7 +319,7 @@ class MPGEnv(gym.Env):
         """Colour and depth heightmaps of the current state (ray-cast or camera)."""
         if self.obs_mode == "camera":
             if self._camera is None:
-                from mpg_envs.camera import CameraConfig, CameraHeightmapper
+                from mpg_envs.perception.camera import CameraConfig, CameraHeightmapper
 
                 self._camera = CameraHeightmapper(self.world.model, self.camera_config or CameraConfig(), self.config.workspace)
             return self._camera.heightmaps(self.world.data, self.np_random)
@@ -327,7 +327,7 @@ class MPGEnv(gym.Env):
 
     def _target_view(self, depth: np.ndarray, target: int | None) -> tuple[np.ndarray, bool]:
         """The mask heightmap for ``target`` (every object in Stage 1) and whether it is occluded."""
-        from mpg_envs.footprint import footprint_mask
+        from mpg_envs.perception.footprint import footprint_mask
 
         world = self.world
         ws = self.config.workspace

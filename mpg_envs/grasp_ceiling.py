@@ -18,7 +18,7 @@ import numpy as np
 
 from mpg_envs.config import EnvConfig
 from mpg_envs.grid.grasp_geometry import angle_to_rotation, footprint_rect
-from mpg_envs.heightmap import RaycastHeightmapper
+from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.objects import ObjectAsset
 from mpg_envs.primitives import Primitives
 from mpg_envs.robot import ArmIK

@@ -384,7 +384,7 @@ class OraclePolicy:
         """The oracle's own ray-cast view of the current state: depth heightmap and which
         object each pixel shows (its own caster, so trials never touch the env's cameras or RNG)."""
         if self._ids_model is not world.model:
-            from mpg_envs.heightmap import RaycastHeightmapper
+            from mpg_envs.perception.heightmap import RaycastHeightmapper
 
             if self._ids_caster is not None:
                 self._ids_caster.close()

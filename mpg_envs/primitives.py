@@ -243,7 +243,7 @@ class Primitives:
     def _free_place(self, held: int, target: int | None) -> tuple[float, float] | None:
         """The most open spot of the workspace clear of the target, or ``None``."""
         world, cfg, ws = self.world, self.config, self.world.workspace
-        from mpg_envs.footprint import footprint_mask
+        from mpg_envs.perception.footprint import footprint_mask
 
         others = [i for i in world.active_objects() if i != held]
         geoms = np.concatenate([world.object_geom_ids[i] for i in others]) if others else np.array([], dtype=int)

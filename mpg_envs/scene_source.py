@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Sequence
 
-from mpg_envs.occlusion import in_band, surrounded_sectors
+from mpg_envs.perception.occlusion import in_band, surrounded_sectors
 from mpg_envs.scene_io import SceneFile
 from mpg_envs.scenes import BURIED, SCENES, InvalidSceneError, SceneConfig, keep_inside
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import flat_quat
-from mpg_envs.heightmap import RaycastHeightmapper
+from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.primitives import Primitives
 from mpg_envs.world import World
 from mpg_envs.grid.workspace import world_to_pixel

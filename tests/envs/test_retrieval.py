@@ -12,7 +12,7 @@ import pytest
 import mpg_envs  # noqa: F401
 from mpg_envs.config import EnvConfig
 from mpg_envs.env import MPGEnv
-from mpg_envs.occlusion import VISIBILITY_BANDS, check_band, in_band, visibility_band, visible_fraction
+from mpg_envs.perception.occlusion import VISIBILITY_BANDS, check_band, in_band, visibility_band, visible_fraction
 from mpg_envs.scene_io import SceneFile, SceneObject
 from mpg_envs.scenes import InvalidSceneError
 from mpg_envs.test_sets import TEST_SEED_START, find_test_set, load_test_set, shipped_set_path

@@ -205,7 +205,7 @@ def _threads_in_a_child() -> int:
     import concurrent.futures
     import multiprocessing
 
-    from mpg_envs.heightmap import _default_threads
+    from mpg_envs.perception.heightmap import _default_threads
 
     with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
         return pool.submit(_default_threads).result(timeout=120)

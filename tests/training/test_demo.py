@@ -2,7 +2,7 @@
 
 import cv2
 
-import mpg_envs.render as render_module
+import mpg_envs.perception.render as render_module
 from mpg_agents.policy_zoo import shipped_checkpoint
 from mpg_agents.demo import PANEL_PX, TITLE_PX, main
 

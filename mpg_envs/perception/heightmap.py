@@ -1,7 +1,7 @@
 """Top-down heightmaps of the workspace by ray casting (no OpenGL).
 
-RGB-D back-projection and fusion of camera views live in :mod:`mpg_envs.rgbd`; the target
-footprint mask in :mod:`mpg_envs.footprint`.
+RGB-D back-projection and fusion of camera views live in :mod:`mpg_envs.perception.rgbd`; the target
+footprint mask in :mod:`mpg_envs.perception.footprint`.
 
 All heightmaps follow :mod:`mpg_envs.grid.workspace`: pixel ``(row, col)`` covers world
 ``y`` (rows) and ``x`` (columns), ``row = floor((y - y_min) / res)``,
@@ -15,8 +15,8 @@ implausible heights above ``z_max`` to ``z_max``.
 The default observation path, :class:`RaycastHeightmapper`, needs no OpenGL: it casts one
 ray per pixel centre with ``mujoco.mj_multiRay`` and sees only the geom groups of the table
 (0) and the objects (1), so the robot (groups 2 and 3) is invisible. The camera path
-(:mod:`mpg_envs.camera`) renders RGB-D images and goes through
-:func:`mpg_envs.rgbd.heightmap_from_rgbd`, which a real RGB-D camera can use as well.
+(:mod:`mpg_envs.perception.camera`) renders RGB-D images and goes through
+:func:`mpg_envs.perception.rgbd.heightmap_from_rgbd`, which a real RGB-D camera can use as well.
 """
 
 from __future__ import annotations
@@ -161,7 +161,7 @@ class RaycastHeightmapper:
     up are nearly parallel: a surface at height ``h`` is sampled ``h * r / source_height``
     away from the pixel centre, ``r`` being the pixel's distance from the workspace centre
     (at most 0.32 m): 0.016 mm for a 5 cm object at the corner with the default 1000 m.
-    That keeps the heightmap consistent with :func:`mpg_envs.footprint.footprint_mask` (pixel-centre
+    That keeps the heightmap consistent with :func:`mpg_envs.perception.footprint.footprint_mask` (pixel-centre
     sampling) at object edges: on a 30-object scene, 5 edge pixels of ~16000 disagree at
     1000 m, against 23 at 100 m and 58 at 50 m. The heights stay exact in float64 (error
     ~1e-13 m). Only geom groups ``geom_groups`` (table and objects) are

@@ -1,7 +1,7 @@
 """Footprints seen along gravity: the target mask heightmap and its pure geometry.
 
 A footprint is the set of heightmap pixels whose centre lies under a geom (pixel-centre
-sampling, exactly as :class:`~mpg_envs.heightmap.RaycastHeightmapper` samples), whatever lies
+sampling, exactly as :class:`~mpg_envs.perception.heightmap.RaycastHeightmapper` samples), whatever lies
 on top of it. Grid conventions are :mod:`mpg_envs.grid.workspace`'s.
 """
 

@@ -13,7 +13,7 @@ Rendering needs an OpenGL context. On a headless Linux machine set ``MUJOCO_GL=e
 ``osmesa``) *before the first* ``import mujoco`` in the process (MuJoCo picks its GL
 backend at import time) and install the Debian packages ``libegl1 libegl-mesa0
 libgl1-mesa-dri`` (EGL) or ``libosmesa6`` (OSMesa). The default ray-cast observations
-(:class:`mpg_envs.heightmap.RaycastHeightmapper`) need none of this.
+(:class:`mpg_envs.perception.heightmap.RaycastHeightmapper`) need none of this.
 
 Only geom groups 0 (table) and 1 (objects) are drawn, so the robot never appears in the
 images, just as it is invisible to the ray-cast heightmaps.
@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from mpg_envs.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
-from mpg_envs.render import make_renderer
-from mpg_envs.rgbd import fuse_heightmaps, heightmap_from_rgbd
+from mpg_envs.perception.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
+from mpg_envs.perception.render import make_renderer
+from mpg_envs.perception.rgbd import fuse_heightmaps, heightmap_from_rgbd
 from mpg_envs.grid.workspace import Workspace
 
 # OpenCV camera axes (x right, y down, z forward) expressed in MuJoCo's camera frame

@@ -1,9 +1,9 @@
 """RGB-D back-projection: camera images -> colour/depth heightmaps, and fusion of views.
 
-The camera observation path (:mod:`mpg_envs.camera`) renders RGB-D images and goes through
+The camera observation path (:mod:`mpg_envs.perception.camera`) renders RGB-D images and goes through
 :func:`heightmap_from_rgbd`, which a real RGB-D camera can use as well; several views are
 merged with :func:`fuse_heightmaps`. Grid conventions are :mod:`mpg_envs.grid.workspace`'s and
-heights are those of :class:`~mpg_envs.heightmap.Heightmaps`.
+heights are those of :class:`~mpg_envs.perception.heightmap.Heightmaps`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from mpg_envs.heightmap import Heightmaps
+from mpg_envs.perception.heightmap import Heightmaps
 from mpg_envs.grid.workspace import Workspace
 
 
