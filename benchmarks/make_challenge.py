@@ -32,7 +32,7 @@ from scipy.spatial import ConvexHull
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_envs.cases import INDEX_FILE, challenge_dir, jitter_scene
-from mpg_envs.objects import blocks_object_set
+from mpg_envs.simulation.objects import blocks_object_set
 from mpg_envs.scene_io import SceneFile, SceneObject, read_scene, save_scene
 from mpg_envs.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
 from mpg_envs.grid.workspace import Workspace

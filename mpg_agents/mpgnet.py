@@ -43,7 +43,7 @@ from mpg_agents.primitive_net import PLANES, PrimitiveNet, run_in_batches
 from mpg_agents.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
 from mpg_agents.rotations import rotation_grids
 from mpg_envs.grid.grasp_geometry import fingers_blocked
-from mpg_envs.primitives import PrimitiveConfig
+from mpg_envs.simulation.primitives import PrimitiveConfig
 from mpg_envs.grid.workspace import Workspace
 
 

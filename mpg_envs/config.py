@@ -8,12 +8,12 @@ import numpy as np
 from gymnasium import spaces
 
 from mpg_envs.perception.occlusion import ChangeConfig, OcclusionConfig
-from mpg_envs.primitives import PrimitiveConfig
+from mpg_envs.simulation.primitives import PrimitiveConfig
 from mpg_envs.rewards import RewardConfig
-from mpg_envs.robot import RobotConfig
+from mpg_envs.simulation.robot import RobotConfig
 from mpg_envs.scenes import SceneConfig
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.world import PhysicsConfig
+from mpg_envs.simulation.world import PhysicsConfig
 
 OBS_MODES = ("raycast", "camera")
 """``raycast``: GL-free heightmaps (default); ``camera``: rendered RGB-D back-projected."""

@@ -17,18 +17,18 @@ import numpy as np
 
 from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.config import OBS_MODES, EnvConfig, observation_space
-from mpg_envs.objects import ObjectAsset, load_object_set
+from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 from mpg_envs.perception.occlusion import change_detected, check_band, is_occluded, visible_fraction
-from mpg_envs.primitives import PrimitiveResult, Primitives
+from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
 from mpg_envs.rewards import StepOutcome
 from mpg_envs.scene_source import draw_scene, shipped_scene
 from mpg_envs.step_evaluation import StepEvaluation, action_info
-from mpg_envs.robot import ArmIK
+from mpg_envs.simulation.robot import ArmIK
 from mpg_envs.scene_io import SceneFile, SceneFileError, read_scene
 from mpg_envs.scene_loading import apply_scene, scene_of
 from mpg_envs.scenes import InvalidSceneError
 from mpg_envs.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
-from mpg_envs.world import World, WorldCheckpoint
+from mpg_envs.simulation.world import World, WorldCheckpoint
 
 __all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "InvalidSceneError", "MPGEnv", "StepEvaluation", "observation_space"]
 
@@ -50,7 +50,7 @@ class MPGEnv(gym.Env):
         num_motions: motions taken so far in the current episode.
         target: index of the target object in the world (``None`` in Stage 1, where every
             object is a target).
-        world: the :class:`~mpg_envs.world.World` of the current episode (``None`` before
+        world: the :class:`~mpg_envs.simulation.world.World` of the current episode (``None`` before
             the first reset).
 
     Keywords beyond the stage: ``wrong_grasp`` (``"remove"``, the paper's protocol, or

@@ -19,12 +19,12 @@ import numpy as np
 from mpg_envs.config import EnvConfig
 from mpg_envs.grid.grasp_geometry import angle_to_rotation, footprint_rect
 from mpg_envs.perception.heightmap import RaycastHeightmapper
-from mpg_envs.objects import ObjectAsset
-from mpg_envs.primitives import Primitives
-from mpg_envs.robot import ArmIK
+from mpg_envs.simulation.objects import ObjectAsset
+from mpg_envs.simulation.primitives import Primitives
+from mpg_envs.simulation.robot import ArmIK
 from mpg_envs.scenes import random_quat, yaw_quat
 from mpg_envs.grid.workspace import world_to_pixel
-from mpg_envs.world import World
+from mpg_envs.simulation.world import World
 
 DROPS = ("yaw", "random")
 """How a trial places its object: on its base with a random yaw, or in a random orientation."""

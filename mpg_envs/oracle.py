@@ -40,8 +40,8 @@ from mpg_envs.grid.grasp_geometry import (
     jaw_strip_heights,
 )
 from mpg_envs.policy import Policy
-from mpg_envs.primitives import PrimitiveResult, Primitives
-from mpg_envs.world import WorldCheckpoint
+from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
+from mpg_envs.simulation.world import WorldCheckpoint
 from mpg_envs.grid.workspace import NUM_ROTATIONS, world_to_pixel
 
 __all__ = ["ActionMemory", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect", "try_primitive"]

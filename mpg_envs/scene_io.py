@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mpg_envs.objects import ObjectAsset, blocks_object_set, load_mesh_folder
+from mpg_envs.simulation.objects import ObjectAsset, blocks_object_set, load_mesh_folder
 from mpg_envs.grid.workspace import Workspace
 
 SCENE_FORMAT = "mpg-scene"

@@ -19,10 +19,10 @@ from typing import Callable, Sequence
 import mujoco
 import numpy as np
 
-from mpg_envs.assets import ObjectAsset
+from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.scene_io import SceneFile, SceneObject, kept_target, objects_outside, resolve_outside
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.world import World
+from mpg_envs.simulation.world import World
 
 LOAD_TOLERANCE_M = 0.006
 """How far (m) an object of a settled peer file may lie from its file position."""

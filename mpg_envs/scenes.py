@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from mpg_envs.world import World
+from mpg_envs.simulation.world import World
 
 
 class InvalidSceneError(RuntimeError):

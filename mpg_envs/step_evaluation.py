@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from mpg_envs.primitives import PrimitiveResult
+from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.rewards import StepOutcome
 
 

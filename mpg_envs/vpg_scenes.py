@@ -38,8 +38,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mpg_envs.assets import ObjectAsset
-from mpg_envs.objects import blocks_object_set, load_mesh_folder
+from mpg_envs.simulation.assets import ObjectAsset
+from mpg_envs.simulation.objects import blocks_object_set, load_mesh_folder
 from mpg_envs.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject
 
 GTI_COLOURS: dict[str, tuple[float, float, float]] = {

@@ -168,7 +168,7 @@ def test_gti_set_has_the_twelve_presets(peers_dir):
 
 # ------------------------------------------------------------------------------ jitter
 def scene_of_cubes(positions: list[tuple[float, float]]):
-    from mpg_envs.objects import blocks_object_set
+    from mpg_envs.simulation.objects import blocks_object_set
     from mpg_envs.scene_io import SceneFile, SceneObject
 
     cube = next(a for a in blocks_object_set() if a.name == "cube")

@@ -350,7 +350,7 @@ def test_camera_obs_mode_agrees_with_raycast(make_env):
 def test_an_unreachable_pose_is_a_motion_that_did_nothing():
     import gymnasium as gym
 
-    from mpg_envs.robot import UnreachablePoseError
+    from mpg_envs.simulation.robot import UnreachablePoseError
 
     env = gym.make("MPG-Stage2-v0")
     obs, _ = env.reset(seed=3)
@@ -379,7 +379,7 @@ def test_an_unreachable_pose_is_a_motion_that_did_nothing():
 def test_an_unreachable_trial_of_the_oracle_returns_instead_of_raising():
     import gymnasium as gym
 
-    from mpg_envs.robot import UnreachablePoseError
+    from mpg_envs.simulation.robot import UnreachablePoseError
     from mpg_envs.oracle import try_primitive
 
     env = gym.make("MPG-Stage2-v0")

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from mpg_envs.objects import blocks_object_set
-from mpg_envs.robot import ArmIK
+from mpg_envs.simulation.objects import blocks_object_set
+from mpg_envs.simulation.robot import ArmIK
 
 
 

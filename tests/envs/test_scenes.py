@@ -15,7 +15,7 @@ from mpg_envs.scene_io import SceneFile, SceneFileError, objects_outside, read_s
 from mpg_envs.scenes import InvalidSceneError, SceneConfig, SceneLayout, keep_inside
 from mpg_envs.stages import STAGES, episode_end
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.world import World
+from mpg_envs.simulation.world import World
 
 
 # --------------------------------------------------------------------------- valid scenes

@@ -19,9 +19,9 @@ import mujoco
 import numpy as np
 
 from mpg_envs.grid.actions import PRIMITIVES
-from mpg_envs.robot import ArmIK, UnreachablePoseError, gripper_states
+from mpg_envs.simulation.robot import ArmIK, UnreachablePoseError, gripper_states
 from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
-from mpg_envs.world import World, WorldCheckpoint
+from mpg_envs.simulation.world import World, WorldCheckpoint
 
 
 @dataclass(frozen=True)
@@ -108,7 +108,7 @@ class Primitives:
 
         ``depth`` is the current depth heightmap (metres above the table); ``target`` the
         index of the target object, whose motion is reported. A pose the arm cannot reach
-        (:class:`~mpg_envs.robot.UnreachablePoseError`) puts the world back as it was and
+        (:class:`~mpg_envs.simulation.robot.UnreachablePoseError`) puts the world back as it was and
         returns a result with ``unreachable`` set (``grasp_failure="unreachable"`` for grasp
         and move), so the env and the oracle's trials both carry on.
         """

@@ -1,9 +1,9 @@
 """Objects from a folder of meshes, and the convex decomposition (coacd) they may need.
 
 :func:`load_mesh_folder` turns every OBJ/STL mesh of a folder into an
-:class:`~mpg_envs.assets.ObjectAsset`: concave meshes are split by ``coacd``
+:class:`~mpg_envs.simulation.assets.ObjectAsset`: concave meshes are split by ``coacd``
 (:func:`decompose`), convex ones become their convex hull. Geometry is cached on disk
-(:mod:`mpg_envs.geometry_cache`); colour, mass and friction are not cached: they are cheap
+(:mod:`mpg_envs.simulation.geometry_cache`); colour, mass and friction are not cached: they are cheap
 and derived from the geometry at load time.
 """
 
@@ -20,7 +20,7 @@ import coacd
 import numpy as np
 import trimesh
 
-from mpg_envs.assets import (
+from mpg_envs.simulation.assets import (
     DEFAULT_FRICTION,
     MIN_PART_VOLUME,
     TABLEAU_10,
@@ -31,7 +31,7 @@ from mpg_envs.assets import (
     convex_part,
     make_asset,
 )
-from mpg_envs.geometry_cache import cached_parts, resolve_cache_dir
+from mpg_envs.simulation.geometry_cache import cached_parts, resolve_cache_dir
 
 CONVEX_VOLUME_RATIO = 0.97
 """A watertight mesh whose volume is at least this fraction of its convex hull's volume is

@@ -22,7 +22,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from mpg_envs.assets import Part, centre_parts
+from mpg_envs.simulation.assets import Part, centre_parts
 
 CACHE_FORMAT_VERSION = 2
 """Bump when the cached geometry changes for the same inputs; old files are then ignored."""

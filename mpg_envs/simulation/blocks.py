@@ -3,7 +3,7 @@
 Cube, long box, flat box, tall box, cylinder, disc, triangular prism and an arch (a box
 minus a cylinder, the only concave one, split into convex parts by ``coacd``). The seed
 jitters every dimension by up to +-10 %. Geometry is cached on disk
-(:mod:`mpg_envs.geometry_cache`).
+(:mod:`mpg_envs.simulation.geometry_cache`).
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ import os
 import numpy as np
 import trimesh
 
-from mpg_envs.assets import DEFAULT_FRICTION, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part, check_seed, convex_part, make_asset
-from mpg_envs.geometry_cache import cached_parts, resolve_cache_dir
-from mpg_envs.meshes import CoacdParams, decompose
+from mpg_envs.simulation.assets import DEFAULT_FRICTION, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part, check_seed, convex_part, make_asset
+from mpg_envs.simulation.geometry_cache import cached_parts, resolve_cache_dir
+from mpg_envs.simulation.meshes import CoacdParams, decompose
 
 BLOCKS_JITTER = 0.1
 """Relative jitter of every block dimension (uniform in [1 - j, 1 + j])."""

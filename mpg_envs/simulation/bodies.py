@@ -1,4 +1,4 @@
-"""MuJoCo bodies for objects: an :class:`~mpg_envs.assets.ObjectAsset` as a free body of an ``MjSpec``."""
+"""MuJoCo bodies for objects: an :class:`~mpg_envs.simulation.assets.ObjectAsset` as a free body of an ``MjSpec``."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Sequence
 import mujoco
 import numpy as np
 
-from mpg_envs.assets import ObjectAsset
+from mpg_envs.simulation.assets import ObjectAsset
 
 TORSIONAL_FRICTION = 0.005
 """Torsional friction (used by condim 4 contacts)."""

@@ -2,8 +2,8 @@
 
 An :class:`ObjectAsset` is a list of convex meshes in the object frame (origin at the centre
 of mass of the parts, z up in the object's canonical pose) plus its colour, mass and
-friction. The object sets (:mod:`mpg_envs.blocks`, :mod:`mpg_envs.meshes`) build assets with
-:func:`make_asset`; :mod:`mpg_envs.bodies` adds them to a MuJoCo scene.
+friction. The object sets (:mod:`mpg_envs.simulation.blocks`, :mod:`mpg_envs.simulation.meshes`) build assets with
+:func:`make_asset`; :mod:`mpg_envs.simulation.bodies` adds them to a MuJoCo scene.
 """
 
 from __future__ import annotations

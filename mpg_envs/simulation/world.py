@@ -18,8 +18,8 @@ from typing import Callable, Sequence
 import mujoco
 import numpy as np
 
-from mpg_envs.objects import ObjectAsset, add_object_body
-from mpg_envs.robot import Robot, RobotConfig, robot_spec
+from mpg_envs.simulation.objects import ObjectAsset, add_object_body
+from mpg_envs.simulation.robot import Robot, RobotConfig, robot_spec
 from mpg_envs.grid.workspace import Workspace
 
 ROBOT_PREFIX = "robot/"
@@ -34,7 +34,7 @@ def arena_path() -> str:
             return str(shipped)
     except ModuleNotFoundError:
         pass
-    checkout = Path(__file__).resolve().parent.parent / "xml" / "arena.xml"
+    checkout = Path(__file__).resolve().parents[2] / "xml" / "arena.xml"  # mpg_envs/simulation/world.py -> the checkout
     if not checkout.is_file():
         raise FileNotFoundError(f"arena MJCF not found in the package nor at {checkout}")
     return str(checkout)

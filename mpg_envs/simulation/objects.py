@@ -3,11 +3,11 @@
 :func:`load_object_set` picks a set by name (``"blocks"``) or by the path of a folder of
 meshes. The pieces live in modules of their own and are re-exported here:
 
-* :mod:`mpg_envs.assets` -- the :class:`ObjectAsset` type, colours and material defaults;
-* :mod:`mpg_envs.blocks` -- the generated "blocks" set (:func:`blocks_object_set`);
-* :mod:`mpg_envs.meshes` -- mesh folders and coacd decomposition (:func:`load_mesh_folder`);
-* :mod:`mpg_envs.geometry_cache` -- the on-disk geometry cache (:func:`default_cache_dir`);
-* :mod:`mpg_envs.bodies` -- :func:`add_object_body`, an asset as a free body of an ``MjSpec``.
+* :mod:`mpg_envs.simulation.assets` -- the :class:`ObjectAsset` type, colours and material defaults;
+* :mod:`mpg_envs.simulation.blocks` -- the generated "blocks" set (:func:`blocks_object_set`);
+* :mod:`mpg_envs.simulation.meshes` -- mesh folders and coacd decomposition (:func:`load_mesh_folder`);
+* :mod:`mpg_envs.simulation.geometry_cache` -- the on-disk geometry cache (:func:`default_cache_dir`);
+* :mod:`mpg_envs.simulation.bodies` -- :func:`add_object_body`, an asset as a free body of an ``MjSpec``.
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from mpg_envs.assets import DEFAULT_FRICTION, MASS_RANGE, MIN_PART_VOLUME, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part
-from mpg_envs.blocks import ARCH_TUNNEL_RATIO, BLOCK_SHAPES, BLOCKS_JITTER, CYLINDER_SECTIONS, blocks_object_set
-from mpg_envs.bodies import OBJECT_CONDIM, OBJECT_GEOM_GROUP, ROLLING_FRICTION, TORSIONAL_FRICTION, add_object_body
-from mpg_envs.geometry_cache import CACHE_FORMAT_VERSION, default_cache_dir
-from mpg_envs.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, load_mesh_folder
+from mpg_envs.simulation.assets import DEFAULT_FRICTION, MASS_RANGE, MIN_PART_VOLUME, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part
+from mpg_envs.simulation.blocks import ARCH_TUNNEL_RATIO, BLOCK_SHAPES, BLOCKS_JITTER, CYLINDER_SECTIONS, blocks_object_set
+from mpg_envs.simulation.bodies import OBJECT_CONDIM, OBJECT_GEOM_GROUP, ROLLING_FRICTION, TORSIONAL_FRICTION, add_object_body
+from mpg_envs.simulation.geometry_cache import CACHE_FORMAT_VERSION, default_cache_dir
+from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, load_mesh_folder
 
 __all__ = [
     "ARCH_TUNNEL_RATIO",
