@@ -30,7 +30,7 @@ import gymnasium as gym  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401  (registers the envs)
 from mpg_envs.env import MPGEnv  # noqa: E402
-from mpg_envs.scenes import InvalidSceneError  # noqa: E402
+from mpg_envs.scenes.generators import InvalidSceneError  # noqa: E402
 from mpg_envs.stages import STAGES  # noqa: E402
 
 TARGET_RULES: dict[str, tuple[int, ...]] = {"Occluded": (0, 1, 2, 3, 4), "Stage5": (0, 1)}

@@ -1,7 +1,7 @@
-"""A policy on every case of a case set (:mod:`mpg_envs.cases`), N runs per case.
+"""A policy on every case of a case set (:mod:`mpg_envs.scenes.cases`), N runs per case.
 
 Run ``r`` of case ``c`` (0-based, in the set's order) loads the case's scene jittered for
-run ``r`` (:func:`mpg_envs.cases.jitter_scene`; run 0 is the case as written) and is episode
+run ``r`` (:func:`mpg_envs.scenes.cases.jitter_scene`; run 0 is the case as written) and is episode
 ``r`` of :func:`mpg_agents.evaluate.run_episode` with seed ``seed + CASE_SEED_STRIDE * c``:
 its reset, the policy and the action space are seeded ``seed + CASE_SEED_STRIDE * c + r``,
 so every run is reproducible on its own. Runs use strict retrieval by default (the env's
@@ -23,7 +23,7 @@ import gymnasium as gym
 
 from mpg_agents.evaluate import EpisodeRecord, env_id_of, run_episode
 from mpg_envs._version import __version__
-from mpg_envs.cases import Case, CaseSet, jitter_scene
+from mpg_envs.scenes.cases import Case, CaseSet, jitter_scene
 
 CASE_SEED_STRIDE = 1000
 """Case ``c``'s runs are seeded from ``seed + CASE_SEED_STRIDE * c``; at most this many runs."""

@@ -238,7 +238,7 @@ def _eval_cases(args: argparse.Namespace, policy_kwargs: dict[str, Any], env_opt
     """``mpg-eval --cases``: every case of a set, ``--runs`` runs each, one row per case
     (strict retrieval unless ``--env-option wrong_grasp=...`` says otherwise)."""
     from mpg_agents.case_runs import run_case_set
-    from mpg_envs.cases import load_cases
+    from mpg_envs.scenes.cases import load_cases
 
     if args.workers not in (None, 1) or args.ray_address is not None:
         raise UsageError("--cases runs in this process: leave out --workers and --ray-address")

@@ -55,7 +55,7 @@ def reset_first_valid(
     Raises:
         InvalidSceneError: :data:`MAX_SKIPPED_SEEDS` seeds in a row gave no valid scene.
     """
-    from mpg_envs.scenes import InvalidSceneError
+    from mpg_envs.scenes.generators import InvalidSceneError
 
     for attempt in range(MAX_SKIPPED_SEEDS + 1):
         try:

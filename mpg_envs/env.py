@@ -24,9 +24,9 @@ from mpg_envs.rewards import StepOutcome
 from mpg_envs.scene_source import draw_scene, shipped_scene
 from mpg_envs.step_evaluation import StepEvaluation, action_info
 from mpg_envs.simulation.robot import ArmIK
-from mpg_envs.scene_io import SceneFile, SceneFileError, read_scene
-from mpg_envs.scene_loading import apply_scene, scene_of
-from mpg_envs.scenes import InvalidSceneError
+from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, read_scene
+from mpg_envs.scenes.scene_loading import apply_scene, scene_of
+from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
 from mpg_envs.simulation.world import World, WorldCheckpoint
 
@@ -60,11 +60,11 @@ class MPGEnv(gym.Env):
 
     Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
     workspace, and meets the start condition (the stage's occlusion or surround, the visible
-    band); else :class:`~mpg_envs.scenes.InvalidSceneError`, never a lesser scene.
+    band); else :class:`~mpg_envs.scenes.generators.InvalidSceneError`, never a lesser scene.
     ``reset(options=...)`` takes ``scene`` (a scene file, ours or a peer's, or a
-    :class:`~mpg_envs.scene_io.SceneFile`), ``mesh_dir`` (meshes for a peer's file),
+    :class:`~mpg_envs.scenes.scene_io.SceneFile`), ``mesh_dir`` (meshes for a peer's file),
     ``drop_outside`` (leave out, with a warning, the file's objects outside the workspace
-    instead of raising :class:`~mpg_envs.scene_io.SceneFileError`) and ``num_objects`` (this
+    instead of raising :class:`~mpg_envs.scenes.scene_io.SceneFileError`) and ``num_objects`` (this
     episode's count). Reset's ``info`` has ``objects_left``, ``occluded``,
     ``visible_fraction``, ``target``, ``num_motions`` and ``is_success``; a step's also
     ``end_reason`` (``None`` until the last step, then one of :data:`END_REASONS`).
@@ -303,14 +303,14 @@ class MPGEnv(gym.Env):
         return world
 
     def _apply_scene(self, scene: SceneFile, drop_outside: bool) -> None:
-        """Build the world of a scene file (:func:`mpg_envs.scene_loading.apply_scene`)."""
+        """Build the world of a scene file (:func:`mpg_envs.scenes.scene_loading.apply_scene`)."""
         _, self.target = apply_scene(self._build_world, scene, self.config.workspace, drop_outside)
         if self.target is None and not self.stage.mask_all_objects:
             raise SceneFileError(f"scene {scene.source!r} has no target; {self.stage.env_id} needs one")
 
     def current_scene(self) -> SceneFile:
         """The current scene (every object's asset, pose and state, the target), as
-        :func:`mpg_envs.scene_io.save_scene` writes it."""
+        :func:`mpg_envs.scenes.scene_io.save_scene` writes it."""
         if self.world is None:
             raise RuntimeError("call reset() before current_scene()")
         return scene_of(self.world, self.target, self.stage.name, self.config.object_set_seed)

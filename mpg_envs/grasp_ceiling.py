@@ -22,7 +22,7 @@ from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.simulation.primitives import Primitives
 from mpg_envs.simulation.robot import ArmIK
-from mpg_envs.scenes import random_quat, yaw_quat
+from mpg_envs.scenes.generators import random_quat, yaw_quat
 from mpg_envs.grid.workspace import world_to_pixel
 from mpg_envs.simulation.world import World
 

@@ -1,16 +1,16 @@
 """Where a reset's scene comes from: a shipped test set, or objects dropped afresh.
 
-:func:`draw_scene` drops objects with the stage's generator (:mod:`mpg_envs.scenes`) until a
+:func:`draw_scene` drops objects with the stage's generator (:mod:`mpg_envs.scenes.generators`) until a
 scene meets the episode's start condition: every object resting inside the workspace, and a
 candidate target that is occluded or surrounded as the stage asks and whose visible fraction
 lies in the asked band. A band that asks for a mostly hidden target (upper bound at most
 :data:`BURY_BELOW`) switches the stage's generator to its buried variant, which drops
 occluders onto the target by construction, so such scenes are not found by slow rejection.
-A reset never returns a scene outside its band: :class:`~mpg_envs.scenes.InvalidSceneError`
+A reset never returns a scene outside its band: :class:`~mpg_envs.scenes.generators.InvalidSceneError`
 when none is made in ``EnvConfig.scene_tries`` draws.
 
 :func:`shipped_scene` looks a seed up in the stage's shipped test set
-(:mod:`mpg_envs.test_sets`), used only with the settings the set was generated with.
+(:mod:`mpg_envs.scenes.test_sets`), used only with the settings the set was generated with.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Sequence
 
 from mpg_envs.perception.occlusion import in_band, surrounded_sectors
-from mpg_envs.scene_io import SceneFile
-from mpg_envs.scenes import BURIED, SCENES, InvalidSceneError, SceneConfig, keep_inside
+from mpg_envs.scenes.scene_io import SceneFile
+from mpg_envs.scenes.generators import BURIED, SCENES, InvalidSceneError, SceneConfig, keep_inside
 
 if TYPE_CHECKING:  # the env imports this module
     from mpg_envs.env import MPGEnv
@@ -98,7 +98,7 @@ def shipped_scene(env: MPGEnv, seed: int | None) -> SceneFile | None:
         return None
     if env.visible_range != env.stage.visible_range:
         return None
-    from mpg_envs.test_sets import TEST_SET_WORKSPACE, find_test_set
+    from mpg_envs.scenes.test_sets import TEST_SET_WORKSPACE, find_test_set
 
     if env.config.workspace != TEST_SET_WORKSPACE:
         return None

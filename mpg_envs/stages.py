@@ -49,7 +49,7 @@ class StageSpec:
 
     name: str
     primitives: tuple[str, ...]
-    scene: str  # key of mpg_envs.scenes.SCENES
+    scene: str  # key of mpg_envs.scenes.generators.SCENES
     num_objects: int
     max_motions: int  # truncation cap
     reward: RewardFn
@@ -61,7 +61,7 @@ class StageSpec:
     min_objects: int = 1
     wrong_grasp: str = "remove"  # one of WRONG_GRASP_RULES (the env's default)
     visible_range: tuple[float, float] | None = None  # band of the target's visible fraction at reset
-    test_set: str | None = None  # name of the shipped scene sets of its test seeds (mpg_envs.test_sets)
+    test_set: str | None = None  # name of the shipped scene sets of its test seeds (mpg_envs.scenes.test_sets)
 
     @property
     def env_id(self) -> str:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpg_envs.cases import (
+from mpg_envs.scenes.cases import (
     EPG_CASES,
     EPG_SHIFT,
     GTI_PRESETS,
@@ -25,9 +25,9 @@ from mpg_envs.cases import (
     jitter_scene,
     load_cases,
 )
-from mpg_envs.scene_io import SceneFileError, objects_outside, read_scene
-from mpg_envs.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
-from mpg_envs.vpg_scenes import GTI_COLOURS
+from mpg_envs.scenes.scene_io import SceneFileError, objects_outside, read_scene
+from mpg_envs.scenes.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
+from mpg_envs.scenes.vpg_scenes import GTI_COLOURS
 from mpg_envs.grid.workspace import Workspace
 
 PEERS = Path(__file__).resolve().parents[2] / ".." / "shared" / "peers"
@@ -169,7 +169,7 @@ def test_gti_set_has_the_twelve_presets(peers_dir):
 # ------------------------------------------------------------------------------ jitter
 def scene_of_cubes(positions: list[tuple[float, float]]):
     from mpg_envs.simulation.objects import blocks_object_set
-    from mpg_envs.scene_io import SceneFile, SceneObject
+    from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 
     cube = next(a for a in blocks_object_set() if a.name == "cube")
     objects = tuple(SceneObject(cube, np.array([x, y, 0.0257]), np.array([1.0, 0.0, 0.0, 0.0]), True, f"object {k}") for k, (x, y) in enumerate(positions))

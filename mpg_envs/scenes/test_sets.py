@@ -25,7 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from mpg_envs.simulation.assets import ObjectAsset
-from mpg_envs.scene_io import SceneFile, SceneObject
+from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 from mpg_envs.grid.workspace import Workspace
 
 GENERATOR_VERSION = 1

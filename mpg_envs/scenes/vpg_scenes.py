@@ -40,7 +40,7 @@ import numpy as np
 
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.objects import blocks_object_set, load_mesh_folder
-from mpg_envs.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject
+from mpg_envs.scenes.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject
 
 GTI_COLOURS: dict[str, tuple[float, float, float]] = {
     name: (r / 255.0, g / 255.0, b / 255.0)

@@ -1,6 +1,6 @@
 """Case sets: fixed scenes to run a policy on, with the target each case names.
 
-A :class:`Case` is a scene (a scene file or a :class:`~mpg_envs.scene_io.SceneFile`) and
+A :class:`Case` is a scene (a scene file or a :class:`~mpg_envs.scenes.scene_io.SceneFile`) and
 optionally the target it asks for; a :class:`CaseSet` is a named list of them.
 :func:`load_cases` gives the named sets or any scene file or folder of them:
 
@@ -38,7 +38,7 @@ from typing import Iterator
 import mujoco
 import numpy as np
 
-from mpg_envs.scene_io import SceneFile, SceneFileError, kept_target, objects_outside, read_scene
+from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, kept_target, objects_outside, read_scene
 from mpg_envs.grid.workspace import Workspace
 
 CASE_SETS = ("challenge", "epg", "gti")
@@ -80,12 +80,12 @@ class Case:
 
     Attributes:
         name: the case's name (unique within its set).
-        scene: a scene file (ours or a peer's, see :func:`mpg_envs.scene_io.read_scene`) or a
-            :class:`~mpg_envs.scene_io.SceneFile`.
+        scene: a scene file (ours or a peer's, see :func:`mpg_envs.scenes.scene_io.read_scene`) or a
+            :class:`~mpg_envs.scenes.scene_io.SceneFile`.
         target: the target's object index (file order), overriding the file's; ``None``
             keeps the file's.
         mesh_dir: meshes of a peer file (``None``: found beside it, see
-            :mod:`mpg_envs.vpg_scenes`).
+            :mod:`mpg_envs.scenes.vpg_scenes`).
         note: one line saying what makes the case hard.
     """
 

@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from mpg_envs.simulation.assets import ObjectAsset
-from mpg_envs.scene_io import SceneFile, SceneObject, kept_target, objects_outside, resolve_outside
+from mpg_envs.scenes.scene_io import SceneFile, SceneObject, kept_target, objects_outside, resolve_outside
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.world import World
 
@@ -44,7 +44,7 @@ def apply_scene(
     world and the target's index in it.
 
     Objects outside the workspace in the file, or off the table or outside it once
-    settled, raise :class:`~mpg_envs.scene_io.SceneFileError` naming them or, with
+    settled, raise :class:`~mpg_envs.scenes.scene_io.SceneFileError` naming them or, with
     ``drop_outside``, are left out with a warning (the target then is the first kept object
     for a VPG test case, else it raises).
     """
@@ -86,7 +86,7 @@ def pose_errors(world: World, scene: SceneFile) -> tuple[np.ndarray, np.ndarray]
 
 def scene_of(world: World, target: int | None, stage: str | None = None, object_set_seed: int = 0) -> SceneFile:
     """A world's current scene (every object's asset, pose and state, the target), as
-    :func:`mpg_envs.scene_io.save_scene` writes it."""
+    :func:`mpg_envs.scenes.scene_io.save_scene` writes it."""
     objects = tuple(
         SceneObject(asset, *world.object_pose(i), active=bool(world.active[i]), label=f"object {i} ({asset.name!r})")
         for i, asset in enumerate(world.assets)

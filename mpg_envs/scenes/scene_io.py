@@ -1,14 +1,14 @@
 """Scene files: read and write them, and say what is wrong with them.
 
 This module only reads and writes files; :meth:`mpg_envs.env.MPGEnv.reset` (option
-``scene``) applies a :class:`SceneFile` to a world (:mod:`mpg_envs.scene_loading`), and
+``scene``) applies a :class:`SceneFile` to a world (:mod:`mpg_envs.scenes.scene_loading`), and
 :meth:`MPGEnv.current_scene` makes one from the current episode.
 
 Our format is JSON (``.json``): the object set, each object's asset, pose and state, and
 the target. The peers' plain-text files (``.txt``, poses in VPG's frame) load too: VPG's
 test cases (``mesh r g b x y z rx ry rz`` per line, the first object is the target) and
 Grasping the Invisible's presets (``name mesh x y z rx ry rz``, the target named by its
-colour); :mod:`mpg_envs.vpg_scenes` reads them and says how their poses map onto ours.
+colour); :mod:`mpg_envs.scenes.vpg_scenes` reads them and says how their poses map onto ours.
 
 Errors (:class:`SceneFileError`, a ``ValueError``) name the file, the object (its index and,
 for text files, its line) and what is wrong: an unreadable file, an unknown mesh or asset, a
@@ -181,13 +181,13 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
 # ------------------------------------------------------------------------------ reading
 def read_scene(path: str | Path, mesh_dir: str | Path | None = None, object_set_seed: int = 0) -> SceneFile:
     """Read a scene file: ours (``.json``), or a VPG test case or Grasping the Invisible
-    preset (``.txt``, see :mod:`mpg_envs.vpg_scenes`); ``object_set_seed`` is used for the
+    preset (``.txt``, see :mod:`mpg_envs.scenes.vpg_scenes`); ``object_set_seed`` is used for the
     text files (ours carry their own)."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
     if path.suffix.lower() == ".txt":
-        from mpg_envs.vpg_scenes import read_vpg_text  # it builds on this module's types
+        from mpg_envs.scenes.vpg_scenes import read_vpg_text  # it builds on this module's types
 
         return read_vpg_text(path, mesh_dir, object_set_seed)
     if path.suffix.lower() == ".json":
