@@ -44,7 +44,7 @@ from mpg_envs.threads import THREADS_ENV, load_average, set_torch_threads, use_p
 
 use_passive_openmp_wait()  # before torch loads OpenMP, as importing mpg_agents does
 
-from mpg_envs.env import observation_space  # noqa: E402
+from mpg_envs.tasks.env import observation_space  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3.common.buffers import DictReplayBuffer  # noqa: E402
 from torch.nn import functional as F  # noqa: E402

@@ -50,7 +50,7 @@ BASELINES = ("random", "grasp-only", "shipped")
 def make_wrapped_env(cell: int, size: int, action: str = "grid") -> gym.Env:
     """``ImageObservation(GridAction(MPG-Stage2-v0))`` (or ``ContinuousAction`` for
     ``action="continuous"``) on one thread (picklable for workers)."""
-    from mpg_envs.config import EnvConfig
+    from mpg_envs.tasks.config import EnvConfig
     from mpg_envs.threads import worker_init
     from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
 
@@ -300,7 +300,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     import mpg_envs  # noqa: F401
     from mpg_agents.policy_zoo import make_policy
-    from mpg_envs.config import EnvConfig
+    from mpg_envs.tasks.config import EnvConfig
 
     torch.set_num_threads(1)
     rows: dict[str, dict] = {}

@@ -3,7 +3,7 @@
 A value is read as a Python literal where it is one (``3``, ``0.5``, ``True``, ``(0, 0.3)``)
 and kept as text otherwise (``camera``, ``fail``): ``--env-option obs_mode=camera
 --env-option wrong_grasp=fail --env-option "visible_range=(0, 0.3)"``. What an env accepts is
-:class:`mpg_envs.env.MPGEnv`'s keywords; a wrong one fails when the env is made, naming it.
+:class:`mpg_envs.tasks.env.MPGEnv`'s keywords; a wrong one fails when the env is made, naming it.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def env_keywords() -> tuple[str, ...]:
     """The keywords an MPG env takes besides its stage and object count."""
     import inspect
 
-    from mpg_envs.env import MPGEnv
+    from mpg_envs.tasks.env import MPGEnv
 
     names = inspect.signature(MPGEnv.__init__).parameters
     return tuple(n for n in names if n not in ("self", "stage", *RESERVED))

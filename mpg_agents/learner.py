@@ -56,7 +56,7 @@ from mpg_agents.train_log import IterationRecord, TrainingLog
 from mpg_agents.training_stages import TrainingStage, stage_for_env
 from mpg_agents.weights import load_mpgnet_weights
 from mpg_envs.grid.actions import PRIMITIVES
-from mpg_envs.config import EnvConfig
+from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
 
 

@@ -6,7 +6,7 @@ move frozen; a grasp ends the episode after the push budget) -> V joint training
 nets in turn). The pipeline, the learner and ``mpg-train`` read this table; the ablations are
 changes of it (:func:`without_multistage`, :func:`without_alternation`).
 
-The envs' own differences (scene, rewards, motion cap) are in :mod:`mpg_envs.stages`; this
+The envs' own differences (scene, rewards, motion cap) are in :mod:`mpg_envs.tasks.stages`; this
 table holds only how the agent trains on them.
 """
 
@@ -17,7 +17,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from mpg_agents.coordination import check_coordination
 from mpg_envs.grid.actions import check_primitives
-from mpg_envs.rewards import RewardConfig
+from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
 
 
@@ -65,12 +65,12 @@ class TrainingStage:
             branch ``from`` of the starting weights, e.g. ``(("move", "grasp"),)``: a move is a
             grasp of the occluder, carried away, so the move net starts as the grasp net.
         reward: ``((field, value), ...)`` (a TOML table in a config) of
-            :class:`~mpg_envs.rewards.RewardConfig` fields that this stage's training envs
+            :class:`~mpg_envs.tasks.rewards.RewardConfig` fields that this stage's training envs
             set, e.g. ``{"move_needs_lift": True}``; empty: the paper's rewards.
         grasp_trials: each grasp the stage takes is also tried at this many other gripper
             orientations at the same pixel (drawn from the other ``GRASP_ROTATIONS - 1``, each
             in either of its two rotations), in the simulation and undone
-            (:meth:`~mpg_envs.env.MPGEnv.try_step`); those transitions go into the replay, with
+            (:meth:`~mpg_envs.tasks.env.MPGEnv.try_step`); those transitions go into the replay, with
             one more gradient step per grasp. A grasp in clutter is decided by its angle, and
             one executed grasp labels one angle. Privileged (a simulator's counterfactual, like
             demonstrations, not the paper's pure RL); 0: off.

@@ -1,7 +1,7 @@
 """MPG environments: target-oriented grasping in clutter on MuJoCo.
 
 Importing the package registers one Gymnasium id per stage of
-:data:`mpg_envs.stages.STAGES` (:data:`ENV_IDS`: ``MPG-Stage1-v0`` ... ``MPG-Stage5-v0``,
+:data:`mpg_envs.tasks.stages.STAGES` (:data:`ENV_IDS`: ``MPG-Stage1-v0`` ... ``MPG-Stage5-v0``,
 ``MPG-Occluded-v0``, ...); ``gymnasium.make("mpg_envs:MPG-Stage5-v0")`` imports it on demand.
 Each id carries its stage's motion cap as ``max_episode_steps``, so ``gymnasium.make`` wraps
 the env in Gymnasium's ``TimeLimit`` at the same cap the env enforces itself.
@@ -19,7 +19,7 @@ choose_gl_backend()  # before anything imports mujoco: EGL (or OSMesa) on headle
 import gymnasium as gym  # noqa: E402
 
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
-from mpg_envs.stages import STAGES, StageSpec
+from mpg_envs.tasks.stages import STAGES, StageSpec
 from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace
 from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
 
@@ -37,7 +37,7 @@ def _register() -> None:
         if stage.env_id not in gym.registry:
             gym.register(
                 id=stage.env_id,
-                entry_point="mpg_envs.env:MPGEnv",
+                entry_point="mpg_envs.tasks.env:MPGEnv",
                 kwargs={"stage": name},
                 max_episode_steps=stage.max_motions,
             )

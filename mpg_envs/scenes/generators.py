@@ -6,7 +6,7 @@ says which objects may be the target, in the order to try them (none when the ma
 every object, Stage I), and where an object that rolled out of the workspace is dropped
 again (:func:`keep_inside`: same pile, same seed stream, so scenes stay deterministic).
 Whether a candidate target is acceptable (e.g. it really is occluded) is the stage's call
-(:class:`~mpg_envs.stages.StageSpec`), made by the env, which redraws the whole scene when
+(:class:`~mpg_envs.tasks.stages.StageSpec`), made by the env, which redraws the whole scene when
 no candidate is.
 """
 

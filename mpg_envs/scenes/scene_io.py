@@ -1,6 +1,6 @@
 """Scene files: read and write them, and say what is wrong with them.
 
-This module only reads and writes files; :meth:`mpg_envs.env.MPGEnv.reset` (option
+This module only reads and writes files; :meth:`mpg_envs.tasks.env.MPGEnv.reset` (option
 ``scene``) applies a :class:`SceneFile` to a world (:mod:`mpg_envs.scenes.scene_loading`), and
 :meth:`MPGEnv.current_scene` makes one from the current episode.
 

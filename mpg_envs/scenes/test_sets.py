@@ -45,7 +45,7 @@ class TestSet:
     """The scenes of one test env at one object count.
 
     Attributes:
-        name: the set's name (a :class:`~mpg_envs.stages.StageSpec`'s ``test_set``).
+        name: the set's name (a :class:`~mpg_envs.tasks.stages.StageSpec`'s ``test_set``).
         num_objects: objects per scene.
         seeds: ``(S,)`` reset seeds, one per scene.
         assets: ``(S, N)`` asset names.

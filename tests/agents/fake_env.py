@@ -11,7 +11,7 @@ from typing import Any, Sequence
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.env import observation_space
+from mpg_envs.tasks.env import observation_space
 
 from mpg_envs.grid.actions import PixelActionSpace, decode_action
 

@@ -16,7 +16,7 @@ from mpg_agents.visualize import (
     save_qmap_png,
 )
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, encode_action
-from mpg_envs.env import observation_space
+from mpg_envs.tasks.env import observation_space
 
 from .fake_env import random_scene
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import mpg_envs
-from mpg_envs.env import MPGEnv
+from mpg_envs.tasks.env import MPGEnv
 from mpg_envs.perception.occlusion import change_detected, is_occluded, surrounded_sectors
 from mpg_envs.oracle import OraclePolicy
-from mpg_envs.rewards import RewardConfig, StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
+from mpg_envs.tasks.rewards import RewardConfig, StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
 from mpg_envs.scenes.scene_io import save_scene
 
 ALL_IDS = mpg_envs.ENV_IDS

@@ -12,9 +12,9 @@ from mpg_envs.simulation.robot import ArmIK
 
 @pytest.fixture(scope="module")
 def ceiling():
-    import mpg_envs.grasp_ceiling
+    import mpg_envs.tasks.grasp_ceiling
 
-    return mpg_envs.grasp_ceiling
+    return mpg_envs.tasks.grasp_ceiling
 
 
 @pytest.fixture(scope="module")

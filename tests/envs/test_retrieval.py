@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401
-from mpg_envs.config import EnvConfig
-from mpg_envs.env import MPGEnv
+from mpg_envs.tasks.config import EnvConfig
+from mpg_envs.tasks.env import MPGEnv
 from mpg_envs.perception.occlusion import VISIBILITY_BANDS, check_band, in_band, visibility_band, visible_fraction
 from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 from mpg_envs.scenes.generators import InvalidSceneError

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from conftest import flat_quat
-from mpg_envs.env import END_REASONS, EnvConfig, MPGEnv
+from mpg_envs.tasks.env import END_REASONS, EnvConfig, MPGEnv
 from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, objects_outside, read_scene, save_scene
 from mpg_envs.scenes.generators import InvalidSceneError, SceneConfig, SceneLayout, keep_inside
-from mpg_envs.stages import STAGES, episode_end
+from mpg_envs.tasks.stages import STAGES, episode_end
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.world import World
 

@@ -11,7 +11,7 @@ import pytest
 from mpg_agents.cli import eval_main
 from mpg_agents.evaluate import PRIMITIVES, EpisodeRecord, summarise
 from mpg_agents.stats import bootstrap_mean_interval, wilson_interval
-from mpg_envs.env import END_REASONS
+from mpg_envs.tasks.env import END_REASONS
 
 
 # ----------------------------------------------------------------------------- stats

@@ -13,7 +13,7 @@ from mpg_agents.training_stages import (
     without_alternation,
     without_multistage,
 )
-from mpg_envs.rewards import RewardConfig
+from mpg_envs.tasks.rewards import RewardConfig
 
 
 def test_the_paper_table():

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from mpg_envs.rewards import (
+from mpg_envs.tasks.rewards import (
     RewardConfig,
     StepOutcome,
     reward_grasp_any,

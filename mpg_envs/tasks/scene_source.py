@@ -22,7 +22,7 @@ from mpg_envs.scenes.scene_io import SceneFile
 from mpg_envs.scenes.generators import BURIED, SCENES, InvalidSceneError, SceneConfig, keep_inside
 
 if TYPE_CHECKING:  # the env imports this module
-    from mpg_envs.env import MPGEnv
+    from mpg_envs.tasks.env import MPGEnv
 
 BURY_BELOW = 0.5
 """A visible-fraction band whose upper bound is at most this uses the buried generator."""

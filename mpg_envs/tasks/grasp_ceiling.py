@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mpg_envs.config import EnvConfig
+from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.grid.grasp_geometry import angle_to_rotation, footprint_rect
 from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.simulation.objects import ObjectAsset

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mpg_envs.simulation.primitives import PrimitiveResult
-from mpg_envs.rewards import StepOutcome
+from mpg_envs.tasks.rewards import StepOutcome
 
 
 def action_info(primitive: str, rotation: int, row: int, col: int, result: PrimitiveResult) -> dict[str, Any]:
@@ -28,7 +28,7 @@ class StepEvaluation:
     """The judged outcome of one step.
 
     Attributes:
-        outcome: the facts the paper's rewards need (:class:`~mpg_envs.rewards.StepOutcome`).
+        outcome: the facts the paper's rewards need (:class:`~mpg_envs.tasks.rewards.StepOutcome`).
         wrong_grasp: a grasp lifted an object other than the target (a mis-pick).
         ends_wrong_object: ... and strict retrieval (``wrong_grasp="fail"``) ends the
             episode for it.

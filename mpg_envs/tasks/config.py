@@ -9,7 +9,7 @@ from gymnasium import spaces
 
 from mpg_envs.perception.occlusion import ChangeConfig, OcclusionConfig
 from mpg_envs.simulation.primitives import PrimitiveConfig
-from mpg_envs.rewards import RewardConfig
+from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.simulation.robot import RobotConfig
 from mpg_envs.scenes.generators import SceneConfig
 from mpg_envs.grid.workspace import Workspace

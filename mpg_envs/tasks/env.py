@@ -2,9 +2,9 @@
 
 Life of a step, as named hooks: decode the pixel-wise action, run the primitive in the world,
 observe (heightmaps, target mask, occlusion, visible fraction), ``evaluate`` what the step did
-(a :class:`~mpg_envs.step_evaluation.StepEvaluation`), ``step_reward`` it, and decide the end
-(:func:`~mpg_envs.stages.episode_end`). A reset's scene comes from ``_load_scene``: a scene
-file, the shipped test set of the seed, or a fresh drop (:mod:`mpg_envs.scene_source`).
+(a :class:`~mpg_envs.tasks.step_evaluation.StepEvaluation`), ``step_reward`` it, and decide the end
+(:func:`~mpg_envs.tasks.stages.episode_end`). A reset's scene comes from ``_load_scene``: a scene
+file, the shipped test set of the seed, or a fresh drop (:mod:`mpg_envs.tasks.scene_source`).
 """
 
 from __future__ import annotations
@@ -16,18 +16,18 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.actions import PixelActionSpace
-from mpg_envs.config import OBS_MODES, EnvConfig, observation_space
+from mpg_envs.tasks.config import OBS_MODES, EnvConfig, observation_space
 from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 from mpg_envs.perception.occlusion import change_detected, check_band, is_occluded, visible_fraction
 from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
-from mpg_envs.rewards import StepOutcome
-from mpg_envs.scene_source import draw_scene, shipped_scene
-from mpg_envs.step_evaluation import StepEvaluation, action_info
+from mpg_envs.tasks.rewards import StepOutcome
+from mpg_envs.tasks.scene_source import draw_scene, shipped_scene
+from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
 from mpg_envs.simulation.robot import ArmIK
 from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, read_scene
 from mpg_envs.scenes.scene_loading import apply_scene, scene_of
 from mpg_envs.scenes.generators import InvalidSceneError
-from mpg_envs.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
+from mpg_envs.tasks.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
 from mpg_envs.simulation.world import World, WorldCheckpoint
 
 __all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "InvalidSceneError", "MPGEnv", "StepEvaluation", "observation_space"]
@@ -42,7 +42,7 @@ class MPGEnv(gym.Env):
     Public attributes (read-only for callers; the agents package relies on them):
 
     Attributes:
-        stage: the :class:`~mpg_envs.stages.StageSpec` this env runs (its ``name``,
+        stage: the :class:`~mpg_envs.tasks.stages.StageSpec` this env runs (its ``name``,
             ``env_id``, ``primitives``, ``end_after_grasp``, ``mask_all_objects``, ...).
         num_objects: objects dropped at every reset (the stage's default unless given).
         primitives: the primitive names this env accepts, in action-code order.
@@ -180,7 +180,7 @@ class MPGEnv(gym.Env):
     # ------------------------------------------------------------ task hooks
     def _load_scene(self, seed: int | None, options: dict[str, Any]) -> None:
         """Build this episode's world and target: a scene file, else the shipped test set's
-        scene of ``seed``, else objects dropped afresh (:mod:`mpg_envs.scene_source`)."""
+        scene of ``seed``, else objects dropped afresh (:mod:`mpg_envs.tasks.scene_source`)."""
         scene = options.get("scene")
         if scene is not None:
             if not isinstance(scene, SceneFile):
