@@ -189,7 +189,7 @@ def build(spec: Spec, env, out: Path) -> dict:
 
 def oracle_runs(name: str, path: Path, env, runs: int) -> list[tuple[bool, int, str, float]]:
     """The oracle on ``runs`` jittered runs of a case: (success, motions, end reason, seconds) each."""
-    from mpg_envs.oracle import OraclePolicy
+    from mpg_envs.policies.oracle import OraclePolicy
 
     scene = read_scene(path)
     oracle = OraclePolicy(env)

@@ -1,6 +1,6 @@
 """Oracle demonstrations for the learner's replay (an optional training aid, DQfD style).
 
-Before a stage learns, the scripted oracle (:class:`mpg_envs.oracle.OraclePolicy`) may play
+Before a stage learns, the scripted oracle (:class:`mpg_envs.policies.oracle.OraclePolicy`) may play
 a few episodes on the stage's env; its transitions seed the prioritised replay and training
 then runs as usual. This is not the paper's method (pure RL), so the learner does it only when
 :attr:`mpg_agents.learner.TrainConfig.demonstration_episodes` is set, and results obtained with
@@ -20,7 +20,7 @@ from typing import Any, Callable, Sequence
 import gymnasium as gym
 
 from mpg_envs.grid.actions import PixelActionSpace
-from mpg_envs.oracle import OraclePolicy
+from mpg_envs.policies.oracle import OraclePolicy
 
 AddTransition = Callable[[dict[str, Any], dict[str, Any], int, float, bool], None]
 """``add(obs, next_obs, action, reward, terminated)``: stores one unbatched transition."""

@@ -2,7 +2,7 @@
 
 Runs a checkpoint greedily (its own coordination and Q*_g) on seeded episodes and, before each
 move it makes, looks at the move in a copy of the simulation (each trial is run and undone,
-:func:`mpg_envs.oracle.try_primitive`; the episode itself is unchanged; :class:`MoveProbe`):
+:func:`mpg_envs.policies.oracle.try_primitive`; the episode itself is unchanged; :class:`MoveProbe`):
 
 - what the move's pixel shows: bare table, the target, an occluder (an object seen over the
   target's footprint above the target's top, as the scripted oracle finds them) or another
@@ -29,8 +29,8 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.evaluate import run_episodes
 from mpg_agents.policy_zoo import NetworkPolicy, make_network_policy
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, angle_gap, footprint_rect, other_grasp_angles
-from mpg_envs.oracle import OraclePolicy
-from mpg_envs.oracle import try_primitive
+from mpg_envs.policies.oracle import OraclePolicy
+from mpg_envs.policies.oracle import try_primitive
 
 ON_WHAT = ("table", "target", "occluder", "other")
 """What a move's pixel shows."""

@@ -2,11 +2,11 @@
 built-in baseline (:func:`make_policy`). The learned baselines of Table I are stage tables
 (:data:`mpg_agents.training_stages.BASELINES`); once trained they load here as checkpoints.
 
-Every policy is a :class:`mpg_envs.policy.Policy`: ``name``, ``reset()`` at each episode's
+Every policy is a :class:`mpg_envs.policies.policy.Policy`: ``name``, ``reset()`` at each episode's
 start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(path, obs)`` and
 ``primitives`` (what they act with).
 
-- ``oracle``: :class:`mpg_envs.oracle.OraclePolicy` (reads the simulator: upper baseline).
+- ``oracle``: :class:`mpg_envs.policies.oracle.OraclePolicy` (reads the simulator: upper baseline).
 - ``random``: uniform over the whole action space (seeded).
 - ``grasp-only``: the pixel-only heuristic grasp at the target mask, every step.
 - ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V) that
@@ -90,7 +90,7 @@ class NetworkPolicy:
     A greedy Q policy is a function of the observation: when an action changes nothing (a
     grasp that closes on air), it meets the same observation and takes the same action until
     the motion cap. With ``avoid_repeats`` it remembers its actions in the episode
-    (:class:`mpg_envs.action_memory.ActionMemory`, as the oracle does) and takes the best one
+    (:class:`mpg_envs.policies.action_memory.ActionMemory`, as the oracle does) and takes the best one
     that would not repeat an action on an unchanged scene; the name ends with ``[no repeats]``.
     """
 
@@ -134,7 +134,7 @@ class NetworkPolicy:
             self.name += f" [Q*_g: {q_star:g}]"
         self.memory = None
         if avoid_repeats:
-            from mpg_envs.action_memory import ActionMemory, RepeatRule
+            from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
 
             self.memory = ActionMemory(RepeatRule())
             self.name += " [no repeats]"
@@ -170,7 +170,7 @@ def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
 def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
     """A policy by name (see the module docstring) for ``env``."""
     if name == "oracle":
-        from mpg_envs.oracle import OraclePolicy
+        from mpg_envs.policies.oracle import OraclePolicy
 
         return OraclePolicy(env)
     if name == "random":

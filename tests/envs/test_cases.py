@@ -269,7 +269,7 @@ def test_case_target_override_is_checked():
 def test_the_oracle_solves_every_challenge_case_in_strict_retrieval():
     import gymnasium as gym
 
-    from mpg_envs.oracle import OraclePolicy
+    from mpg_envs.policies.oracle import OraclePolicy
 
     env = gym.make("MPG-Occluded-v0", wrong_grasp="fail")
     oracle = OraclePolicy(env)

@@ -11,7 +11,7 @@ import pytest
 import mpg_envs
 from mpg_envs.tasks.env import MPGEnv
 from mpg_envs.perception.occlusion import change_detected, is_occluded, surrounded_sectors
-from mpg_envs.oracle import OraclePolicy
+from mpg_envs.policies.oracle import OraclePolicy
 from mpg_envs.tasks.rewards import RewardConfig, StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
 from mpg_envs.scenes.scene_io import save_scene
 
@@ -380,7 +380,7 @@ def test_an_unreachable_trial_of_the_oracle_returns_instead_of_raising():
     import gymnasium as gym
 
     from mpg_envs.simulation.robot import UnreachablePoseError
-    from mpg_envs.oracle import try_primitive
+    from mpg_envs.policies.oracle import try_primitive
 
     env = gym.make("MPG-Stage2-v0")
     obs, _ = env.reset(seed=3)

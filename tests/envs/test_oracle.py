@@ -20,8 +20,8 @@ from mpg_envs.grid.grasp_geometry import (
     polygon_mask,
     region_max,
 )
-from mpg_envs.oracle import ActionMemory, OracleConfig, OraclePolicy, Policy
-from mpg_envs.oracle import try_primitive
+from mpg_envs.policies.oracle import ActionMemory, OracleConfig, OraclePolicy, Policy
+from mpg_envs.policies.oracle import try_primitive
 from mpg_envs.grid.workspace import Workspace
 
 # ----------------------------------------------------------------- geometry (hand-checked)
@@ -205,7 +205,7 @@ def test_oracle_prepares_with_a_tried_move_when_no_grasp_holds(occluded_env) -> 
 def test_action_memory_forbids_a_tried_action_until_its_surroundings_change():
     from dataclasses import dataclass
 
-    from mpg_envs.action_memory import ActionMemory
+    from mpg_envs.policies.action_memory import ActionMemory
 
     @dataclass
     class Rule:

@@ -143,7 +143,7 @@ def test_end_reason_move_success_in_stage3(make_env):
 
 @pytest.mark.parametrize("env_id, reason", [("MPG-Stage2-v0", "target_grasped"), ("MPG-Stage1-v0", "table_empty")])
 def test_end_reason_on_success(make_env, env_id, reason):
-    from mpg_envs.oracle import OraclePolicy
+    from mpg_envs.policies.oracle import OraclePolicy
 
     env = make_env(env_id, num_objects=1)
     obs, info = env.reset(seed=0)

@@ -13,7 +13,7 @@ __all__ = ["ActionMemory", "RepeatConfig", "RepeatRule"]
 
 
 class RepeatConfig(Protocol):
-    """When an action repeats a remembered one (e.g. :class:`RepeatRule`, :class:`mpg_envs.oracle.OracleConfig`)."""
+    """When an action repeats a remembered one (e.g. :class:`RepeatRule`, :class:`mpg_envs.policies.oracle.OracleConfig`)."""
 
     repeat_pixels: int  # an action this close to a tried one (same primitive and angle) ...
     repeat_window: int  # ... on a heightmap unchanged within this many pixels around it ...

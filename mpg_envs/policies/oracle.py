@@ -1,4 +1,4 @@
-"""The scripted reference policy, a :class:`~mpg_envs.policy.Policy` that reads the simulator.
+"""The scripted reference policy, a :class:`~mpg_envs.policies.policy.Policy` that reads the simulator.
 
 :class:`OraclePolicy` reads the simulator's state (object poses and shapes, which object is
 the target, which object each heightmap pixel shows), never pixels alone, and, as a planner
@@ -29,7 +29,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.action_memory import ActionMemory, RepeatRule
+from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
 from mpg_envs.grid.grasp_geometry import (
     GRASP_ROTATIONS,
     JawGeometry,
@@ -39,7 +39,7 @@ from mpg_envs.grid.grasp_geometry import (
     footprint_rect,
     jaw_strip_heights,
 )
-from mpg_envs.policy import Policy
+from mpg_envs.policies.policy import Policy
 from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
 from mpg_envs.simulation.world import WorldCheckpoint
 from mpg_envs.grid.workspace import NUM_ROTATIONS, world_to_pixel
@@ -75,7 +75,7 @@ class OracleConfig:
     grasp_tolerance: float = 0.02  # a grasp this little blocked is tried before any push (the pads push small things aside)
     push_start_gap: float = 0.012  # a push starts this far outside the target's edge
     occluder_tolerance: float = 0.01  # as the env's occlusion test: higher than the target's top by this
-    # When an action repeats a tried one (mpg_envs.action_memory.RepeatRule's defaults).
+    # When an action repeats a tried one (mpg_envs.policies.action_memory.RepeatRule's defaults).
     repeat_pixels: int = RepeatRule.repeat_pixels
     repeat_window: int = RepeatRule.repeat_window
     repeat_height_change: float = RepeatRule.repeat_height_change

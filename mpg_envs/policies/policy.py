@@ -1,6 +1,6 @@
 """What a policy is: the one interface every policy of the suite follows.
 
-The scripted oracle (:mod:`mpg_envs.oracle`), the baselines and network policies of
+The scripted oracle (:mod:`mpg_envs.policies.oracle`), the baselines and network policies of
 ``mpg_agents`` and any third-party agent run through the same evaluation when they have a
 ``name``, ``reset()`` at each episode's start and ``act(obs) -> flat action``.
 """
