@@ -52,7 +52,7 @@ def make_wrapped_env(cell: int, size: int, action: str = "grid") -> gym.Env:
     ``action="continuous"``) on one thread (picklable for workers)."""
     from mpg_envs.tasks.config import EnvConfig
     from mpg_envs.threads import worker_init
-    from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
+    from mpg_envs.integrations.wrappers import ContinuousAction, GridAction, ImageObservation
 
     worker_init()  # one thread: the workers' parallelism is their number
     env = gym.make(ENV_ID, config=EnvConfig(raycast_threads=1))

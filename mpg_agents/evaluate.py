@@ -46,7 +46,7 @@ class EpisodeRecord:
     objects_left: int | None
     visible_fraction: float | None = None  # the target's visible fraction at reset
     # The actions taken, to replay or compare an episode: flat indices, or for a wrapped env
-    # with a continuous action space (mpg_envs.wrappers.ContinuousAction) tuples of floats.
+    # with a continuous action space (mpg_envs.integrations.wrappers.ContinuousAction) tuples of floats.
     actions: tuple[int | tuple[float, ...], ...] = ()
     seconds: float = field(default=0.0, compare=False)
 

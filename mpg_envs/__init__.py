@@ -21,7 +21,7 @@ import gymnasium as gym  # noqa: E402
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
 from mpg_envs.tasks.stages import STAGES, StageSpec
 from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace
-from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
+from mpg_envs.integrations.wrappers import ContinuousAction, GridAction, ImageObservation
 
 ENV_IDS: tuple[str, ...] = tuple(spec.env_id for spec in STAGES.values())
 

@@ -1,4 +1,4 @@
-"""mpg_envs.wrappers: the image/action maths on hand-checked cases, then the wrappers on real
+"""mpg_envs.integrations.wrappers: the image/action maths on hand-checked cases, then the wrappers on real
 envs through Gymnasium's and SB3's checkers (small scenes keep resets quick)."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 import mpg_envs  # noqa: F401  (registers the ids)
 from mpg_envs.grid.actions import decode_action
-from mpg_envs.wrappers import (
+from mpg_envs.integrations.wrappers import (
     ContinuousAction,
     GridAction,
     ImageObservation,

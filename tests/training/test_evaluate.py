@@ -150,7 +150,7 @@ def test_an_episode_of_a_continuous_action_wrapper_is_recorded():
     import gymnasium as gym
 
     from mpg_agents.evaluate import run_episode
-    from mpg_envs.wrappers import ContinuousAction
+    from mpg_envs.integrations.wrappers import ContinuousAction
 
     env = ContinuousAction(gym.make("MPG-Stage2-v0", num_objects=2, max_motions=2))
 

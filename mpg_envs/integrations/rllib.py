@@ -2,7 +2,7 @@
 
 ::
 
-    from mpg_envs.rllib import register
+    from mpg_envs.integrations.rllib import register
     register()
     config = PPOConfig().environment(
         "MPG-Stage2-v0",
@@ -13,9 +13,9 @@
 ``obs_mode`` ...) plus three keys of its own:
 
 - ``wrappers``: a list applied in order, innermost first; each item a name or a
-  ``[name, kwargs]`` pair. Names: ``"grid"`` (:class:`~mpg_envs.wrappers.GridAction`),
-  ``"continuous"`` (:class:`~mpg_envs.wrappers.ContinuousAction`) and ``"image"``
-  (:class:`~mpg_envs.wrappers.ImageObservation`, channels-last by default because RLlib's
+  ``[name, kwargs]`` pair. Names: ``"grid"`` (:class:`~mpg_envs.integrations.wrappers.GridAction`),
+  ``"continuous"`` (:class:`~mpg_envs.integrations.wrappers.ContinuousAction`) and ``"image"``
+  (:class:`~mpg_envs.integrations.wrappers.ImageObservation`, channels-last by default because RLlib's
   CNN encoder expects ``(H, W, C)``, then cast to float32 in [0, 1] with Gymnasium's
   ``DtypeObservation`` and ``RescaleObservation``: RLlib does not cast uint8 images). The raw env's 802,816-way action and ``Dict`` of
   heightmaps have no default RLlib model: use ``["grid", "image"]`` or your own RLModule.
@@ -41,7 +41,7 @@ import numpy as np
 from gymnasium.wrappers import DtypeObservation, RescaleObservation
 
 from mpg_envs import ENV_IDS, make
-from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
+from mpg_envs.integrations.wrappers import ContinuousAction, GridAction, ImageObservation
 
 SEED_STRIDE = 1000
 """Seeds per env runner: ``seed + SEED_STRIDE * worker_index + vector_index``."""
