@@ -49,8 +49,8 @@ import torch  # noqa: E402
 from stable_baselines3.common.buffers import DictReplayBuffer  # noqa: E402
 from torch.nn import functional as F  # noqa: E402
 
-from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics
-from mpg_agents.regions import region_max
+from mpg_agents.network.mpgnet import MPGNet, recompute_batch_norm_statistics
+from mpg_agents.network.regions import region_max
 from mpg_agents.sb3 import MPGNetPolicy
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
 from mpg_envs.grid.actions import PRIMITIVES, PixelActionSpace

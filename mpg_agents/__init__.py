@@ -3,7 +3,7 @@ its Stable-Baselines3 adapter.
 
 Public entry points (``ARCHITECTURE.md`` maps every module):
 
-- :class:`MPGNet` (``mpg_agents.mpgnet``) / :class:`MPGNetConfig` (``mpg_agents.mpgnet_config``):
+- :class:`MPGNet` (``mpg_agents.network.mpgnet``) / :class:`MPGNetConfig` (``mpg_agents.network.mpgnet_config``):
   the three-branch network; ``save_mpgnet`` / ``load_mpgnet`` (``mpg_agents.weights``).
 - :class:`MPGAgent` (``mpg_agents.agent``): the network deciding with :func:`choose_primitive`
   (``mpg_agents.coordination``) and Q*_g (:class:`GraspThreshold`, ``mpg_agents.grasp_threshold``).
@@ -28,12 +28,12 @@ _LAZY = {
     'GraspThreshold': 'mpg_agents.grasp_threshold',
     'MPGAgent': 'mpg_agents.agent',
     'MPGDQN': 'mpg_agents.sb3',
-    'MPGNet': 'mpg_agents.mpgnet',
-    'MPGNetConfig': 'mpg_agents.mpgnet_config',
+    'MPGNet': 'mpg_agents.network.mpgnet',
+    'MPGNetConfig': 'mpg_agents.network.mpgnet_config',
     'MPGNetPolicy': 'mpg_agents.sb3',
     'MPGQFunction': 'mpg_agents.q_function',
     'MPGQNetwork': 'mpg_agents.sb3',
-    'MobileNetV3Features': 'mpg_agents.mobilenet',
+    'MobileNetV3Features': 'mpg_agents.network.mobilenet',
     'PrioritizedHeightmapReplayBuffer': 'mpg_agents.replay',
     'TDStepConfig': 'mpg_agents.td_step',
     'TRAINING_STAGES': 'mpg_agents.training_stages',
@@ -41,10 +41,10 @@ _LAZY = {
     'TrainingStage': 'mpg_agents.training_stages',
     'calibrate_q_star': 'mpg_agents.grasp_threshold',
     'choose_primitive': 'mpg_agents.coordination',
-    'flat_q': 'mpg_agents.mpgnet',
+    'flat_q': 'mpg_agents.network.mpgnet',
     'load_mpgnet': 'mpg_agents.weights',
-    'load_torchvision_features': 'mpg_agents.mobilenet',
-    'recompute_batch_norm_statistics': 'mpg_agents.mpgnet',
+    'load_torchvision_features': 'mpg_agents.network.mobilenet',
+    'recompute_batch_norm_statistics': 'mpg_agents.network.mpgnet',
     'save_mpgnet': 'mpg_agents.weights',
     'save_qmap_png': 'mpg_agents.visualize',
     'td_step': 'mpg_agents.td_step',

@@ -8,7 +8,7 @@ move/push/grasp coordination and Q*_g. No Stable-Baselines3 in it.
 primitive's Q maps (:mod:`mpg_agents.decision`).
 
 Its parts: :attr:`MPGAgent.q_net` (:class:`~mpg_agents.q_function.MPGQFunction`, holding the
-:class:`~mpg_agents.mpgnet.MPGNet`), the coordination rule, and :attr:`MPGAgent.threshold`
+:class:`~mpg_agents.network.mpgnet.MPGNet`), the coordination rule, and :attr:`MPGAgent.threshold`
 (:class:`~mpg_agents.grasp_threshold.GraspThreshold`, the Q*_g it decides with).
 """
 
@@ -26,7 +26,7 @@ from mpg_agents.coordination import check_coordination, usable_primitives
 from mpg_agents.decision import Decision, decide
 from mpg_agents.discriminator import Discriminator
 from mpg_agents.grasp_threshold import UNCALIBRATED, GraspThreshold, from_header
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.q_function import MPGQFunction, check_action_space
 from mpg_agents.spaces import check_observation_space, resolve_primitives
 from mpg_agents.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet

@@ -3,7 +3,7 @@
 The primitive comes from :func:`mpg_agents.coordination.choose_primitive` (the occlusion bit,
 Q*_g and the best Q of the primitives the rule asks about); only the branches the rule needs
 are computed. Then the best action of that primitive's Q maps is taken where it may act
-(:meth:`mpg_agents.mpgnet.MPGNet.actable`).
+(:meth:`mpg_agents.network.mpgnet.MPGNet.actable`).
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import torch
 from torch import Tensor
 
 from mpg_agents.coordination import choose_primitive
-from mpg_agents.mpgnet import EncodedObs
+from mpg_agents.network.mpgnet import EncodedObs
 from mpg_agents.q_function import MPGQFunction, mask_outside
-from mpg_agents.regions import region_max
+from mpg_agents.network.regions import region_max
 from mpg_envs.grid.actions import encode_action
 
 

@@ -11,7 +11,7 @@ from typing import Any, Mapping
 
 import torch
 
-from mpg_agents.mpgnet import MPGNet
+from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.weights import load_mpgnet
 
 

@@ -21,7 +21,7 @@ import torch
 
 from mpg_agents.heuristics import heuristic_grasp
 from mpg_agents.decision import Decision
-from mpg_agents.regions import footprint_top, target_pixels
+from mpg_agents.network.regions import footprint_top, target_pixels
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 
@@ -56,10 +56,10 @@ class Explorer:
         grasp_on_target: explore grasps on visible target pixels only (for a network whose
             ``grasp_region`` is ``"target"``: it may only grasp there greedily either).
         target_margin_px: with ``grasp_on_target``, those pixels grown or shrunk as the
-            network's (:func:`mpg_agents.regions.target_pixels`), so exploration grasps where a
+            network's (:func:`mpg_agents.network.regions.target_pixels`), so exploration grasps where a
             greedy grasp may.
         move_band_m: explore moves on the target footprint's top (within this many metres of
-            its highest point: :func:`mpg_agents.regions.footprint_top`), for a network whose
+            its highest point: :func:`mpg_agents.network.regions.footprint_top`), for a network whose
             ``move_region`` is ``"top"``; ``None``: anywhere in the rectangle.
         usable: the primitives a random primitive is drawn from (default: ``primitives``; a
             network without a move branch never explores a move).

@@ -5,7 +5,7 @@ env's allowed subset of ``move, push, grasp`` (:mod:`mpg_envs.grid.actions`). :c
 gives MPGNet's Q maps in that order, the Q of chosen actions (the training path: only each
 sample's chosen rotation is computed) and the max-Q actions (the TD target's choice).
 
-Move and grasp act inside the rough target region (:mod:`mpg_agents.regions`): outside it
+Move and grasp act inside the rough target region (:mod:`mpg_agents.network.regions`): outside it
 their Q is 0 by construction, which must not win over a negative Q inside it, so choosing
 masks it to -inf (:meth:`MPGQFunction.masked_flat_q`). A network may lack branches the env
 allows (a grasp-only checkpoint on ``MPG-Occluded-v0``): it acts with the primitives it has
@@ -21,8 +21,8 @@ from gymnasium import spaces
 from torch import Tensor, nn
 
 from mpg_agents.coordination import usable_primitives
-from mpg_agents.mpgnet import EncodedObs, MPGNet, flat_q
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet import EncodedObs, MPGNet, flat_q
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives
 
 

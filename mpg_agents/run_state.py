@@ -21,7 +21,7 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from mpg_agents.grasp_threshold import from_header
-from mpg_agents.mpgnet import MPGNet
+from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.replay import Frame, PrioritizedHeightmapReplayBuffer
 from mpg_agents.weights import chmod_by_umask
 from mpg_agents.weights import load_mpgnet_weights, save_mpgnet

@@ -14,8 +14,8 @@ from typing import Any, Mapping, Sequence
 
 from mpg_agents.coordination import check_coordination
 from mpg_agents.grasp_threshold import UNCALIBRATED, as_record, exported_q_star
-from mpg_agents.mpgnet import MPGNet
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives
 
 CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"

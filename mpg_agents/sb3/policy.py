@@ -21,7 +21,7 @@ from torch import Tensor, nn
 from mpg_agents.agent import AgentMethods, agent_net_config
 from mpg_agents.coordination import check_coordination
 from mpg_agents.grasp_threshold import UNCALIBRATED, GraspThreshold
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.q_function import MPGQFunction, check_action_space
 from mpg_agents.spaces import check_observation_space, resolve_primitives
 from mpg_agents.train_config import TrainConfig

@@ -17,7 +17,7 @@ from .conftest import TINY, calibrate_bn
 from .fake_env import FakeMPGEnv, observation_space, random_scene
 
 CORE = (
-    "mpg_agents", "mpg_agents.agent", "mpg_agents.decision", "mpg_agents.q_function", "mpg_agents.mpgnet",
+    "mpg_agents", "mpg_agents.agent", "mpg_agents.decision", "mpg_agents.q_function", "mpg_agents.network.mpgnet",
     "mpg_agents.coordination", "mpg_agents.grasp_threshold", "mpg_agents.weights", "mpg_agents.discriminator",
     "mpg_agents.td_step", "mpg_agents.exploration", "mpg_agents.train_config", "mpg_agents.policy_zoo",
     "mpg_agents.evaluate", "mpg_agents.cli",

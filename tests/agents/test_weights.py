@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from mpg_agents.mpgnet import MPGNet
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.weights import load_mpgnet, load_mpgnet_weights, save_mpgnet
 
 

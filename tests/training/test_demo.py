@@ -70,7 +70,7 @@ def test_grasps_kept_off_the_target_rim():
     import torch
 
     from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.regions import target_pixels
+    from mpg_agents.network.regions import target_pixels
     from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Stage2-v0")
@@ -88,7 +88,7 @@ def test_moves_kept_on_the_occluders_top():
     import torch
 
     from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.regions import footprint_top
+    from mpg_agents.network.regions import footprint_top
     from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
@@ -139,7 +139,7 @@ def test_shipped_grasps_land_where_the_fingers_are_least_blocked():
     import torch
 
     from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.regions import least_blocked, target_pixels
+    from mpg_agents.network.regions import least_blocked, target_pixels
     from mpg_envs.grid.actions import decode_action
     from mpg_envs.grid.grasp_geometry import fingers_blocked
 

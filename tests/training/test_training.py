@@ -183,8 +183,8 @@ def test_mpg_train_rejects_bad_input(tmp_path, capsys, argv, message):
 
 
 def test_checkpoint_of_another_architecture_is_refused(tmp_path, capsys):
-    from mpg_agents.mpgnet import MPGNet
-    from mpg_agents.mpgnet_config import MPGNetConfig
+    from mpg_agents.network.mpgnet import MPGNet
+    from mpg_agents.network.mpgnet_config import MPGNetConfig
     from mpg_agents.weights import save_mpgnet
 
     other = tmp_path / "other.safetensors"
@@ -236,7 +236,7 @@ def test_shipped_training_configs_load(name):
     from importlib.resources import files
 
     from mpg_agents.cli import training_settings
-    from mpg_agents.mpgnet_config import MPGNetConfig
+    from mpg_agents.network.mpgnet_config import MPGNetConfig
 
     path = files("mpg_agents") / "checkpoints" / name
     base, stages = training_settings(str(path))

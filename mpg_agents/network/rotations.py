@@ -3,7 +3,7 @@
 Conventions of :mod:`mpg_envs.grid.workspace`: for rotation ``k`` the input is resampled so that
 the world direction ``theta_k = 2 pi k / R`` (from +x = increasing column toward +y =
 increasing row) becomes the +column direction of the rotated image. Pure functions (numpy in,
-tensors out), used by :class:`mpg_agents.mpgnet.MPGNet` and unit-tested on small frames.
+tensors out), used by :class:`mpg_agents.network.mpgnet.MPGNet` and unit-tested on small frames.
 """
 
 from __future__ import annotations

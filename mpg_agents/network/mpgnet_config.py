@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Mapping
 
-from mpg_agents.mobilenet import DEFAULT_BN_MOMENTUM, full_depth
-from mpg_agents.rotations import padded_side
+from mpg_agents.network.mobilenet import DEFAULT_BN_MOMENTUM, full_depth
+from mpg_agents.network.rotations import padded_side
 from mpg_envs.grid.actions import HEIGHTMAP_SIZE, PRIMITIVES, check_primitives
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 
@@ -71,18 +71,18 @@ class MPGNetConfig:
             (the paper's rough mask) or ``"target"`` (the visible target pixels grown by
             ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object).
         target_margin_px: growth (> 0) or shrinking (< 0) of the target pixels for
-            ``grasp_region="target"``, in 2 mm pixels (see :func:`mpg_agents.regions.target_pixels`).
+            ``grasp_region="target"``, in 2 mm pixels (see :func:`mpg_agents.network.regions.target_pixels`).
         move_region: where move Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
             (the paper's rough mask) or ``"top"`` (the target footprint's pixels within
             ``move_band_m`` of its highest point: the occluder's top; see
-            :func:`mpg_agents.regions.footprint_top`).
+            :func:`mpg_agents.network.regions.footprint_top`).
         move_band_m: height band of ``move_region="top"``, metres.
         grasp_fingers: which grasps may act: ``"any"`` (the paper) or ``"clear"``: only those
             (pixel, angle) pairs whose open fingers come down least blocked, read off the depth
             heightmap with the 2F-85's geometry (:func:`mpg_envs.grid.grasp_geometry.fingers_blocked`,
             the env's default grasp depth and workspace): the free ones when a grasp in the grasp
             region has free landing strips, else the least blocked in that region, each up to
-            ``finger_tolerance_m`` more blocked (:func:`mpg_agents.regions.least_blocked`). Two
+            ``finger_tolerance_m`` more blocked (:func:`mpg_agents.network.regions.least_blocked`). Two
             thirds of a trained net's greedy grasps in 15-object clutter lifted nothing, most
             with a neighbour under a finger; the small trunk does not see 4 cm to each side.
             It restricts greedy grasps, the grasp score compared with Q*_g and the TD target's

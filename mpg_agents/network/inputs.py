@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 
 
 def batched_inputs(obs: Mapping[str, Any], size: int, device: torch.device) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:

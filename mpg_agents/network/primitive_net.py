@@ -1,6 +1,6 @@
 """One primitive's Q-network: colour and depth MobileNetV3 trunks and a Q head.
 
-:class:`~mpg_agents.mpgnet.MPGNet` holds one :class:`PrimitiveNet` per primitive next to the
+:class:`~mpg_agents.network.mpgnet.MPGNet` holds one :class:`PrimitiveNet` per primitive next to the
 mask trunk they share. Every net reads its planes from one stacked, rotated input tensor
 (:data:`PLANES`).
 """
@@ -12,8 +12,8 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from mpg_agents.mobilenet import MobileNetV3Features
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mobilenet import MobileNetV3Features
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 
 # The input planes, stacked on channels and rotated together; each trunk's stem reads its own
 # channels from the stack (mobilenet.window_weight), so no plane is copied out of it (5 channels).

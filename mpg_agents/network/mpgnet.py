@@ -1,6 +1,6 @@
 """MPGNet: the move/push/grasp fully convolutional Q-networks (paper Section III-B).
 
-Each primitive's net (:mod:`mpg_agents.primitive_net`) encodes the colour and the depth
+Each primitive's net (:mod:`mpg_agents.network.primitive_net`) encodes the colour and the depth
 heightmap with two MobileNetV3 trunks; one mask trunk is shared by all nets. Features are
 concatenated on channels and go through two 1x1 convolutions with batch norm and ReLU to one
 Q channel, which is bilinearly upsampled back to the heightmap. Every heightmap is rotated to
@@ -36,12 +36,12 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from mpg_agents.inputs import normalize_inputs
-from mpg_agents.mobilenet import MobileNetV3Features, load_torchvision_features
-from mpg_agents.mpgnet_config import ROUGH_MASKED, MPGNetConfig
-from mpg_agents.primitive_net import PLANES, PrimitiveNet, run_in_batches
-from mpg_agents.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
-from mpg_agents.rotations import rotation_grids
+from mpg_agents.network.inputs import normalize_inputs
+from mpg_agents.network.mobilenet import MobileNetV3Features, load_torchvision_features
+from mpg_agents.network.mpgnet_config import ROUGH_MASKED, MPGNetConfig
+from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches
+from mpg_agents.network.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
+from mpg_agents.network.rotations import rotation_grids
 from mpg_envs.grid.grasp_geometry import fingers_blocked
 from mpg_envs.simulation.primitives import PrimitiveConfig
 from mpg_envs.grid.workspace import Workspace
@@ -119,7 +119,7 @@ class MPGNet(nn.Module):
 
     # ------------------------------------------------------------------ inputs
     def normalize(self, obs: Mapping[str, Any]) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor | None]:
-        """:func:`mpg_agents.inputs.normalize_inputs` with this network's settings."""
+        """:func:`mpg_agents.network.inputs.normalize_inputs` with this network's settings."""
         return normalize_inputs(obs, self.config, self.color_mean, self.color_std)
 
     # --------------------------------------------------------------- geometry
