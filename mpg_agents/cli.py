@@ -14,7 +14,7 @@ from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any, Sequence
 
-from mpg_agents.coordination import COORDINATIONS
+from mpg_agents.acting.coordination import COORDINATIONS
 from mpg_agents.env_options import parse_env_options
 
 
@@ -85,7 +85,7 @@ def _check_checkpoint(path: str | None) -> None:
         return
     if not Path(path).is_file():
         raise UsageError(f"checkpoint {path!r} does not exist")
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     try:
         read_checkpoint_header(path)
@@ -124,7 +124,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
 
     set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
     try:
-        from mpg_agents.grasp_threshold import as_record
+        from mpg_agents.acting.grasp_threshold import as_record
         from mpg_agents.learner import Learner
         from mpg_agents.train_config import TrainConfig, json_safe
         from mpg_agents import training_stages as ts
@@ -274,7 +274,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
-        from mpg_agents.grasp_threshold import calibrate_q_star, calibration_dict
+        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict
         from mpg_agents.policy_zoo import make_policy
 
         _check_env_id(args.env)
@@ -324,7 +324,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--coordination", choices=COORDINATIONS, help="the rule the copy acts with")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.weights import export_weights, read_checkpoint_header
+        from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
         _check_checkpoint(args.src)
         settings = _net_settings(args)

@@ -6,7 +6,7 @@
   pixels for a network that grasps only there), push within 25 pixels (5 cm) of it; with the
   ``max_q`` coordination the primitive is random too;
 - after ``heuristic_after_failed_grasps`` failed grasps in a row the next grasp is the
-  pixel-only heuristic grasp (:mod:`mpg_agents.heuristics`), a training aid of the paper.
+  pixel-only heuristic grasp (:mod:`mpg_agents.acting.heuristics`), a training aid of the paper.
 
 One seeded generator drives every random choice; its state is saved with the run.
 """
@@ -19,8 +19,8 @@ from typing import Mapping, Sequence
 import numpy as np
 import torch
 
-from mpg_agents.heuristics import heuristic_grasp
-from mpg_agents.decision import Decision
+from mpg_agents.acting.heuristics import heuristic_grasp
+from mpg_agents.acting.decision import Decision
 from mpg_agents.network.regions import footprint_top, target_pixels
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.workspace import NUM_ROTATIONS

@@ -1,13 +1,13 @@
 """The DQN learner of MPGNet for one training stage (paper Sections III-C and III-D).
 
-One iteration: observe, decide (the agent's coordination, :class:`~mpg_agents.agent.MPGAgent`;
+One iteration: observe, decide (the agent's coordination, :class:`~mpg_agents.acting.agent.MPGAgent`;
 Stage IV's forced grasp after its push budget), explore (:mod:`mpg_agents.exploration`), act,
 store the transition, and take one gradient step (:func:`mpg_agents.td_step.td_step`) on a
 prioritised batch with the stage's frozen branches left out. What the stage trains comes from
 its :class:`~mpg_agents.training_stages.TrainingStage`; the algorithm's settings from
 :class:`~mpg_agents.train_config.TrainConfig`.
 
-Q*_g (:mod:`mpg_agents.grasp_threshold`): a run starts with ``TrainConfig.q_star`` or else the
+Q*_g (:mod:`mpg_agents.acting.grasp_threshold`): a run starts with ``TrainConfig.q_star`` or else the
 starting checkpoint's; a stage with ``calibration_episodes`` calibrates it in its own scenes,
 one with ``calibrates_q_star`` estimates it from its own greedy grasps at its end. The weights
 carry it.
@@ -41,20 +41,20 @@ import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.agent import MPGAgent
+from mpg_agents.acting.agent import MPGAgent
 from mpg_agents.demonstrations import collect_demonstrations
-from mpg_agents.discriminator import Discriminator
+from mpg_agents.acting.discriminator import Discriminator
 from mpg_agents.exploration import Choice, Explorer, linear_epsilon
-from mpg_agents.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
-from mpg_agents.q_function import MPGQFunction
+from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
+from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.run_state import load_run_state, save_run_state, state_folder
-from mpg_agents.seeds import episode_seed, reset_first_valid
+from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_agents.td_step import td_step
 from mpg_agents.train_config import TrainConfig, json_safe
 from mpg_agents.train_log import IterationRecord, TrainingLog
 from mpg_agents.training_stages import TrainingStage, stage_for_env
-from mpg_agents.weights import load_mpgnet_weights
+from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
@@ -233,7 +233,7 @@ class Learner:
         return summary
 
     def calibrate_in_scenes(self, episodes: int) -> float:
-        """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.grasp_threshold.calibrate_q_star`,
+        """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.acting.grasp_threshold.calibrate_q_star`,
         at the stage's ``calibration_quantile``) and save the state (a resumed run keeps it);
         ``calibration.json`` in the run folder keeps every value of the stage.
 
@@ -260,7 +260,7 @@ class Learner:
 
     def calibrate_from_own_grasps(self) -> float:
         """A ``calibrates_q_star`` stage at its end: Q*_g estimated from the Q of its recent
-        greedy grasps that took the target (:func:`~mpg_agents.grasp_threshold.estimate_q_star`
+        greedy grasps that took the target (:func:`~mpg_agents.acting.grasp_threshold.estimate_q_star`
         at the stage's ``calibration_quantile``), and the state saved; unchanged when no greedy
         grasp took the target. Returns Q*_g."""
         taken = self.counters.successful_grasp_q

@@ -20,11 +20,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
-from mpg_agents.grasp_threshold import UNCALIBRATED, as_record, from_header
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, from_header
 from mpg_agents.learner import Learner
 from mpg_agents.train_config import TrainConfig, json_safe
 from mpg_agents.training_stages import TRAINING_STAGES, TrainingStage
-from mpg_agents.weights import read_checkpoint_header
+from mpg_agents.acting.weights import read_checkpoint_header
 
 
 @dataclass

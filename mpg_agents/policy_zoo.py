@@ -27,7 +27,7 @@ from typing import Any, Mapping, Sequence
 import gymnasium as gym
 import numpy as np
 
-from mpg_agents.heuristics import heuristic_grasp_action
+from mpg_agents.acting.heuristics import heuristic_grasp_action
 
 BUILTIN = ("oracle", "random", "grasp-only", "shipped")
 SHIPPED_CHECKPOINT = "mpgnet_small.safetensors"
@@ -81,10 +81,10 @@ class GraspOnlyBaseline:
 class NetworkPolicy:
     """An MPGNet checkpoint with the paper's coordination (greedy, no exploration).
 
-    ``policy`` is the :class:`~mpg_agents.agent.MPGAgent` it acts with. ``primitives`` are the
+    ``policy`` is the :class:`~mpg_agents.acting.agent.MPGAgent` it acts with. ``primitives`` are the
     env's primitives the network has branches for; when that is fewer than the env allows,
     ``name`` ends with e.g. ``(grasp-only net)``. The keyword settings override the
-    checkpoint's: the coordination, Q*_g (:func:`~mpg_agents.grasp_threshold.check_override`)
+    checkpoint's: the coordination, Q*_g (:func:`~mpg_agents.acting.grasp_threshold.check_override`)
     and settings that change no weight.
 
     A greedy Q policy is a function of the observation: when an action changes nothing (a
@@ -101,8 +101,8 @@ class NetworkPolicy:
     ):
         import torch
 
-        from mpg_agents.agent import MPGAgent
-        from mpg_agents.grasp_threshold import check_override
+        from mpg_agents.acting.agent import MPGAgent
+        from mpg_agents.acting.grasp_threshold import check_override
 
         torch.set_flush_denormal(True)  # see mpg_agents.learner: denormals slow CPUs down
         path = Path(path)

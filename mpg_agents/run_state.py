@@ -1,5 +1,5 @@
 """A training run's resumable state on disk (not the network's weight format: see
-:mod:`mpg_agents.weights`), without pickle.
+:mod:`mpg_agents.acting.weights`), without pickle.
 
 A run directory holds ``weights.safetensors`` (the online MPGNet, usable on its own) and a
 ``state/`` folder: the target network (safetensors), the optimiser (tensors in safetensors,
@@ -20,11 +20,11 @@ import numpy as np
 import torch
 from safetensors.torch import load_file, save_file
 
-from mpg_agents.grasp_threshold import from_header
+from mpg_agents.acting.grasp_threshold import from_header
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.replay import Frame, PrioritizedHeightmapReplayBuffer
-from mpg_agents.weights import chmod_by_umask
-from mpg_agents.weights import load_mpgnet_weights, save_mpgnet
+from mpg_agents.acting.weights import chmod_by_umask
+from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
 
 STATE_FORMAT = "mpg-train-state-v1"
 

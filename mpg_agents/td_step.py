@@ -25,7 +25,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from mpg_agents.q_function import MPGQFunction
+from mpg_agents.acting.q_function import MPGQFunction
 
 
 @dataclass(frozen=True)
@@ -119,8 +119,8 @@ def td_step(
     """One gradient step on ``batch`` (SB3 replay samples: observations, actions, ...).
 
     Args:
-        q_net: the online network (:class:`~mpg_agents.q_function.MPGQFunction`).
-        q_net_target: the target network (:class:`~mpg_agents.q_function.MPGQFunction`).
+        q_net: the online network (:class:`~mpg_agents.acting.q_function.MPGQFunction`).
+        q_net_target: the target network (:class:`~mpg_agents.acting.q_function.MPGQFunction`).
         optimizer: over ``q_net``'s parameters.
         batch: SB3 ``DictReplayBufferSamples``; per-sample ``discounts`` replace ``gamma`` when
             present; ``indices`` (prioritised buffers) are where priorities are written.

@@ -12,7 +12,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from mpg_agents.grasp_threshold import UNCALIBRATED
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED
 from mpg_agents.td_step import TDStepConfig
 from mpg_agents.training_stages import check_fields
 
@@ -44,7 +44,7 @@ class TrainConfig:
     # Training aids (paper, Simulation Experiments).
     heuristic_after_failed_grasps: int = 2
     # The run's starting Q*_g, overriding the starting checkpoint's; NaN: the checkpoint's
-    # (mpg_agents.grasp_threshold.starting_q_star).
+    # (mpg_agents.acting.grasp_threshold.starting_q_star).
     q_star: float = UNCALIBRATED
     # Not the paper's (pure RL): oracle episodes whose transitions seed the replay of a fresh run (0: none).
     demonstration_episodes: int = 0

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, Callable, Mapping, Sequence
 
-from mpg_agents.coordination import check_coordination
+from mpg_agents.acting.coordination import check_coordination
 from mpg_envs.grid.actions import check_primitives
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
@@ -39,10 +39,10 @@ class TrainingStage:
         finish_iterations: the stage's last this many iterations train only ``finish_trainable``
             (0: no finish), e.g. the grasp net alone after the three nets' alternation.
         finish_trainable: the branches that learn in the finish.
-        coordination: how the primitive is chosen (:mod:`mpg_agents.coordination`).
+        coordination: how the primitive is chosen (:mod:`mpg_agents.acting.coordination`).
         calibrates_q_star: at its end, the stage estimates Q*_g from the Q of its own recent
             greedy grasps that took the target (at ``calibration_quantile``;
-            :mod:`mpg_agents.grasp_threshold`).
+            :mod:`mpg_agents.acting.grasp_threshold`).
         calibration_episodes: before it trains, the stage calibrates Q*_g again in its own
             scenes from the Q of the greedy grasps that take the target in this many
             grasp-only episodes of the starting net, no learning (0: keep the Q*_g it is given).

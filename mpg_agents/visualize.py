@@ -182,9 +182,9 @@ def save_qmap_png(
 
 def save_policy_qmaps(path: str | Path, policy: Any, obs: Mapping[str, Any]) -> Path:
     """:func:`save_qmap_png` for an agent's decision on ``obs`` (an
-    :class:`~mpg_agents.agent.MPGAgent` or SB3's ``MPGNetPolicy``), with the Q maps of every
+    :class:`~mpg_agents.acting.agent.MPGAgent` or SB3's ``MPGNetPolicy``), with the Q maps of every
     primitive the network has (the decision itself may compute only some of them)."""
-    from mpg_agents.agent import batch_observation
+    from mpg_agents.acting.agent import batch_observation
 
     decision = policy.decide(obs)
     net = policy.q_net.mpgnet

@@ -3,8 +3,8 @@ policy and algorithm classes (the replay buffer, :mod:`mpg_agents.replay`, imple
 buffer API).
 
 - :class:`MPGNetPolicy`: ``stable_baselines3.DQN(MPGNetPolicy, env)`` runs on every MPG env;
-  it decides as :class:`~mpg_agents.agent.MPGAgent` does.
-- :class:`MPGQNetwork`: its Q-network, :class:`~mpg_agents.q_function.MPGQFunction` as SB3's
+  it decides as :class:`~mpg_agents.acting.agent.MPGAgent` does.
+- :class:`MPGQNetwork`: its Q-network, :class:`~mpg_agents.acting.q_function.MPGQFunction` as SB3's
   ``QNetwork``.
 - :class:`MPGDQN`: SB3's DQN whose gradient step is ``mpg-train``'s
   (:func:`~mpg_agents.td_step.td_step`), with ``mpg-train``'s settings as its defaults

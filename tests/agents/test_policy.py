@@ -13,7 +13,7 @@ from stable_baselines3 import DQN
 
 from mpg_agents import MPGDQN, MPGNetPolicy, PrioritizedHeightmapReplayBuffer
 from mpg_agents.network.regions import region_max, target_region
-from mpg_agents.spaces import resolve_primitives
+from mpg_agents.acting.spaces import resolve_primitives
 from mpg_envs.grid.actions import PixelActionSpace, decode_action
 
 from .conftest import TINY, calibrate_bn

@@ -14,7 +14,7 @@ GRASP_NET = str(shipped_checkpoint().parent / "stage2_grasp_small.safetensors")
 def test_shipped_checkpoint_is_small_and_loads():
     path = shipped_checkpoint()
     assert path.stat().st_size < 10 * 2**20
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     header = read_checkpoint_header(path)
     assert header["primitives"] == ["move", "push", "grasp"] and header["variant"] == "small"

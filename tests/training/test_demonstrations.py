@@ -9,7 +9,7 @@ import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.demonstrations import DemoStats, collect_demonstrations
-from mpg_agents.seeds import episode_seed
+from mpg_agents.acting.seeds import episode_seed
 from mpg_agents.learner import Counters, Learner
 from mpg_agents.train_config import TrainConfig
 

@@ -12,8 +12,8 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from mpg_agents.coordination import check_coordination
-from mpg_agents.grasp_threshold import UNCALIBRATED, as_record, exported_q_star
+from mpg_agents.acting.coordination import check_coordination
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, exported_q_star
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives
@@ -25,7 +25,7 @@ def checkpoint_metadata(
     net: MPGNet, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> dict[str, str]:
     """The safetensors metadata header: one JSON document under key ``"mpgnet"``; its
-    ``"q_star"`` is where a checkpoint stores Q*_g (:mod:`mpg_agents.grasp_threshold`), its
+    ``"q_star"`` is where a checkpoint stores Q*_g (:mod:`mpg_agents.acting.grasp_threshold`), its
     ``"package_version"`` the version of the package that wrote it (the env id, with its
     version, a training run writes under ``extra``)."""
     from mpg_envs import __version__
@@ -170,10 +170,10 @@ def export_weights(
     ``settings`` change :data:`SETTINGS_WITHOUT_WEIGHTS` in the copy's configuration (e.g. a
     move region measured better after training); the header's ``extra`` records them as
     ``settings_after_training``, so the copy never passes for what training used.
-    ``coordination`` records the rule the copy acts with (:mod:`mpg_agents.coordination`;
+    ``coordination`` records the rule the copy acts with (:mod:`mpg_agents.acting.coordination`;
     default: the checkpoint's), for checkpoints written before the learner recorded it.
     ``q_star`` replaces Q*_g (e.g. one measured under the new settings); the header's ``extra``
-    keeps training's as ``q_star_from_training`` (:func:`~mpg_agents.grasp_threshold.exported_q_star`).
+    keeps training's as ``q_star_from_training`` (:func:`~mpg_agents.acting.grasp_threshold.exported_q_star`).
     """
     settings = dict(settings or {})
     weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))

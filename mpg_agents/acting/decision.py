@@ -1,6 +1,6 @@
 """The greedy coordinated decision: which primitive, then its best pixel and rotation.
 
-The primitive comes from :func:`mpg_agents.coordination.choose_primitive` (the occlusion bit,
+The primitive comes from :func:`mpg_agents.acting.coordination.choose_primitive` (the occlusion bit,
 Q*_g and the best Q of the primitives the rule asks about); only the branches the rule needs
 are computed. Then the best action of that primitive's Q maps is taken where it may act
 (:meth:`mpg_agents.network.mpgnet.MPGNet.actable`).
@@ -13,9 +13,9 @@ from typing import Mapping, NamedTuple
 import torch
 from torch import Tensor
 
-from mpg_agents.coordination import choose_primitive
+from mpg_agents.acting.coordination import choose_primitive
 from mpg_agents.network.mpgnet import EncodedObs
-from mpg_agents.q_function import MPGQFunction, mask_outside
+from mpg_agents.acting.q_function import MPGQFunction, mask_outside
 from mpg_agents.network.regions import region_max
 from mpg_envs.grid.actions import encode_action
 
@@ -46,7 +46,7 @@ def decide(
     Args:
         q: the network on the env's action space.
         obs: a batch (leading axis) of raw observation tensors.
-        coordination: one of :data:`~mpg_agents.coordination.COORDINATIONS`.
+        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS`.
         q_star: the grasp threshold Q*_g (NaN: uncalibrated).
         primitive: overrides the coordination's choice of primitive (e.g. Stage IV's final grasp).
         forbidden: ``{primitive: (R, H, W) bool}`` actions not to take (one sample only; e.g.

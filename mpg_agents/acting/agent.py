@@ -4,12 +4,12 @@ move/push/grasp coordination and Q*_g. No Stable-Baselines3 in it.
 :class:`MPGAgent` is what ``mpg-train``'s learner trains and acts with, what ``mpg-eval`` and
 ``mpg-calibrate`` load (:mod:`mpg_agents.policy_zoo`), and what the SB3 adapter
 (:mod:`mpg_agents.sb3`) wraps. A decision (:meth:`MPGAgent.decide`) picks the primitive with
-:func:`mpg_agents.coordination.choose_primitive` and then the best pixel and rotation of that
-primitive's Q maps (:mod:`mpg_agents.decision`).
+:func:`mpg_agents.acting.coordination.choose_primitive` and then the best pixel and rotation of that
+primitive's Q maps (:mod:`mpg_agents.acting.decision`).
 
-Its parts: :attr:`MPGAgent.q_net` (:class:`~mpg_agents.q_function.MPGQFunction`, holding the
+Its parts: :attr:`MPGAgent.q_net` (:class:`~mpg_agents.acting.q_function.MPGQFunction`, holding the
 :class:`~mpg_agents.network.mpgnet.MPGNet`), the coordination rule, and :attr:`MPGAgent.threshold`
-(:class:`~mpg_agents.grasp_threshold.GraspThreshold`, the Q*_g it decides with).
+(:class:`~mpg_agents.acting.grasp_threshold.GraspThreshold`, the Q*_g it decides with).
 """
 
 from __future__ import annotations
@@ -22,14 +22,14 @@ import torch
 from gymnasium import spaces
 from torch import Tensor, nn
 
-from mpg_agents.coordination import check_coordination, usable_primitives
-from mpg_agents.decision import Decision, decide
-from mpg_agents.discriminator import Discriminator
-from mpg_agents.grasp_threshold import UNCALIBRATED, GraspThreshold, from_header
+from mpg_agents.acting.coordination import check_coordination, usable_primitives
+from mpg_agents.acting.decision import Decision, decide
+from mpg_agents.acting.discriminator import Discriminator
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED, GraspThreshold, from_header
 from mpg_agents.network.mpgnet_config import MPGNetConfig
-from mpg_agents.q_function import MPGQFunction, check_action_space
-from mpg_agents.spaces import check_observation_space, resolve_primitives
-from mpg_agents.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet
+from mpg_agents.acting.q_function import MPGQFunction, check_action_space
+from mpg_agents.acting.spaces import check_observation_space, resolve_primitives
+from mpg_agents.acting.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet
 from mpg_envs.grid.actions import check_primitives
 
 
@@ -85,8 +85,8 @@ def batch_observation(observation: Mapping[str, Any], device: torch.device | str
 
 
 class AgentMethods:
-    """What an MPGNet agent does with ``q_net`` (:class:`~mpg_agents.q_function.MPGQFunction`),
-    ``threshold`` (:class:`~mpg_agents.grasp_threshold.GraspThreshold`) and ``coordination``:
+    """What an MPGNet agent does with ``q_net`` (:class:`~mpg_agents.acting.q_function.MPGQFunction`),
+    ``threshold`` (:class:`~mpg_agents.acting.grasp_threshold.GraspThreshold`) and ``coordination``:
     decide, hold Q*_g, save and load weights. :class:`MPGAgent` and the SB3 adapter's
     ``MPGNetPolicy`` both act through it.
     """
@@ -132,7 +132,7 @@ class AgentMethods:
         self.threshold.set(value)
 
     def set_coordination(self, coordination: str) -> None:
-        """Switch to another of :data:`~mpg_agents.coordination.COORDINATIONS`."""
+        """Switch to another of :data:`~mpg_agents.acting.coordination.COORDINATIONS`."""
         self.coordination = check_coordination(coordination)
 
     # -------------------------------------------------------------- decisions
@@ -159,7 +159,7 @@ class AgentMethods:
     def decide_batch(
         self, obs: Mapping[str, Tensor], primitive: str | None = None, forbidden: Mapping[str, Any] | None = None
     ) -> list[Decision]:
-        """Coordinated decisions for a batch of observation tensors (see :func:`~mpg_agents.decision.decide`)."""
+        """Coordinated decisions for a batch of observation tensors (see :func:`~mpg_agents.acting.decision.decide`)."""
         return decide(self.q_net, obs, self.coordination, self.q_star, primitive, forbidden)
 
     def discriminator(self) -> Discriminator:
@@ -191,7 +191,7 @@ class MPGAgent(AgentMethods):
     Args:
         q_net: the network on the env's action space.
         coordination: ``"workflow"`` (paper), ``"grasp_first"`` or ``"max_q"`` (ablation); see
-            :mod:`mpg_agents.coordination`.
+            :mod:`mpg_agents.acting.coordination`.
         threshold: the Q*_g it decides with (default: a new, uncalibrated one).
 
     Build one with :meth:`build` (a fresh network) or :meth:`from_weights` (a checkpoint).

@@ -20,7 +20,7 @@ import torch
 from gymnasium import spaces
 from torch import Tensor, nn
 
-from mpg_agents.coordination import usable_primitives
+from mpg_agents.acting.coordination import usable_primitives
 from mpg_agents.network.mpgnet import EncodedObs, MPGNet, flat_q
 from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives

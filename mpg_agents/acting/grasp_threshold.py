@@ -1,12 +1,12 @@
 """Q*_g, the grasp threshold of the coordination: how it is estimated, held, stored, overridden
 and recorded. Every other module reads it through this one.
 
-The paper's workflow grasps when the best grasp Q reaches Q*_g (:mod:`mpg_agents.coordination`).
+The paper's workflow grasps when the best grasp Q reaches Q*_g (:mod:`mpg_agents.acting.coordination`).
 
 - **Estimate**: :func:`estimate_q_star`, a quantile of the Q of greedy grasps that took the
   target (the paper sets Q*_g from the Q of successful grasps). :func:`calibrate_q_star` measures
   it in a stage's own scenes: ``episodes`` greedy grasp-only episodes of the net, nothing learned,
-  on the calibration seeds of :func:`~mpg_agents.seeds.episode_seed` (clear of the training and
+  on the calibration seeds of :func:`~mpg_agents.acting.seeds.episode_seed` (clear of the training and
   evaluation seeds; the same run seed gives the same scenes, so successive calibrations of one
   run use one measuring stick). A stage with ``calibrates_q_star`` applies the same estimate to
   its own recent greedy grasps that took the target, at its end.
@@ -35,10 +35,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from mpg_agents.seeds import episode_seed, reset_first_valid
+from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 
 if TYPE_CHECKING:
-    from mpg_agents.agent import MPGAgent
+    from mpg_agents.acting.agent import MPGAgent
 
 UNCALIBRATED = float("nan")
 """Q*_g before any estimate: the coordination then compares the best grasp and push Q instead."""
@@ -114,7 +114,7 @@ def calibrate_q_star(
     """Measure Q*_g of ``agent`` in ``env``'s scenes (greedy grasps only, nothing learned).
 
     Args:
-        agent: the net (an :class:`~mpg_agents.agent.MPGAgent`, or anything with
+        agent: the net (an :class:`~mpg_agents.acting.agent.MPGAgent`, or anything with
             ``decide(obs, primitive)``, ``usable_primitives`` and ``branches``); only its grasp
             branch acts.
         env: the scenes; episode ``k`` is reset with ``episode_seed(seed, k, calibration=True)``.

@@ -12,7 +12,7 @@ from typing import Any, Mapping
 import torch
 
 from mpg_agents.network.mpgnet import MPGNet
-from mpg_agents.weights import load_mpgnet
+from mpg_agents.acting.weights import load_mpgnet
 
 
 class Discriminator:
