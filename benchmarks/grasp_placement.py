@@ -23,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.policy_zoo import NetworkPolicy
+from mpg_agents.evaluation.policy_zoo import NetworkPolicy
 from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_envs.threads import set_torch_threads
 from mpg_envs.grid.workspace import NUM_ROTATIONS

@@ -1,7 +1,7 @@
 """The scripted oracle on held-out ``MPG-Occluded-v0`` episodes: success, motions, and why it failed.
 
 Episode ``i`` of a cell is reset with seed ``--seed + i`` (the same scenes for any run; the
-episodes and their metrics are ``mpg-eval``'s, :mod:`mpg_agents.evaluate`). For each object
+episodes and their metrics are ``mpg-eval``'s, :mod:`mpg_agents.evaluation.evaluate`). For each object
 count: the success rate and the mean motions per episode with their 95% intervals, and every
 failed episode categorised:
 
@@ -33,7 +33,7 @@ from typing import Any
 import gymnasium as gym
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.evaluate import EpisodeRecord, run_episodes, summarise
+from mpg_agents.evaluation.evaluate import EpisodeRecord, run_episodes, summarise
 from mpg_envs.policies.oracle import OracleConfig, OraclePolicy
 
 ENV_ID = "MPG-Occluded-v0"

@@ -5,7 +5,7 @@ Trains SB3's PPO and DQN with ``CnnPolicy`` through the standard wrappers,
 pixel cells x 8 grasp angles), for a fixed budget of env steps on a ``SubprocVecEnv``
 (``--envs`` workers, one torch/OpenMP thread and ``raycast_threads=1`` each). Then it
 evaluates each trained model, and the built-in ``random``, ``grasp-only`` and ``shipped``
-(MPGNet) policies on the raw env, with ``mpg_agents.evaluate.evaluate``: the same
+(MPGNet) policies on the raw env, with ``mpg_agents.evaluation.evaluate.evaluate``: the same
 episodes for all, seeded ``--eval-seed + k`` (held out: training envs draw scenes from
 ``--seed + worker``).
 
@@ -243,7 +243,7 @@ class SB3Policy:
 def evaluate_row(policy, env: gym.Env, args: argparse.Namespace) -> dict:
     from scipy.stats import binomtest
 
-    from mpg_agents.evaluate import evaluate
+    from mpg_agents.evaluation.evaluate import evaluate
 
     result = evaluate(policy, env, args.episodes, args.eval_seed)
     successes = int(round(result.task_success_rate * args.episodes))
@@ -299,7 +299,7 @@ def main(argv: list[str] | None = None) -> dict:
     import torch
 
     import mpg_envs  # noqa: F401
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_envs.tasks.config import EnvConfig
 
     torch.set_num_threads(1)

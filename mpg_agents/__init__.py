@@ -11,7 +11,7 @@ Public entry points (``ARCHITECTURE.md`` maps every module):
   and SB3's DQN training with :func:`td_step` (``mpg_agents.td_step``).
 - :class:`PrioritizedHeightmapReplayBuffer` (``mpg_agents.replay``): compact SB3 replay buffer.
 - :data:`TRAINING_STAGES` (``mpg_agents.training_stages``): the paper's stages as data.
-- :func:`save_qmap_png` (``mpg_agents.visualize``): Q-map pictures.
+- :func:`save_qmap_png` (``mpg_agents.evaluation.visualize``): Q-map pictures.
 """
 
 from mpg_envs._version import __version__  # one version for both packages
@@ -46,7 +46,7 @@ _LAZY = {
     'load_torchvision_features': 'mpg_agents.network.mobilenet',
     'recompute_batch_norm_statistics': 'mpg_agents.network.mpgnet',
     'save_mpgnet': 'mpg_agents.acting.weights',
-    'save_qmap_png': 'mpg_agents.visualize',
+    'save_qmap_png': 'mpg_agents.evaluation.visualize',
     'td_step': 'mpg_agents.td_step',
     'td_targets': 'mpg_agents.td_step',
 }

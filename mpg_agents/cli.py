@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from mpg_agents.acting.coordination import COORDINATIONS
-from mpg_agents.env_options import parse_env_options
+from mpg_agents.evaluation.env_options import parse_env_options
 
 
 class UsageError(Exception):
@@ -196,8 +196,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--peers", help="with --cases epg or gti: the folder holding the peers' files (vpg/, gti/)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.policy_zoo import BUILTIN
-        from mpg_agents.eval_runner import EvalJob, evaluate_parallel
+        from mpg_agents.evaluation.policy_zoo import BUILTIN
+        from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel
 
         _check_env_id(args.env)
         if args.policy not in BUILTIN:
@@ -237,7 +237,7 @@ def _report(result: Any, json_path: str | None) -> int:
 def _eval_cases(args: argparse.Namespace, policy_kwargs: dict[str, Any], env_options: dict[str, Any]) -> int:
     """``mpg-eval --cases``: every case of a set, ``--runs`` runs each, one row per case
     (strict retrieval unless ``--env-option wrong_grasp=...`` says otherwise)."""
-    from mpg_agents.case_runs import run_case_set
+    from mpg_agents.evaluation.case_runs import run_case_set
     from mpg_envs.scenes.cases import load_cases
 
     if args.workers not in (None, 1) or args.ray_address is not None:
@@ -275,7 +275,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         import gymnasium as gym
 
         from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict
-        from mpg_agents.policy_zoo import make_policy
+        from mpg_agents.evaluation.policy_zoo import make_policy
 
         _check_env_id(args.env)
         if args.policy != "shipped":

@@ -76,8 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps.png (default demo_out)")
     args = parser.parse_args(argv)
 
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.evaluate import evaluate
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_agents.evaluation.evaluate import evaluate
 
     from mpg_envs.threads import set_torch_threads
 

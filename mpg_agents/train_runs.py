@@ -86,7 +86,7 @@ def train_run(spec: RunSpec) -> RunResult:
     ``train.log`` in its folder (appended, so a resumed run keeps its history)."""
     if spec.finished:
         return RunResult(spec.run, spec.seed, str(spec.folder), "finished before", 0.0)
-    from mpg_agents.eval_runner import THREAD_ENV
+    from mpg_agents.evaluation.eval_runner import THREAD_ENV
 
     spec.folder.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, **THREAD_ENV}
@@ -114,7 +114,7 @@ def plan_runs(runs: Sequence[str], seeds: Sequence[int], config: str | Path = DE
 def train_runs(specs: Sequence[RunSpec], workers: int | None = 1, ray_address: str | None = None) -> list[RunResult]:
     """Run ``specs`` as Ray tasks, ``workers`` at once on a local Ray (one CPU each), or on the
     cluster at ``ray_address``; results in the order of ``specs``."""
-    from mpg_agents.eval_runner import ray_session
+    from mpg_agents.evaluation.eval_runner import ray_session
 
     with ray_session(workers, ray_address) as ray:
         remote = ray.remote(num_cpus=1, max_retries=0)(train_run)

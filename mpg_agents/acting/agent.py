@@ -2,7 +2,7 @@
 move/push/grasp coordination and Q*_g. No Stable-Baselines3 in it.
 
 :class:`MPGAgent` is what ``mpg-train``'s learner trains and acts with, what ``mpg-eval`` and
-``mpg-calibrate`` load (:mod:`mpg_agents.policy_zoo`), and what the SB3 adapter
+``mpg-calibrate`` load (:mod:`mpg_agents.evaluation.policy_zoo`), and what the SB3 adapter
 (:mod:`mpg_agents.sb3`) wraps. A decision (:meth:`MPGAgent.decide`) picks the primitive with
 :func:`mpg_agents.acting.coordination.choose_primitive` and then the best pixel and rotation of that
 primitive's Q maps (:mod:`mpg_agents.acting.decision`).

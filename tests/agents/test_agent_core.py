@@ -19,8 +19,8 @@ from .fake_env import FakeMPGEnv, observation_space, random_scene
 CORE = (
     "mpg_agents", "mpg_agents.acting.agent", "mpg_agents.acting.decision", "mpg_agents.acting.q_function", "mpg_agents.network.mpgnet",
     "mpg_agents.acting.coordination", "mpg_agents.acting.grasp_threshold", "mpg_agents.acting.weights", "mpg_agents.acting.discriminator",
-    "mpg_agents.td_step", "mpg_agents.exploration", "mpg_agents.train_config", "mpg_agents.policy_zoo",
-    "mpg_agents.evaluate", "mpg_agents.cli",
+    "mpg_agents.td_step", "mpg_agents.exploration", "mpg_agents.train_config", "mpg_agents.evaluation.policy_zoo",
+    "mpg_agents.evaluation.evaluate", "mpg_agents.cli",
 )
 
 

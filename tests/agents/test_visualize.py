@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.visualize import (
+from mpg_agents.evaluation.visualize import (
     COLORBAR_PX,
     FOOTER_PX,
     HEADER_PX,

@@ -3,7 +3,7 @@
 import cv2
 
 import mpg_envs.perception.render as render_module
-from mpg_agents.policy_zoo import shipped_checkpoint
+from mpg_agents.evaluation.policy_zoo import shipped_checkpoint
 from mpg_agents.demo import PANEL_PX, TITLE_PX, main
 
 # The Stage I-II grasp net (the learned Grasping-Only of the earlier release), kept beside
@@ -51,7 +51,7 @@ def test_demo_without_opengl_says_so_and_writes_the_heightmaps(tmp_path, capsys,
 def test_grasp_net_with_grasps_kept_on_the_target():
     import gymnasium as gym
 
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
@@ -69,7 +69,7 @@ def test_grasps_kept_off_the_target_rim():
     import gymnasium as gym
     import torch
 
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_agents.network.regions import target_pixels
     from mpg_envs.grid.actions import decode_action
 
@@ -87,7 +87,7 @@ def test_moves_kept_on_the_occluders_top():
     import gymnasium as gym
     import torch
 
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_agents.network.regions import footprint_top
     from mpg_envs.grid.actions import decode_action
 
@@ -109,7 +109,7 @@ def test_moves_kept_on_the_occluders_top():
 def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
     import gymnasium as gym
 
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
@@ -138,7 +138,7 @@ def test_shipped_grasps_land_where_the_fingers_are_least_blocked():
     import numpy as np
     import torch
 
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_agents.network.regions import least_blocked, target_pixels
     from mpg_envs.grid.actions import decode_action
     from mpg_envs.grid.grasp_geometry import fingers_blocked

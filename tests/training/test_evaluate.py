@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from mpg_agents.cli import eval_main
-from mpg_agents.evaluate import PRIMITIVES, EpisodeRecord, summarise
-from mpg_agents.stats import bootstrap_mean_interval, wilson_interval
+from mpg_agents.evaluation.evaluate import PRIMITIVES, EpisodeRecord, summarise
+from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.tasks.env import END_REASONS
 
 
@@ -149,7 +149,7 @@ def test_mpg_eval_rejects_bad_counts(extra, message, capsys):
 def test_an_episode_of_a_continuous_action_wrapper_is_recorded():
     import gymnasium as gym
 
-    from mpg_agents.evaluate import run_episode
+    from mpg_agents.evaluation.evaluate import run_episode
     from mpg_envs.integrations.wrappers import ContinuousAction
 
     env = ContinuousAction(gym.make("MPG-Stage2-v0", num_objects=2, max_motions=2))

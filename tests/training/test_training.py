@@ -99,7 +99,7 @@ def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
 
 
 def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_agents.training_stages import target_vpg_baseline
     from mpg_agents.acting.weights import read_checkpoint_header
 
@@ -328,7 +328,7 @@ def test_calibrate_every_follows_the_grasp_net_and_ends_calibrated(tmp_path):
 def test_mpg_eval_q_star_overrides_the_checkpoint(tmp_path, capsys):
     import gymnasium as gym
 
-    from mpg_agents.policy_zoo import NetworkPolicy
+    from mpg_agents.evaluation.policy_zoo import NetworkPolicy
     from mpg_agents.acting.weights import save_mpgnet
 
     cfg = TrainConfig(steps=1, **TINY)

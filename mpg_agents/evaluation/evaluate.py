@@ -11,7 +11,7 @@ seeded reset ``reset(seed=seed + i)`` run until the env ends it (target grasped,
 cap, target out of the workspace, ...). Before it starts, the env's action space and the
 policy (if it has ``seed(s)``) are seeded with the same ``seed + i`` and the policy is
 ``reset()``, so an episode's actions depend only on its index: any split of the episodes
-over workers (:mod:`mpg_agents.eval_runner`) gives the same records.
+over workers (:mod:`mpg_agents.evaluation.eval_runner`) gives the same records.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterable, Sequence
 import gymnasium as gym
 import numpy as np
 
-from mpg_agents.stats import bootstrap_mean_interval, wilson_interval
+from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
 
 PRIMITIVES = ("move", "push", "grasp")
@@ -332,7 +332,7 @@ def evaluate(
 
     ``on_reset(episode, obs)`` and ``on_step(episode, reward, info)`` let a caller (the demo)
     watch the episodes without keeping its own tally of the metrics. For several worker
-    processes see :func:`mpg_agents.eval_runner.evaluate_parallel` (same records).
+    processes see :func:`mpg_agents.evaluation.eval_runner.evaluate_parallel` (same records).
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")

@@ -155,7 +155,7 @@ class NetworkPolicy:
         return int(decision.action)
 
     def save_qmaps(self, path: str | Path, obs: Mapping[str, np.ndarray]) -> None:
-        from mpg_agents.visualize import save_policy_qmaps
+        from mpg_agents.evaluation.visualize import save_policy_qmaps
 
         save_policy_qmaps(path, self.policy, obs)  # every branch's map, not only the decision's
 

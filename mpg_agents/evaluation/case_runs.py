@@ -2,7 +2,7 @@
 
 Run ``r`` of case ``c`` (0-based, in the set's order) loads the case's scene jittered for
 run ``r`` (:func:`mpg_envs.scenes.cases.jitter_scene`; run 0 is the case as written) and is episode
-``r`` of :func:`mpg_agents.evaluate.run_episode` with seed ``seed + CASE_SEED_STRIDE * c``:
+``r`` of :func:`mpg_agents.evaluation.evaluate.run_episode` with seed ``seed + CASE_SEED_STRIDE * c``:
 its reset, the policy and the action space are seeded ``seed + CASE_SEED_STRIDE * c + r``,
 so every run is reproducible on its own. Runs use strict retrieval by default (the env's
 ``wrong_grasp="fail"``: a grasp that lifts another object ends the run as a failure).
@@ -21,7 +21,7 @@ from typing import Any, Callable, Sequence
 
 import gymnasium as gym
 
-from mpg_agents.evaluate import EpisodeRecord, env_id_of, run_episode
+from mpg_agents.evaluation.evaluate import EpisodeRecord, env_id_of, run_episode
 from mpg_envs._version import __version__
 from mpg_envs.scenes.cases import Case, CaseSet, jitter_scene
 
@@ -181,9 +181,9 @@ def run_case_set(
     on_record: Callable[[Case, EpisodeRecord], None] | None = None,
 ) -> CaseRunResult:
     """:func:`run_cases` with a fresh ``gym.make(env_id)`` (strict retrieval, :data:`STRICT`,
-    unless ``env_kwargs`` says otherwise) and :func:`mpg_agents.policy_zoo.make_policy`'s
+    unless ``env_kwargs`` says otherwise) and :func:`mpg_agents.evaluation.policy_zoo.make_policy`'s
     ``policy_name``."""
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
 
     settings = {**STRICT, **(env_kwargs or {})}
     env = gym.make(env_id, **settings)

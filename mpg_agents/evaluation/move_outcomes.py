@@ -26,8 +26,8 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.evaluate import run_episodes
-from mpg_agents.policy_zoo import NetworkPolicy, make_network_policy
+from mpg_agents.evaluation.evaluate import run_episodes
+from mpg_agents.evaluation.policy_zoo import NetworkPolicy, make_network_policy
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, angle_gap, footprint_rect, other_grasp_angles
 from mpg_envs.policies.oracle import OraclePolicy
 from mpg_envs.policies.oracle import try_primitive

@@ -1,11 +1,11 @@
 """Evaluation episodes as Ray tasks: the same records for any number of workers.
 
-An :class:`EvalJob` names a policy (a :func:`mpg_agents.policy_zoo.make_policy` name or a
+An :class:`EvalJob` names a policy (a :func:`mpg_agents.evaluation.policy_zoo.make_policy` name or a
 checkpoint path), an env and a number of episodes. :func:`evaluate_jobs` splits every
 job's episode indices into ``workers`` interleaved chunks; each chunk is one Ray task that
 builds its env and policy once (building the MuJoCo scene and loading a net take seconds)
 and runs its episodes. Since episode ``i`` is seeded ``seed + i`` whatever process runs it
-(:func:`mpg_agents.evaluate.start_episode`), the gathered records, sorted by index, do not
+(:func:`mpg_agents.evaluation.evaluate.start_episode`), the gathered records, sorted by index, do not
 depend on the split. ``workers=1`` without a cluster address runs in this process, no Ray.
 
 Every task runs on one torch/OpenMP thread (``OMP_NUM_THREADS=1`` in Ray's runtime env and
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-from mpg_agents.evaluate import EpisodeRecord, EvalResult, env_id_of, run_episodes, summarise
+from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, run_episodes, summarise
 
 # what mpg_envs.threads.worker_init sets, before the worker imports torch
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "MPG_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE", "MKL_NUM_THREADS": "1"}
@@ -50,7 +50,7 @@ class EvalJob:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
         if self.num_objects is not None and self.num_objects < 1:
             raise ValueError(f"num_objects must be >= 1, got {self.num_objects}")
-        from mpg_agents.policy_zoo import BUILTIN
+        from mpg_agents.evaluation.policy_zoo import BUILTIN
 
         if self.policy not in BUILTIN and Path(self.policy).exists():
             # workers may start in another directory
@@ -112,7 +112,7 @@ def run_chunk(
 ) -> ChunkResult:
     """Build ``job``'s env and policy once and run the episodes ``indices`` on one thread."""
     import mpg_envs  # registers the envs in a fresh worker
-    from mpg_agents.policy_zoo import make_policy
+    from mpg_agents.evaluation.policy_zoo import make_policy
 
     start = time.perf_counter()
     with _one_torch_thread():

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
-from mpg_agents.evaluate import EvalResult
+from mpg_agents.evaluation.evaluate import EvalResult
 
 ENV_ID = "MPG-Occluded-v0"
 

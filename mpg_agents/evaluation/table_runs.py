@@ -2,7 +2,7 @@
 
 Every cell runs ``episodes`` episodes (episode ``i`` reset with seed ``seed + i``, so every
 policy meets the same scenes at a given object count) as Ray tasks or on a local process
-pool (:mod:`mpg_agents.eval_runner`); results are identical for any number of workers. The
+pool (:mod:`mpg_agents.evaluation.eval_runner`); results are identical for any number of workers. The
 policies are named (``oracle``, ``shipped``, a checkpoint path) or listed in a TOML file
 with a label and the settings each runs with::
 
@@ -25,15 +25,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from mpg_agents.comparison import load_eval_records
-from mpg_agents.evaluate import EpisodeRecord, EvalResult, summarise
-from mpg_agents.eval_runner import EvalJob, evaluate_jobs
-from mpg_agents.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
+from mpg_agents.evaluation.comparison import load_eval_records
+from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, summarise
+from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
+from mpg_agents.evaluation.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
 
 
 @dataclass(frozen=True)
 class PolicySpec:
-    """A policy of a table: its row label, what :func:`~mpg_agents.policy_zoo.make_policy`
+    """A policy of a table: its row label, what :func:`~mpg_agents.evaluation.policy_zoo.make_policy`
     builds, and the keywords it is built with."""
 
     label: str
@@ -110,7 +110,7 @@ def run_table(
 
 def merged_result(paths: Sequence[str | Path]) -> EvalResult:
     """One cell from ``mpg-eval --json`` files of the same policy and cell run in seed blocks
-    (:func:`mpg_agents.comparison.load_eval_records`): their episodes in seed order, summarised
+    (:func:`mpg_agents.evaluation.comparison.load_eval_records`): their episodes in seed order, summarised
     as one evaluation (the first seed is the cell's)."""
     cell = load_eval_records(paths)
     first = json.loads(Path(paths[0]).read_text())

@@ -29,8 +29,8 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.evaluate import run_episodes
-from mpg_agents.policy_zoo import NetworkPolicy, make_network_policy
+from mpg_agents.evaluation.evaluate import run_episodes
+from mpg_agents.evaluation.policy_zoo import NetworkPolicy, make_network_policy
 from mpg_envs.grid.grasp_geometry import fingers_blocked, other_grasp_angles
 from mpg_envs.simulation.primitives import PrimitiveConfig
 from mpg_envs.grid.workspace import Workspace

@@ -5,7 +5,7 @@ env, object count and seeds meet the same scenes. Comparing their per-episode re
 pair removes the scenes' own difficulty from the comparison (on this benchmark the seed set
 moves a cell by more than a method does), and gives much narrower intervals than two
 independent 95% intervals side by side. The intervals are percentile bootstraps over the
-episode pairs (:func:`~mpg_agents.stats.bootstrap_mean_interval` of the per-pair differences).
+episode pairs (:func:`~mpg_agents.evaluation.stats.bootstrap_mean_interval` of the per-pair differences).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from mpg_agents.stats import bootstrap_mean_interval
+from mpg_agents.evaluation.stats import bootstrap_mean_interval
 
 
 @dataclass(frozen=True)
