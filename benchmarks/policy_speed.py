@@ -52,7 +52,7 @@ from torch.nn import functional as F  # noqa: E402
 from mpg_agents.network.mpgnet import MPGNet, recompute_batch_norm_statistics
 from mpg_agents.network.regions import region_max
 from mpg_agents.sb3 import MPGNetPolicy
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
 from mpg_envs.grid.actions import PRIMITIVES, PixelActionSpace
 
 SIZE = 224

@@ -8,9 +8,9 @@ Public entry points (``ARCHITECTURE.md`` maps every module):
 - :class:`MPGAgent` (``mpg_agents.acting.agent``): the network deciding with :func:`choose_primitive`
   (``mpg_agents.acting.coordination``) and Q*_g (:class:`GraspThreshold`, ``mpg_agents.acting.grasp_threshold``).
 - :class:`MPGNetPolicy` / :class:`MPGDQN` (``mpg_agents.sb3``): ``stable_baselines3.DQN(MPGNetPolicy, env)``,
-  and SB3's DQN training with :func:`td_step` (``mpg_agents.td_step``).
-- :class:`PrioritizedHeightmapReplayBuffer` (``mpg_agents.replay``): compact SB3 replay buffer.
-- :data:`TRAINING_STAGES` (``mpg_agents.training_stages``): the paper's stages as data.
+  and SB3's DQN training with :func:`td_step` (``mpg_agents.learning.td_step``).
+- :class:`PrioritizedHeightmapReplayBuffer` (``mpg_agents.learning.replay``): compact SB3 replay buffer.
+- :data:`TRAINING_STAGES` (``mpg_agents.learning.training_stages``): the paper's stages as data.
 - :func:`save_qmap_png` (``mpg_agents.evaluation.visualize``): Q-map pictures.
 """
 
@@ -34,11 +34,11 @@ _LAZY = {
     'MPGQFunction': 'mpg_agents.acting.q_function',
     'MPGQNetwork': 'mpg_agents.sb3',
     'MobileNetV3Features': 'mpg_agents.network.mobilenet',
-    'PrioritizedHeightmapReplayBuffer': 'mpg_agents.replay',
-    'TDStepConfig': 'mpg_agents.td_step',
-    'TRAINING_STAGES': 'mpg_agents.training_stages',
-    'TrainConfig': 'mpg_agents.train_config',
-    'TrainingStage': 'mpg_agents.training_stages',
+    'PrioritizedHeightmapReplayBuffer': 'mpg_agents.learning.replay',
+    'TDStepConfig': 'mpg_agents.learning.td_step',
+    'TRAINING_STAGES': 'mpg_agents.learning.training_stages',
+    'TrainConfig': 'mpg_agents.learning.train_config',
+    'TrainingStage': 'mpg_agents.learning.training_stages',
     'calibrate_q_star': 'mpg_agents.acting.grasp_threshold',
     'choose_primitive': 'mpg_agents.acting.coordination',
     'flat_q': 'mpg_agents.network.mpgnet',
@@ -47,8 +47,8 @@ _LAZY = {
     'recompute_batch_norm_statistics': 'mpg_agents.network.mpgnet',
     'save_mpgnet': 'mpg_agents.acting.weights',
     'save_qmap_png': 'mpg_agents.evaluation.visualize',
-    'td_step': 'mpg_agents.td_step',
-    'td_targets': 'mpg_agents.td_step',
+    'td_step': 'mpg_agents.learning.td_step',
+    'td_targets': 'mpg_agents.learning.td_step',
 }
 
 

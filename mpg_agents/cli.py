@@ -44,8 +44,8 @@ def _read_config(path: str | None) -> dict[str, Any]:
 def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
     """The ``TrainConfig`` and the stage table a ``--config`` file (TOML or JSON) describes:
     ``TrainConfig`` fields at the top level, ``[stages.StageN]`` tables of stage fields."""
-    from mpg_agents import training_stages as ts
-    from mpg_agents.train_config import TrainConfig
+    from mpg_agents.learning import training_stages as ts
+    from mpg_agents.learning.train_config import TrainConfig
 
     settings = _read_config(path)
     stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
@@ -125,9 +125,9 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
     try:
         from mpg_agents.acting.grasp_threshold import as_record
-        from mpg_agents.learner import Learner
-        from mpg_agents.train_config import TrainConfig, json_safe
-        from mpg_agents import training_stages as ts
+        from mpg_agents.learning.learner import Learner
+        from mpg_agents.learning.train_config import TrainConfig, json_safe
+        from mpg_agents.learning import training_stages as ts
 
         base, stages = training_settings(args.config)
         flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name, None) is not None}
@@ -135,7 +135,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         _check_checkpoint(args.init)
         _check_checkpoint(args.discriminator)
         if args.pipeline:
-            from mpg_agents.pipeline import PipelineConfig, run_pipeline
+            from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 
             if args.stages:
                 stages = ts.select_stages(stages, args.stages.split(","))
@@ -161,7 +161,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         print("interrupted: state saved, run the same command to resume", file=sys.stderr)
         return 130
     except Exception as exc:
-        from mpg_agents.learner import StopRequested
+        from mpg_agents.learning.learner import StopRequested
 
         if isinstance(exc, StopRequested):
             print("stopped: state saved, run the same command to resume", file=sys.stderr)
@@ -351,7 +351,7 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--labels", help="comma-separated legend labels, one per run (default: the folder names)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.plotting import plot_compare, plot_run
+        from mpg_agents.learning.plotting import plot_compare, plot_run
 
         if args.stage or len(args.run) > 1:
             if not args.stage or not args.out:

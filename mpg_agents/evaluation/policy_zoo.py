@@ -1,6 +1,6 @@
 """The policies ``mpg-eval``, the demo and the benchmarks ask for by name: a checkpoint or a
 built-in baseline (:func:`make_policy`). The learned baselines of Table I are stage tables
-(:data:`mpg_agents.training_stages.BASELINES`); once trained they load here as checkpoints.
+(:data:`mpg_agents.learning.training_stages.BASELINES`); once trained they load here as checkpoints.
 
 Every policy is a :class:`mpg_envs.policies.policy.Policy`: ``name``, ``reset()`` at each episode's
 start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(path, obs)`` and
@@ -104,7 +104,7 @@ class NetworkPolicy:
         from mpg_agents.acting.agent import MPGAgent
         from mpg_agents.acting.grasp_threshold import check_override
 
-        torch.set_flush_denormal(True)  # see mpg_agents.learner: denormals slow CPUs down
+        torch.set_flush_denormal(True)  # see mpg_agents.learning.learner: denormals slow CPUs down
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"checkpoint {str(path)!r} does not exist")

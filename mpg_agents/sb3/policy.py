@@ -24,7 +24,7 @@ from mpg_agents.acting.grasp_threshold import UNCALIBRATED, GraspThreshold
 from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.acting.q_function import MPGQFunction, check_action_space
 from mpg_agents.acting.spaces import check_observation_space, resolve_primitives
-from mpg_agents.train_config import TrainConfig
+from mpg_agents.learning.train_config import TrainConfig
 from mpg_envs.grid.actions import check_primitives
 
 DEFAULTS = TrainConfig()

@@ -7,7 +7,7 @@ import math
 import gymnasium as gym
 import numpy as np
 
-from mpg_agents.replay import sb3_dict_buffer_nbytes
+from mpg_agents.learning.replay import sb3_dict_buffer_nbytes
 import pytest
 import torch
 

@@ -145,9 +145,9 @@ def test_one_estimator_is_a_quantile_of_the_target_grasps_q():
 def test_a_calibrates_q_star_stage_estimates_from_its_own_greedy_grasps_into_its_weights(tmp_path):
     """Stage II's Q*_g: the same estimate over its last greedy grasps that took the target,
     stored in its weights header (where the next stage and the pipeline read it)."""
-    from mpg_agents.learner import Learner
-    from mpg_agents.train_config import TrainConfig
-    from mpg_agents.training_stages import TRAINING_STAGES
+    from mpg_agents.learning.learner import Learner
+    from mpg_agents.learning.train_config import TrainConfig
+    from mpg_agents.learning.training_stages import TRAINING_STAGES
     from mpg_agents.acting.weights import read_checkpoint_header
 
     stage = TRAINING_STAGES[1]

@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from mpg_agents.cli import eval_main, plot_main, train_main
-from mpg_agents.learner import Learner, StopRequested
-from mpg_agents.train_config import TrainConfig
-from mpg_agents.pipeline import PipelineConfig, run_pipeline
-from mpg_agents.training_stages import TRAINING_STAGES, with_overrides
+from mpg_agents.learning.learner import Learner, StopRequested
+from mpg_agents.learning.train_config import TrainConfig
+from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
+from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -65,7 +65,7 @@ def test_a_stage_reward_setting_reaches_its_env(tmp_path):
 
 
 def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monkeypatch):
-    import mpg_agents.learner as learner_module
+    import mpg_agents.learning.learner as learner_module
 
     stage = with_overrides(TRAINING_STAGES, {"Stage5": {
         "env_id": "MPG-Occluded-v0", "objects": [6, 6], "coordination": "grasp_first", "grasp_trials": 2, "alternate_every": 1,
@@ -85,7 +85,7 @@ def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monk
 
 
 def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
-    import mpg_agents.learner as learner_module
+    import mpg_agents.learning.learner as learner_module
 
     stage = with_overrides(TRAINING_STAGES, {"Stage5": {
         "iterations": 4, "alternate_every": 1, "finish_iterations": 2, "finish_trainable": ["grasp"], "objects": [3, 3],
@@ -100,7 +100,7 @@ def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
 
 def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
     from mpg_agents.evaluation.policy_zoo import make_policy
-    from mpg_agents.training_stages import target_vpg_baseline
+    from mpg_agents.learning.training_stages import target_vpg_baseline
     from mpg_agents.acting.weights import read_checkpoint_header
 
     stages = with_overrides(TRAINING_STAGES, {s.name: {"iterations": 2} for s in TRAINING_STAGES})

@@ -1,9 +1,9 @@
 """The algorithm's settings of a training run (``mpg-train``'s ``--config`` top level).
 
-One :class:`TrainConfig` drives the learner (:mod:`mpg_agents.learner`), and the SB3 adapter
+One :class:`TrainConfig` drives the learner (:mod:`mpg_agents.learning.learner`), and the SB3 adapter
 (:mod:`mpg_agents.sb3`) takes its defaults from it, so both train with the same settings.
 What a stage trains (env, branches, curriculum, alternation, ...) is its
-:class:`~mpg_agents.training_stages.TrainingStage`.
+:class:`~mpg_agents.learning.training_stages.TrainingStage`.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED
-from mpg_agents.td_step import TDStepConfig
-from mpg_agents.training_stages import check_fields
+from mpg_agents.learning.td_step import TDStepConfig
+from mpg_agents.learning.training_stages import check_fields
 
 
 @dataclass

@@ -22,7 +22,7 @@ from safetensors.torch import load_file, save_file
 
 from mpg_agents.acting.grasp_threshold import from_header
 from mpg_agents.network.mpgnet import MPGNet
-from mpg_agents.replay import Frame, PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.replay import Frame, PrioritizedHeightmapReplayBuffer
 from mpg_agents.acting.weights import chmod_by_umask
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
 

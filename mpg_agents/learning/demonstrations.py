@@ -3,11 +3,11 @@
 Before a stage learns, the scripted oracle (:class:`mpg_envs.policies.oracle.OraclePolicy`) may play
 a few episodes on the stage's env; its transitions seed the prioritised replay and training
 then runs as usual. This is not the paper's method (pure RL), so the learner does it only when
-:attr:`mpg_agents.learner.TrainConfig.demonstration_episodes` is set, and results obtained with
+:attr:`mpg_agents.learning.learner.TrainConfig.demonstration_episodes` is set, and results obtained with
 it must say so.
 
 A transition is kept when its primitive is in ``keep_primitives`` (the net's branches: a
-frozen branch simply does not learn from it, see :func:`mpg_agents.td_step.td_step`) and
+frozen branch simply does not learn from it, see :func:`mpg_agents.learning.td_step.td_step`) and
 dropped otherwise (the net has no Q map to train for it).
 """
 

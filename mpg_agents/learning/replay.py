@@ -236,7 +236,7 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
 
     def forget_last_frames(self) -> None:
         """Share nothing with the last stored frame: the next :meth:`add` starts a fresh episode
-        (after :func:`mpg_agents.run_state.load_replay`, whose frames were not added here)."""
+        (after :func:`mpg_agents.learning.run_state.load_replay`, whose frames were not added here)."""
         self._last_next = [None] * self.n_envs
 
     @property

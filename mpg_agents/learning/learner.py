@@ -1,11 +1,11 @@
 """The DQN learner of MPGNet for one training stage (paper Sections III-C and III-D).
 
 One iteration: observe, decide (the agent's coordination, :class:`~mpg_agents.acting.agent.MPGAgent`;
-Stage IV's forced grasp after its push budget), explore (:mod:`mpg_agents.exploration`), act,
-store the transition, and take one gradient step (:func:`mpg_agents.td_step.td_step`) on a
+Stage IV's forced grasp after its push budget), explore (:mod:`mpg_agents.learning.exploration`), act,
+store the transition, and take one gradient step (:func:`mpg_agents.learning.td_step.td_step`) on a
 prioritised batch with the stage's frozen branches left out. What the stage trains comes from
-its :class:`~mpg_agents.training_stages.TrainingStage`; the algorithm's settings from
-:class:`~mpg_agents.train_config.TrainConfig`.
+its :class:`~mpg_agents.learning.training_stages.TrainingStage`; the algorithm's settings from
+:class:`~mpg_agents.learning.train_config.TrainConfig`.
 
 Q*_g (:mod:`mpg_agents.acting.grasp_threshold`): a run starts with ``TrainConfig.q_star`` or else the
 starting checkpoint's; a stage with ``calibration_episodes`` calibrates it in its own scenes,
@@ -13,14 +13,14 @@ one with ``calibrates_q_star`` estimates it from its own greedy grasps at its en
 carry it.
 
 Everything needed to continue is saved every ``checkpoint_every`` iterations and when the
-process is asked to stop (SIGINT/SIGTERM) (:mod:`mpg_agents.run_state`): a killed run resumes
+process is asked to stop (SIGINT/SIGTERM) (:mod:`mpg_agents.learning.run_state`): a killed run resumes
 with the same counters, replay, weights, optimiser and random generators. An episode
 interrupted by the kill is started afresh (its scene comes from the episode counter, so it is
-the same scene). The log (:mod:`mpg_agents.train_log`) goes to TensorBoard and ``progress.csv``.
+the same scene). The log (:mod:`mpg_agents.learning.train_log`) goes to TensorBoard and ``progress.csv``.
 
 Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
 fresh run first fills the replay with the oracle's transitions
-(:mod:`mpg_agents.demonstrations`); they are no iterations or episodes of the run. With
+(:mod:`mpg_agents.learning.demonstrations`); they are no iterations or episodes of the run. With
 ``TrainingStage.grasp_trials`` (off by default) each grasp is also tried at other gripper
 orientations in the simulation and undone, and those transitions are stored too (privileged,
 labelled like the demonstrations).
@@ -42,18 +42,18 @@ import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.acting.agent import MPGAgent
-from mpg_agents.demonstrations import collect_demonstrations
+from mpg_agents.learning.demonstrations import collect_demonstrations
 from mpg_agents.acting.discriminator import Discriminator
-from mpg_agents.exploration import Choice, Explorer, linear_epsilon
+from mpg_agents.learning.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
 from mpg_agents.acting.q_function import MPGQFunction
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
-from mpg_agents.run_state import load_run_state, save_run_state, state_folder
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.run_state import load_run_state, save_run_state, state_folder
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
-from mpg_agents.td_step import td_step
-from mpg_agents.train_config import TrainConfig, json_safe
-from mpg_agents.train_log import IterationRecord, TrainingLog
-from mpg_agents.training_stages import TrainingStage, stage_for_env
+from mpg_agents.learning.td_step import td_step
+from mpg_agents.learning.train_config import TrainConfig, json_safe
+from mpg_agents.learning.train_log import IterationRecord, TrainingLog
+from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.tasks.config import EnvConfig
@@ -89,8 +89,8 @@ class Learner:
 
     Args:
         config: the algorithm's settings.
-        stage: what to train (a row of :data:`~mpg_agents.training_stages.TRAINING_STAGES`,
-            or :func:`~mpg_agents.training_stages.stage_for_env` of an env id).
+        stage: what to train (a row of :data:`~mpg_agents.learning.training_stages.TRAINING_STAGES`,
+            or :func:`~mpg_agents.learning.training_stages.stage_for_env` of an env id).
         out: the run folder.
         init: start from this MPGNet checkpoint (branches it lacks keep their initialisation).
     """

@@ -37,7 +37,7 @@ RUNS: dict[str, tuple[str, ...]] = {
 """Run name -> the ``mpg-train --pipeline`` flags that make it: MPGNet, its three ablations
 (paper, Fig. 5), and the learned baselines of the results tables at MPGNet's total iterations."""
 
-DEFAULT_CONFIG = Path(__file__).resolve().parent / "checkpoints" / "mpgnet_train.toml"
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "checkpoints" / "mpgnet_train.toml"  # mpg_agents/checkpoints/
 """The shipped MPGNet's training config."""
 
 

@@ -1,13 +1,13 @@
 """The paper's multi-stage training pipeline (Section III-C), driven by the stage table.
 
-The stages run in order (:data:`~mpg_agents.training_stages.TRAINING_STAGES` by default), each
+The stages run in order (:data:`~mpg_agents.learning.training_stages.TRAINING_STAGES` by default), each
 starting from the previous stage's weights, and with them the Q*_g they carry (the run's
 ``--q-star``, if given, is the first stage's). A stage that ``calibrates_q_star`` estimates Q*_g
 from its own successful grasps and its weights become the discriminator of the stages that
 ``uses_discriminator``; a stage with ``calibration_episodes`` calibrates Q*_g again in its own
 scenes. ``pipeline.json`` records the final weights and the one Q*_g they carry. Ablations are
-changes of the table (:func:`~mpg_agents.training_stages.without_multistage`,
-:func:`~mpg_agents.training_stages.without_alternation`).
+changes of the table (:func:`~mpg_agents.learning.training_stages.without_multistage`,
+:func:`~mpg_agents.learning.training_stages.without_alternation`).
 
 Each stage writes to ``out/<stage name>/`` and resumes there if interrupted; finished stages
 are skipped on a re-run.
@@ -21,9 +21,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, from_header
-from mpg_agents.learner import Learner
-from mpg_agents.train_config import TrainConfig, json_safe
-from mpg_agents.training_stages import TRAINING_STAGES, TrainingStage
+from mpg_agents.learning.learner import Learner
+from mpg_agents.learning.train_config import TrainConfig, json_safe
+from mpg_agents.learning.training_stages import TRAINING_STAGES, TrainingStage
 from mpg_agents.acting.weights import read_checkpoint_header
 
 
