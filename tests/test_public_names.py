@@ -36,3 +36,13 @@ def test_every_public_name_imports_from_the_top(package, name):
     namespace: dict = {}
     exec(f"from {package} import {name}", namespace)
     assert namespace[name] is getattr(importlib.import_module(package), name)
+
+
+@pytest.mark.parametrize("package", sorted(PUBLIC))
+def test_no_public_name_is_a_module(package):
+    """``from mpg_agents import td_step`` is the function, whichever modules were imported first
+    (while ``td_step.py`` lay at the package top, importing it rebound the name to the module)."""
+    module = importlib.import_module(package)
+    importlib.import_module("mpg_agents.learning.learner")  # imports the module td_step, among others
+    for name in PUBLIC[package]:
+        assert not isinstance(getattr(module, name), type(importlib)), f"{package}.{name} is a module"
