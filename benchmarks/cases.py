@@ -1,10 +1,10 @@
 """The case tables: several policies on the challenge, Efficient Push-Grasping and Grasping
-the Invisible case sets (:mod:`mpg_envs.cases`), in strict retrieval, printed as Markdown.
+the Invisible case sets (:mod:`mpg_envs.scenes.cases`), in strict retrieval, printed as Markdown.
 
 One table per case set: a row per case and an overall row, the target's mean visible
 fraction at reset, a column per policy; each cell is ``successes/runs · mean motions ·
 mis-picks per run``. Runs follow
-:mod:`mpg_agents.case_runs` (run 0 as written, the others jittered; seeded per case), so a
+:mod:`mpg_agents.evaluation.case_runs` (run 0 as written, the others jittered; seeded per case), so a
 cell is reproducible on its own. ``--json`` also writes every result (rows and records).
 
     python benchmarks/cases.py --peers PATH/TO/PEERS [--sets challenge epg gti] \\
@@ -23,8 +23,8 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("MPG_NUM_THREADS", "1")
 
-from mpg_agents.case_runs import CaseRow, CaseRunResult, run_case_set  # noqa: E402
-from mpg_envs.cases import CASE_SETS, load_cases  # noqa: E402
+from mpg_agents.evaluation.case_runs import CaseRow, CaseRunResult, run_case_set  # noqa: E402
+from mpg_envs.scenes.cases import CASE_SETS, load_cases  # noqa: E402
 
 POLICIES = ("oracle", "grasp-only", "random", "shipped")
 

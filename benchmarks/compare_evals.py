@@ -5,14 +5,14 @@
 
 Each side is one policy in one cell (env, object count): one or more ``mpg-eval --json`` files,
 e.g. seed blocks run apart. Episodes are paired by their reset seed; only the seeds both sides
-played count. Prints A minus B with 95% paired-bootstrap intervals (``mpg_agents.comparison``).
+played count. Prints A minus B with 95% paired-bootstrap intervals (``mpg_agents.evaluation.comparison``).
 """
 
 from __future__ import annotations
 
 import sys
 
-from mpg_agents.comparison import compare_main
+from mpg_agents.evaluation.comparison import compare_main
 
 if __name__ == "__main__":
     sys.exit(compare_main())

@@ -29,9 +29,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from mpg_envs.env import MPGEnv  # noqa: E402
-from mpg_envs.oracle import footprint_rect, angle_to_rotation  # noqa: E402
-from mpg_envs.workspace import world_to_pixel  # noqa: E402
+from mpg_envs.tasks.env import MPGEnv  # noqa: E402
+from mpg_envs.policies.oracle import footprint_rect, angle_to_rotation  # noqa: E402
+from mpg_envs.grid.workspace import world_to_pixel  # noqa: E402
 
 
 def action_for(env: MPGEnv, primitive: str) -> tuple[int, int, int]:

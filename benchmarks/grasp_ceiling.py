@@ -21,10 +21,10 @@ import sys
 import time
 
 
-from mpg_envs.env import EnvConfig  # noqa: E402
-from mpg_envs.grasp_ceiling import DROPS, run_shape  # noqa: E402
-from mpg_envs.objects import load_object_set  # noqa: E402
-from mpg_envs.robot import ArmIK  # noqa: E402
+from mpg_envs.tasks.env import EnvConfig  # noqa: E402
+from mpg_envs.tasks.grasp_ceiling import DROPS, run_shape  # noqa: E402
+from mpg_envs.simulation.objects import load_object_set  # noqa: E402
+from mpg_envs.simulation.robot import ArmIK  # noqa: E402
 
 GOAL = 0.98
 

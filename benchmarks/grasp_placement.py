@@ -6,7 +6,7 @@ pixel heuristic's grasp (the target mask's centre across its short side). It pri
 margin: the share of first grasps that took the target, the mean distance (pixels) from the
 heuristic's grasp point and the share within one rotation step (mod 180 degrees) of the
 heuristic's angle; the heuristic's own success is the reference. A negative margin keeps the
-grasp that many pixels inside the target's rim (:func:`mpg_agents.regions.target_pixels`).
+grasp that many pixels inside the target's rim (:func:`mpg_agents.network.regions.target_pixels`).
 
     python benchmarks/grasp_placement.py --policy mpg_agents/checkpoints/stage2_grasp_small.safetensors \
         --margins 2 -4 -8 --scenes 20 --seed 900000
@@ -23,10 +23,10 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.policy_zoo import NetworkPolicy
-from mpg_agents.heuristics import heuristic_grasp
+from mpg_agents.evaluation.policy_zoo import NetworkPolicy
+from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_envs.threads import set_torch_threads
-from mpg_envs.workspace import NUM_ROTATIONS
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 
 def first_grasps(policy: NetworkPolicy, env: gym.Env, scenes: int, seed: int) -> dict[str, float]:

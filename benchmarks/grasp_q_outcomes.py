@@ -1,6 +1,6 @@
 """Does a grasp net's Q tell the grasps that take the target from those that do not?
 
-The command line of :mod:`mpg_agents.grasp_outcomes`: runs a checkpoint greedily (its own
+The command line of :mod:`mpg_agents.evaluation.grasp_outcomes`: runs a checkpoint greedily (its own
 coordination and Q*_g) on ``--episodes`` scenes and prints, for every grasp it executed, how
 its Q, the occlusion bit and its finger blocking relate to taking the target (counts, shares,
 ROC AUCs), and what its moves and pushes did. ``--angle-trials`` also tries each grasp at the
@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from mpg_agents.grasp_outcomes import grasp_records, summarise, summarise_motions
+from mpg_agents.evaluation.grasp_outcomes import grasp_records, summarise, summarise_motions
 from mpg_envs.threads import set_torch_threads
 
 

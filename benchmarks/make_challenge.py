@@ -4,12 +4,12 @@ Each case is a list of blocks (a shape of the ``blocks`` set, a position in mill
 the workspace centre, a yaw in degrees, lying as built or on its side) and the target among
 them. The blocks are stacked in the order listed: each one's lowest point is put just above
 whatever is already under its footprint. The scene then goes through the env's own loading
-path (:func:`mpg_envs.scene_loading.apply_scene`: placed, settled until at rest) and is
+path (:func:`mpg_envs.scenes.scene_loading.apply_scene`: placed, settled until at rest) and is
 checked: every block still within the loading tolerance of its designed pose (so nothing
 toppled), the target's visible fraction in the case's band, and the saved file reproducing
 the settled scene exactly. ``--oracle`` also runs the oracle on each case in strict
 retrieval (a mis-pick fails) and reports it; every case must be solved. Writes one JSON scene
-per case (``mpg_envs.scene_io.save_scene``) and ``index.json`` (the cases in order, each with
+per case (``mpg_envs.scenes.scene_io.save_scene``) and ``index.json`` (the cases in order, each with
 its note).
 
     python benchmarks/make_challenge.py [--out mpg_envs/challenge] [--only NAME ...] [--oracle] [--runs N]
@@ -31,11 +31,11 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_envs.cases import INDEX_FILE, challenge_dir, jitter_scene
-from mpg_envs.objects import blocks_object_set
-from mpg_envs.scene_io import SceneFile, SceneObject, read_scene, save_scene
-from mpg_envs.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
-from mpg_envs.workspace import Workspace
+from mpg_envs.scenes.cases import INDEX_FILE, challenge_dir, jitter_scene
+from mpg_envs.simulation.objects import blocks_object_set
+from mpg_envs.scenes.scene_io import SceneFile, SceneObject, read_scene, save_scene
+from mpg_envs.scenes.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
+from mpg_envs.grid.workspace import Workspace
 
 ENV_ID = "MPG-Occluded-v0"
 GAP = 0.0005  # a block is placed this far (m) above what it rests on, then settles
@@ -189,7 +189,7 @@ def build(spec: Spec, env, out: Path) -> dict:
 
 def oracle_runs(name: str, path: Path, env, runs: int) -> list[tuple[bool, int, str, float]]:
     """The oracle on ``runs`` jittered runs of a case: (success, motions, end reason, seconds) each."""
-    from mpg_envs.oracle import OraclePolicy
+    from mpg_envs.policies.oracle import OraclePolicy
 
     scene = read_scene(path)
     oracle = OraclePolicy(env)

@@ -25,7 +25,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401
-from mpg_envs.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet  # noqa: E402
+from mpg_envs.scenes.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet  # noqa: E402
 
 _ENVS: dict[tuple[str, int, bool], gym.Env] = {}
 

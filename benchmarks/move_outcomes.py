@@ -1,6 +1,6 @@
 """Why does an MPGNet's move lift nothing? Where and at which angle its moves close.
 
-The command line of :mod:`mpg_agents.move_outcomes`: runs a checkpoint greedily on
+The command line of :mod:`mpg_agents.evaluation.move_outcomes`: runs a checkpoint greedily on
 ``--episodes`` scenes, looks at each of its moves in a copy of the simulation before it is made
 (what its pixel shows, its angle to the object's short axis, whether it, another angle at the
 pixel, or the oracle's move of the top occluder lifts anything) and prints the counts.
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import json
 
-from mpg_agents.move_outcomes import ANGLE_LIMIT_DEG, ON_WHAT, move_records, summarise_moves
+from mpg_agents.evaluation.move_outcomes import ANGLE_LIMIT_DEG, ON_WHAT, move_records, summarise_moves
 from mpg_envs.threads import set_torch_threads
 
 # Run as a script, benchmarks/ is on the path: the options are grasp_q_outcomes.py's.

@@ -1,7 +1,7 @@
 """The scripted oracle on held-out ``MPG-Occluded-v0`` episodes: success, motions, and why it failed.
 
 Episode ``i`` of a cell is reset with seed ``--seed + i`` (the same scenes for any run; the
-episodes and their metrics are ``mpg-eval``'s, :mod:`mpg_agents.evaluate`). For each object
+episodes and their metrics are ``mpg-eval``'s, :mod:`mpg_agents.evaluation.evaluate`). For each object
 count: the success rate and the mean motions per episode with their 95% intervals, and every
 failed episode categorised:
 
@@ -13,7 +13,7 @@ failed episode categorised:
 
 The env's own ``info["end_reason"]`` is printed too when the env reports it. The oracle tries
 its candidate grasps and preparations in a checkpointed copy of the simulation before acting
-(see :mod:`mpg_envs.oracle`); ``--geometric`` plans by geometry alone, without trials. Goals:
+(see :mod:`mpg_envs.policies.oracle`); ``--geometric`` plans by geometry alone, without trials. Goals:
 >= 97% success in <= 2.8 mean motions at 15 objects, >= 93% in <= 3.7 at 30. The last output
 line is JSON.
 
@@ -33,8 +33,8 @@ from typing import Any
 import gymnasium as gym
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.evaluate import EpisodeRecord, run_episodes, summarise
-from mpg_envs.oracle import OracleConfig, OraclePolicy
+from mpg_agents.evaluation.evaluate import EpisodeRecord, run_episodes, summarise
+from mpg_envs.policies.oracle import OracleConfig, OraclePolicy
 
 ENV_ID = "MPG-Occluded-v0"
 GOALS = {15: (0.97, 2.8), 30: (0.93, 3.7)}

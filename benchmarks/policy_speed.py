@@ -44,16 +44,16 @@ from mpg_envs.threads import THREADS_ENV, load_average, set_torch_threads, use_p
 
 use_passive_openmp_wait()  # before torch loads OpenMP, as importing mpg_agents does
 
-from mpg_envs.env import observation_space  # noqa: E402
+from mpg_envs.tasks.env import observation_space  # noqa: E402
 import torch  # noqa: E402
 from stable_baselines3.common.buffers import DictReplayBuffer  # noqa: E402
 from torch.nn import functional as F  # noqa: E402
 
-from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics
-from mpg_agents.regions import region_max
+from mpg_agents.network.mpgnet import MPGNet, recompute_batch_norm_statistics
+from mpg_agents.network.regions import region_max
 from mpg_agents.sb3 import MPGNetPolicy
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
-from mpg_envs.actions import PRIMITIVES, PixelActionSpace
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
+from mpg_envs.grid.actions import PRIMITIVES, PixelActionSpace
 
 SIZE = 224
 

@@ -1,7 +1,7 @@
 """RLlib PPO on the wrapped ``MPG-Stage2-v0``: a few iterations with env runners on Ray.
 
 The env is ``ImageObservation(GridAction(MPG-Stage2-v0))`` built by
-``mpg_envs.rllib.register()`` from ``env_config`` (``{"wrappers": ["grid", "image"]}``):
+``mpg_envs.integrations.rllib.register()`` from ``env_config`` (``{"wrappers": ["grid", "image"]}``):
 an 84 x 84 x 5 channels-last image and 6,272 grid actions. RLlib's new API stack builds a
 CNN encoder for any 3-D ``Box`` observation; the channel count (5) comes from the space,
 and ``conv_filters`` below end in one "valid" 11 x 11 convolution so the encoder gives a
@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     import ray
 
-    from mpg_envs.rllib import register
+    from mpg_envs.integrations.rllib import register
 
     ray.init(address=args.address, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
     register()

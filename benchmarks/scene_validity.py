@@ -29,9 +29,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import gymnasium as gym  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401  (registers the envs)
-from mpg_envs.env import MPGEnv  # noqa: E402
-from mpg_envs.scenes import InvalidSceneError  # noqa: E402
-from mpg_envs.stages import STAGES  # noqa: E402
+from mpg_envs.tasks.env import MPGEnv  # noqa: E402
+from mpg_envs.scenes.generators import InvalidSceneError  # noqa: E402
+from mpg_envs.tasks.stages import STAGES  # noqa: E402
 
 TARGET_RULES: dict[str, tuple[int, ...]] = {"Occluded": (0, 1, 2, 3, 4), "Stage5": (0, 1)}
 """Stage name -> the dropped positions the target may have."""

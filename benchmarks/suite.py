@@ -22,8 +22,8 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402
-from mpg_agents.evaluate import evaluate  # noqa: E402
-from mpg_envs.oracle import OraclePolicy  # noqa: E402
+from mpg_agents.evaluation.evaluate import evaluate  # noqa: E402
+from mpg_envs.policies.oracle import OraclePolicy  # noqa: E402
 
 
 def time_env(env_id: str, resets: int) -> tuple[float, float]:

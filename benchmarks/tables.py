@@ -33,10 +33,10 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from mpg_agents.env_options import parse_env_options  # noqa: E402
-from mpg_agents.policy_zoo import BUILTIN  # noqa: E402
-from mpg_agents.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
-from mpg_agents.tables import TRACKS  # noqa: E402
+from mpg_agents.evaluation.env_options import parse_env_options  # noqa: E402
+from mpg_agents.evaluation.policy_zoo import BUILTIN  # noqa: E402
+from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
+from mpg_agents.evaluation.tables import TRACKS  # noqa: E402
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

@@ -28,9 +28,9 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401
-from mpg_envs.occlusion import VISIBILITY_BANDS, visibility_band  # noqa: E402
-from mpg_envs.stages import STAGES  # noqa: E402
-from mpg_envs.test_sets import TEST_SEED_START, find_test_set  # noqa: E402
+from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band  # noqa: E402
+from mpg_envs.tasks.stages import STAGES  # noqa: E402
+from mpg_envs.scenes.test_sets import TEST_SEED_START, find_test_set  # noqa: E402
 
 CELLS = (("MPG-Occluded-v0", 15), ("MPG-Occluded-v0", 30), ("MPG-OccludedHard-v0", 15), ("MPG-OccludedHard-v0", 30))
 

@@ -5,7 +5,7 @@ Trains SB3's PPO and DQN with ``CnnPolicy`` through the standard wrappers,
 pixel cells x 8 grasp angles), for a fixed budget of env steps on a ``SubprocVecEnv``
 (``--envs`` workers, one torch/OpenMP thread and ``raycast_threads=1`` each). Then it
 evaluates each trained model, and the built-in ``random``, ``grasp-only`` and ``shipped``
-(MPGNet) policies on the raw env, with ``mpg_agents.evaluate.evaluate``: the same
+(MPGNet) policies on the raw env, with ``mpg_agents.evaluation.evaluate.evaluate``: the same
 episodes for all, seeded ``--eval-seed + k`` (held out: training envs draw scenes from
 ``--seed + worker``).
 
@@ -50,9 +50,9 @@ BASELINES = ("random", "grasp-only", "shipped")
 def make_wrapped_env(cell: int, size: int, action: str = "grid") -> gym.Env:
     """``ImageObservation(GridAction(MPG-Stage2-v0))`` (or ``ContinuousAction`` for
     ``action="continuous"``) on one thread (picklable for workers)."""
-    from mpg_envs.config import EnvConfig
+    from mpg_envs.tasks.config import EnvConfig
     from mpg_envs.threads import worker_init
-    from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
+    from mpg_envs.integrations.wrappers import ContinuousAction, GridAction, ImageObservation
 
     worker_init()  # one thread: the workers' parallelism is their number
     env = gym.make(ENV_ID, config=EnvConfig(raycast_threads=1))
@@ -243,7 +243,7 @@ class SB3Policy:
 def evaluate_row(policy, env: gym.Env, args: argparse.Namespace) -> dict:
     from scipy.stats import binomtest
 
-    from mpg_agents.evaluate import evaluate
+    from mpg_agents.evaluation.evaluate import evaluate
 
     result = evaluate(policy, env, args.episodes, args.eval_seed)
     successes = int(round(result.task_success_rate * args.episodes))
@@ -299,8 +299,8 @@ def main(argv: list[str] | None = None) -> dict:
     import torch
 
     import mpg_envs  # noqa: F401
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_envs.config import EnvConfig
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_envs.tasks.config import EnvConfig
 
     torch.set_num_threads(1)
     rows: dict[str, dict] = {}

@@ -22,8 +22,8 @@ import time
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from mpg_agents.learner import Learner  # noqa: E402
-from mpg_agents.train_config import TrainConfig  # noqa: E402
+from mpg_agents.learning.learner import Learner  # noqa: E402
+from mpg_agents.learning.train_config import TrainConfig  # noqa: E402
 
 
 def main() -> None:

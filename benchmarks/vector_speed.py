@@ -73,7 +73,7 @@ class WorkerTimer(gym.Wrapper):
 
 def make_env(raycast_threads: int | None = 1) -> gym.Env:
     """One Stage-V env on one thread (module level, so any start method can pickle it)."""
-    from mpg_envs.config import EnvConfig
+    from mpg_envs.tasks.config import EnvConfig
     from mpg_envs.threads import worker_init
 
     worker_init()  # one thread (OpenMP, torch if loaded); the workers' parallelism is their number

@@ -1,6 +1,6 @@
 """MkDocs build hook: keeps the API reference in step with the packages' modules.
 
-The pages under ``api/`` list modules with mkdocstrings directives (``::: mpg_envs.env``),
+The pages under ``api/`` list modules with mkdocstrings directives (``::: mpg_envs.tasks.env``),
 grouped by topic. At build time this hook drops a directive whose module no longer exists
 (the module was renamed or moved) and puts every public module that no page lists on
 ``api/other.md``, so a module is never left out of the reference and a move never breaks

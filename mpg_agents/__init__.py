@@ -3,15 +3,15 @@ its Stable-Baselines3 adapter.
 
 Public entry points (``ARCHITECTURE.md`` maps every module):
 
-- :class:`MPGNet` (``mpg_agents.mpgnet``) / :class:`MPGNetConfig` (``mpg_agents.mpgnet_config``):
-  the three-branch network; ``save_mpgnet`` / ``load_mpgnet`` (``mpg_agents.weights``).
-- :class:`MPGAgent` (``mpg_agents.agent``): the network deciding with :func:`choose_primitive`
-  (``mpg_agents.coordination``) and Q*_g (:class:`GraspThreshold`, ``mpg_agents.grasp_threshold``).
+- :class:`MPGNet` (``mpg_agents.network.mpgnet``) / :class:`MPGNetConfig` (``mpg_agents.network.mpgnet_config``):
+  the three-branch network; ``save_mpgnet`` / ``load_mpgnet`` (``mpg_agents.acting.weights``).
+- :class:`MPGAgent` (``mpg_agents.acting.agent``): the network deciding with :func:`choose_primitive`
+  (``mpg_agents.acting.coordination``) and Q*_g (:class:`GraspThreshold`, ``mpg_agents.acting.grasp_threshold``).
 - :class:`MPGNetPolicy` / :class:`MPGDQN` (``mpg_agents.sb3``): ``stable_baselines3.DQN(MPGNetPolicy, env)``,
-  and SB3's DQN training with :func:`td_step` (``mpg_agents.td_step``).
-- :class:`PrioritizedHeightmapReplayBuffer` (``mpg_agents.replay``): compact SB3 replay buffer.
-- :data:`TRAINING_STAGES` (``mpg_agents.training_stages``): the paper's stages as data.
-- :func:`save_qmap_png` (``mpg_agents.visualize``): Q-map pictures.
+  and SB3's DQN training with :func:`td_step` (``mpg_agents.learning.td_step``).
+- :class:`PrioritizedHeightmapReplayBuffer` (``mpg_agents.learning.replay``): compact SB3 replay buffer.
+- :data:`TRAINING_STAGES` (``mpg_agents.learning.training_stages``): the paper's stages as data.
+- :func:`save_qmap_png` (``mpg_agents.evaluation.visualize``): Q-map pictures.
 """
 
 from mpg_envs._version import __version__  # one version for both packages
@@ -22,33 +22,33 @@ use_passive_openmp_wait()  # before torch loads OpenMP: idle threads sleep, not 
 # The public names load on first use (PEP 562), so ``mpg-eval --help`` and argument errors do not
 # wait for torch, and only the SB3 adapter's names import Stable-Baselines3.
 _LAZY = {
-    'COORDINATIONS': 'mpg_agents.coordination',
-    'Decision': 'mpg_agents.decision',
-    'Discriminator': 'mpg_agents.discriminator',
-    'GraspThreshold': 'mpg_agents.grasp_threshold',
-    'MPGAgent': 'mpg_agents.agent',
+    'COORDINATIONS': 'mpg_agents.acting.coordination',
+    'Decision': 'mpg_agents.acting.decision',
+    'Discriminator': 'mpg_agents.acting.discriminator',
+    'GraspThreshold': 'mpg_agents.acting.grasp_threshold',
+    'MPGAgent': 'mpg_agents.acting.agent',
     'MPGDQN': 'mpg_agents.sb3',
-    'MPGNet': 'mpg_agents.mpgnet',
-    'MPGNetConfig': 'mpg_agents.mpgnet_config',
+    'MPGNet': 'mpg_agents.network.mpgnet',
+    'MPGNetConfig': 'mpg_agents.network.mpgnet_config',
     'MPGNetPolicy': 'mpg_agents.sb3',
-    'MPGQFunction': 'mpg_agents.q_function',
+    'MPGQFunction': 'mpg_agents.acting.q_function',
     'MPGQNetwork': 'mpg_agents.sb3',
-    'MobileNetV3Features': 'mpg_agents.mobilenet',
-    'PrioritizedHeightmapReplayBuffer': 'mpg_agents.replay',
-    'TDStepConfig': 'mpg_agents.td_step',
-    'TRAINING_STAGES': 'mpg_agents.training_stages',
-    'TrainConfig': 'mpg_agents.train_config',
-    'TrainingStage': 'mpg_agents.training_stages',
-    'calibrate_q_star': 'mpg_agents.grasp_threshold',
-    'choose_primitive': 'mpg_agents.coordination',
-    'flat_q': 'mpg_agents.mpgnet',
-    'load_mpgnet': 'mpg_agents.weights',
-    'load_torchvision_features': 'mpg_agents.mobilenet',
-    'recompute_batch_norm_statistics': 'mpg_agents.mpgnet',
-    'save_mpgnet': 'mpg_agents.weights',
-    'save_qmap_png': 'mpg_agents.visualize',
-    'td_step': 'mpg_agents.td_step',
-    'td_targets': 'mpg_agents.td_step',
+    'MobileNetV3Features': 'mpg_agents.network.mobilenet',
+    'PrioritizedHeightmapReplayBuffer': 'mpg_agents.learning.replay',
+    'TDStepConfig': 'mpg_agents.learning.td_step',
+    'TRAINING_STAGES': 'mpg_agents.learning.training_stages',
+    'TrainConfig': 'mpg_agents.learning.train_config',
+    'TrainingStage': 'mpg_agents.learning.training_stages',
+    'calibrate_q_star': 'mpg_agents.acting.grasp_threshold',
+    'choose_primitive': 'mpg_agents.acting.coordination',
+    'flat_q': 'mpg_agents.network.mpgnet',
+    'load_mpgnet': 'mpg_agents.acting.weights',
+    'load_torchvision_features': 'mpg_agents.network.mobilenet',
+    'recompute_batch_norm_statistics': 'mpg_agents.network.mpgnet',
+    'save_mpgnet': 'mpg_agents.acting.weights',
+    'save_qmap_png': 'mpg_agents.evaluation.visualize',
+    'td_step': 'mpg_agents.learning.td_step',
+    'td_targets': 'mpg_agents.learning.td_step',
 }
 
 

@@ -14,8 +14,8 @@ from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any, Sequence
 
-from mpg_agents.coordination import COORDINATIONS
-from mpg_agents.env_options import parse_env_options
+from mpg_agents.acting.coordination import COORDINATIONS
+from mpg_agents.evaluation.env_options import parse_env_options
 
 
 class UsageError(Exception):
@@ -44,8 +44,8 @@ def _read_config(path: str | None) -> dict[str, Any]:
 def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
     """The ``TrainConfig`` and the stage table a ``--config`` file (TOML or JSON) describes:
     ``TrainConfig`` fields at the top level, ``[stages.StageN]`` tables of stage fields."""
-    from mpg_agents import training_stages as ts
-    from mpg_agents.train_config import TrainConfig
+    from mpg_agents.learning import training_stages as ts
+    from mpg_agents.learning.train_config import TrainConfig
 
     settings = _read_config(path)
     stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
@@ -85,7 +85,7 @@ def _check_checkpoint(path: str | None) -> None:
         return
     if not Path(path).is_file():
         raise UsageError(f"checkpoint {path!r} does not exist")
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     try:
         read_checkpoint_header(path)
@@ -124,10 +124,10 @@ def train_main(argv: Sequence[str] | None = None) -> int:
 
     set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
     try:
-        from mpg_agents.grasp_threshold import as_record
-        from mpg_agents.learner import Learner
-        from mpg_agents.train_config import TrainConfig, json_safe
-        from mpg_agents import training_stages as ts
+        from mpg_agents.acting.grasp_threshold import as_record
+        from mpg_agents.learning.learner import Learner
+        from mpg_agents.learning.train_config import TrainConfig, json_safe
+        from mpg_agents.learning import training_stages as ts
 
         base, stages = training_settings(args.config)
         flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name, None) is not None}
@@ -135,7 +135,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         _check_checkpoint(args.init)
         _check_checkpoint(args.discriminator)
         if args.pipeline:
-            from mpg_agents.pipeline import PipelineConfig, run_pipeline
+            from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 
             if args.stages:
                 stages = ts.select_stages(stages, args.stages.split(","))
@@ -161,7 +161,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         print("interrupted: state saved, run the same command to resume", file=sys.stderr)
         return 130
     except Exception as exc:
-        from mpg_agents.learner import StopRequested
+        from mpg_agents.learning.learner import StopRequested
 
         if isinstance(exc, StopRequested):
             print("stopped: state saved, run the same command to resume", file=sys.stderr)
@@ -196,8 +196,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--peers", help="with --cases epg or gti: the folder holding the peers' files (vpg/, gti/)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.policy_zoo import BUILTIN
-        from mpg_agents.eval_runner import EvalJob, evaluate_parallel
+        from mpg_agents.evaluation.policy_zoo import BUILTIN
+        from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel
 
         _check_env_id(args.env)
         if args.policy not in BUILTIN:
@@ -237,8 +237,8 @@ def _report(result: Any, json_path: str | None) -> int:
 def _eval_cases(args: argparse.Namespace, policy_kwargs: dict[str, Any], env_options: dict[str, Any]) -> int:
     """``mpg-eval --cases``: every case of a set, ``--runs`` runs each, one row per case
     (strict retrieval unless ``--env-option wrong_grasp=...`` says otherwise)."""
-    from mpg_agents.case_runs import run_case_set
-    from mpg_envs.cases import load_cases
+    from mpg_agents.evaluation.case_runs import run_case_set
+    from mpg_envs.scenes.cases import load_cases
 
     if args.workers not in (None, 1) or args.ray_address is not None:
         raise UsageError("--cases runs in this process: leave out --workers and --ray-address")
@@ -274,8 +274,8 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
-        from mpg_agents.grasp_threshold import calibrate_q_star, calibration_dict
-        from mpg_agents.policy_zoo import make_policy
+        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict
+        from mpg_agents.evaluation.policy_zoo import make_policy
 
         _check_env_id(args.env)
         if args.policy != "shipped":
@@ -324,7 +324,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--coordination", choices=COORDINATIONS, help="the rule the copy acts with")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.weights import export_weights, read_checkpoint_header
+        from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
         _check_checkpoint(args.src)
         settings = _net_settings(args)
@@ -351,7 +351,7 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--labels", help="comma-separated legend labels, one per run (default: the folder names)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.plotting import plot_compare, plot_run
+        from mpg_agents.learning.plotting import plot_compare, plot_run
 
         if args.stage or len(args.run) > 1:
             if not args.stage or not args.out:

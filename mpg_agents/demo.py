@@ -24,7 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
-from mpg_envs.render import RenderUnavailableError
+from mpg_envs.perception.render import RenderUnavailableError
 
 DEMO_SEED = 500_002
 """The demo's first scene: a held-out hard-track scene whose target a grasp alone cannot take."""
@@ -101,8 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps_<k>.png (default demo_out)")
     args = parser.parse_args(argv)
 
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.evaluate import evaluate
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_agents.evaluation.evaluate import evaluate
 
     from mpg_envs.threads import set_torch_threads
 

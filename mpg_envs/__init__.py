@@ -1,27 +1,27 @@
 """MPG environments: target-oriented grasping in clutter on MuJoCo.
 
 Importing the package registers one Gymnasium id per stage of
-:data:`mpg_envs.stages.STAGES` (:data:`ENV_IDS`: ``MPG-Stage1-v0`` ... ``MPG-Stage5-v0``,
+:data:`mpg_envs.tasks.stages.STAGES` (:data:`ENV_IDS`: ``MPG-Stage1-v0`` ... ``MPG-Stage5-v0``,
 ``MPG-Occluded-v0``, ...); ``gymnasium.make("mpg_envs:MPG-Stage5-v0")`` imports it on demand.
 Each id carries its stage's motion cap as ``max_episode_steps``, so ``gymnasium.make`` wraps
 the env in Gymnasium's ``TimeLimit`` at the same cap the env enforces itself.
 
 Importing the package also picks an OpenGL backend for rendering when none is chosen
-(``MUJOCO_GL``; see :func:`mpg_envs.render.choose_gl_backend`). It imports no deep-learning
+(``MUJOCO_GL``; see :func:`mpg_envs.perception.render.choose_gl_backend`). It imports no deep-learning
 library.
 """
 
 from mpg_envs._version import __version__
-from mpg_envs.render import choose_gl_backend
+from mpg_envs.perception.render import choose_gl_backend
 
 choose_gl_backend()  # before anything imports mujoco: EGL (or OSMesa) on headless Linux
 
 import gymnasium as gym  # noqa: E402
 
-from mpg_envs.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
-from mpg_envs.stages import STAGES, StageSpec
-from mpg_envs.workspace import NUM_ROTATIONS, Workspace
-from mpg_envs.wrappers import ContinuousAction, GridAction, ImageObservation
+from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
+from mpg_envs.tasks.stages import STAGES, StageSpec
+from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace
+from mpg_envs.integrations.wrappers import ContinuousAction, GridAction, ImageObservation
 
 ENV_IDS: tuple[str, ...] = tuple(spec.env_id for spec in STAGES.values())
 
@@ -37,7 +37,7 @@ def _register() -> None:
         if stage.env_id not in gym.registry:
             gym.register(
                 id=stage.env_id,
-                entry_point="mpg_envs.env:MPGEnv",
+                entry_point="mpg_envs.tasks.env:MPGEnv",
                 kwargs={"stage": name},
                 max_episode_steps=stage.max_motions,
             )

@@ -9,7 +9,7 @@ if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from mpg_envs.objects import blocks_object_set  # noqa: E402
+from mpg_envs.simulation.objects import blocks_object_set  # noqa: E402
 
 
 EXPECTED_PRIMITIVES = {

@@ -15,7 +15,7 @@ import gymnasium as gym
 import pytest
 
 import mpg_envs
-from mpg_envs.stages import STAGES
+from mpg_envs.tasks.stages import STAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,14 +1,14 @@
 """Stable-Baselines3 adapter of the MPGNet agent: the only part of ``mpg_agents`` built on SB3's
-policy and algorithm classes (the replay buffer, :mod:`mpg_agents.replay`, implements SB3's
+policy and algorithm classes (the replay buffer, :mod:`mpg_agents.learning.replay`, implements SB3's
 buffer API).
 
 - :class:`MPGNetPolicy`: ``stable_baselines3.DQN(MPGNetPolicy, env)`` runs on every MPG env;
-  it decides as :class:`~mpg_agents.agent.MPGAgent` does.
-- :class:`MPGQNetwork`: its Q-network, :class:`~mpg_agents.q_function.MPGQFunction` as SB3's
+  it decides as :class:`~mpg_agents.acting.agent.MPGAgent` does.
+- :class:`MPGQNetwork`: its Q-network, :class:`~mpg_agents.acting.q_function.MPGQFunction` as SB3's
   ``QNetwork``.
 - :class:`MPGDQN`: SB3's DQN whose gradient step is ``mpg-train``'s
-  (:func:`~mpg_agents.td_step.td_step`), with ``mpg-train``'s settings as its defaults
-  (:class:`~mpg_agents.train_config.TrainConfig`).
+  (:func:`~mpg_agents.learning.td_step.td_step`), with ``mpg-train``'s settings as its defaults
+  (:class:`~mpg_agents.learning.train_config.TrainConfig`).
 """
 
 from mpg_agents.sb3.dqn import MPGDQN, sb3_settings

@@ -1,10 +1,10 @@
-"""SB3 DQN for MPGNet: :class:`MPGDQN` trains with :func:`mpg_agents.td_step.td_step`.
+"""SB3 DQN for MPGNet: :class:`MPGDQN` trains with :func:`mpg_agents.learning.td_step.td_step`.
 
 :class:`MPGDQN` changes only :meth:`DQN.train` and the defaults: each gradient step is the
 same step ``mpg-train``'s learner takes (double-DQN target, chosen-pixel Huber loss, grasp
 symmetry, optional branch freezing, target clamp and gradient clipping, priorities
 ``|Q(s, a) - y|``), and every setting the learner has comes from the same
-:class:`~mpg_agents.train_config.TrainConfig` (:func:`sb3_settings`).
+:class:`~mpg_agents.learning.train_config.TrainConfig` (:func:`sb3_settings`).
 
 Plain ``stable_baselines3.DQN(MPGNetPolicy, env)`` also works (it gathers the chosen pixel
 from the full flat Q vector); it just runs all 16 rotations of every branch in training
@@ -18,10 +18,10 @@ from typing import Any, Sequence
 import numpy as np
 from stable_baselines3.dqn.dqn import DQN
 
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.sb3.policy import MPGNetPolicy
-from mpg_agents.td_step import TDStepConfig, td_step
-from mpg_agents.train_config import TrainConfig
+from mpg_agents.learning.td_step import TDStepConfig, td_step
+from mpg_agents.learning.train_config import TrainConfig
 
 LEARNING_STARTS = 100
 """Transitions SB3 collects before its first gradient step (the learner has no such wait)."""

@@ -2,7 +2,7 @@
 
 ``stable_baselines3.DQN(MPGNetPolicy, env)`` works on every MPG env: the Q-network returns the
 flat Q vector in the env's action order, and the policy acts as
-:class:`~mpg_agents.agent.MPGAgent` does (:class:`~mpg_agents.agent.AgentMethods` over its online
+:class:`~mpg_agents.acting.agent.MPGAgent` does (:class:`~mpg_agents.acting.agent.AgentMethods` over its online
 network, coordination and Q*_g); the target network is SB3's.
 """
 
@@ -18,21 +18,21 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from torch import Tensor, nn
 
-from mpg_agents.agent import AgentMethods, agent_net_config
-from mpg_agents.coordination import check_coordination
-from mpg_agents.grasp_threshold import UNCALIBRATED, GraspThreshold
-from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_agents.q_function import MPGQFunction, check_action_space
-from mpg_agents.spaces import check_observation_space, resolve_primitives
-from mpg_agents.train_config import TrainConfig
-from mpg_envs.actions import check_primitives
+from mpg_agents.acting.agent import AgentMethods, agent_net_config
+from mpg_agents.acting.coordination import check_coordination
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED, GraspThreshold
+from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_agents.acting.q_function import MPGQFunction, check_action_space
+from mpg_agents.acting.spaces import check_observation_space, resolve_primitives
+from mpg_agents.learning.train_config import TrainConfig
+from mpg_envs.grid.actions import check_primitives
 
 DEFAULTS = TrainConfig()
 """``mpg-train``'s settings, where the adapter's defaults come from."""
 
 
 class MPGQNetwork(MPGQFunction, QNetwork):
-    """:class:`~mpg_agents.q_function.MPGQFunction` as SB3's ``QNetwork``: its forward pass is
+    """:class:`~mpg_agents.acting.q_function.MPGQFunction` as SB3's ``QNetwork``: its forward pass is
     MPGNet's flat Q vector.
 
     Bypasses ``QNetwork.__init__`` (it would build an MLP with one output per action, i.e.
@@ -67,7 +67,7 @@ class MPGQNetwork(MPGQFunction, QNetwork):
 
 class MPGNetPolicy(AgentMethods, DQNPolicy):
     """SB3 DQN policy (online and target MPGNet) with coordination, Q*_g and safetensors weights:
-    it decides, holds Q*_g and saves weights as :class:`~mpg_agents.agent.MPGAgent` does.
+    it decides, holds Q*_g and saves weights as :class:`~mpg_agents.acting.agent.MPGAgent` does.
 
     Args:
         observation_space: the MPG Dict space (``color``, ``depth``, ``mask``, ``occluded``);
@@ -79,7 +79,7 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
         branches: the nets to build (default: the action primitives); a superset keeps e.g.
             the grasp net as Stage III's discriminator next to the move net.
         coordination: ``"workflow"`` (paper), ``"grasp_first"`` or ``"max_q"`` (ablation);
-            see :mod:`mpg_agents.coordination`.
+            see :mod:`mpg_agents.acting.coordination`.
         q_star: the calibrated grasp threshold Q*_g; NaN until calibrated.
         net_config: ``MPGNetConfig`` or its dict overriding the variant's defaults.
         imagenet_weights: optional torchvision MobileNetV3 checkpoint to initialise every trunk.

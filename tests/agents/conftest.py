@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.mpgnet import MPGNet, recompute_batch_norm_statistics
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet import MPGNet, recompute_batch_norm_statistics
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.sb3 import MPGNetPolicy
 
 from .fake_env import random_scene

@@ -11,9 +11,9 @@ from typing import Any, Sequence
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.env import observation_space
+from mpg_envs.tasks.env import observation_space
 
-from mpg_envs.actions import PixelActionSpace, decode_action
+from mpg_envs.grid.actions import PixelActionSpace, decode_action
 
 SIZE = 224
 TABLE_RGB = (120, 110, 100)

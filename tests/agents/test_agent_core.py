@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.agent import MPGAgent
-from mpg_agents.train_config import TrainConfig
-from mpg_envs.actions import PixelActionSpace
+from mpg_agents.acting.agent import MPGAgent
+from mpg_agents.learning.train_config import TrainConfig
+from mpg_envs.grid.actions import PixelActionSpace
 
 from .conftest import TINY, calibrate_bn
 from .fake_env import FakeMPGEnv, observation_space, random_scene
 
 CORE = (
-    "mpg_agents", "mpg_agents.agent", "mpg_agents.decision", "mpg_agents.q_function", "mpg_agents.mpgnet",
-    "mpg_agents.coordination", "mpg_agents.grasp_threshold", "mpg_agents.weights", "mpg_agents.discriminator",
-    "mpg_agents.td_step", "mpg_agents.exploration", "mpg_agents.train_config", "mpg_agents.policy_zoo",
-    "mpg_agents.evaluate", "mpg_agents.cli",
+    "mpg_agents", "mpg_agents.acting.agent", "mpg_agents.acting.decision", "mpg_agents.acting.q_function", "mpg_agents.network.mpgnet",
+    "mpg_agents.acting.coordination", "mpg_agents.acting.grasp_threshold", "mpg_agents.acting.weights", "mpg_agents.acting.discriminator",
+    "mpg_agents.learning.td_step", "mpg_agents.learning.exploration", "mpg_agents.learning.train_config", "mpg_agents.evaluation.policy_zoo",
+    "mpg_agents.evaluation.evaluate", "mpg_agents.cli",
 )
 
 

@@ -1,4 +1,4 @@
-"""The paper's coordination as a pure rule (mpg_agents.coordination)."""
+"""The paper's coordination as a pure rule (mpg_agents.acting.coordination)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from mpg_agents.coordination import choose_primitive, usable_primitives
+from mpg_agents.acting.coordination import choose_primitive, usable_primitives
 
 ALL = ("move", "push", "grasp")
 

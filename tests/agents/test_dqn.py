@@ -10,8 +10,8 @@ import torch
 from stable_baselines3.common.logger import configure
 
 from mpg_agents import MPGDQN, MPGNetPolicy
-from mpg_agents.td_step import td_targets
-from mpg_envs.actions import encode_action
+from mpg_agents.learning.td_step import td_targets
+from mpg_envs.grid.actions import encode_action
 
 from .conftest import TINY
 from .fake_env import FakeMPGEnv, random_scene

@@ -7,14 +7,14 @@ import math
 import gymnasium as gym
 import numpy as np
 
-from mpg_agents.replay import sb3_dict_buffer_nbytes
+from mpg_agents.learning.replay import sb3_dict_buffer_nbytes
 import pytest
 import torch
 
 mpg_envs = pytest.importorskip("mpg_envs")
 
 from mpg_agents import MPGDQN, MPGNetPolicy, PrioritizedHeightmapReplayBuffer  # noqa: E402
-from mpg_envs.actions import decode_action  # noqa: E402
+from mpg_envs.grid.actions import decode_action  # noqa: E402
 
 from .conftest import TINY  # noqa: E402
 

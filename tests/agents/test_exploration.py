@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.exploration import PUSH_REACH_PX, Explorer, linear_epsilon
-from mpg_agents.decision import Decision
-from mpg_agents.regions import target_pixels
-from mpg_envs.actions import decode_action
+from mpg_agents.learning.exploration import PUSH_REACH_PX, Explorer, linear_epsilon
+from mpg_agents.acting.decision import Decision
+from mpg_agents.network.regions import target_pixels
+from mpg_envs.grid.actions import decode_action
 
 PRIMS = ("move", "push", "grasp")
 

@@ -10,7 +10,7 @@ from safetensors.torch import save_file
 
 from torch import nn
 
-from mpg_agents.mobilenet import (
+from mpg_agents.network.mobilenet import (
     MobileNetV3Features,
     full_depth,
     load_torchvision_features,

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.mpgnet import MPGNet
-from mpg_agents.primitive_net import PLANES, QHead
-from mpg_agents.mpgnet_config import MPGNetConfig
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.network.primitive_net import PLANES, QHead
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.sb3 import MPGQNetwork
-from mpg_envs.actions import PixelActionSpace, encode_action
+from mpg_envs.grid.actions import PixelActionSpace, encode_action
 
 from .fake_env import observation_space, random_scene
 

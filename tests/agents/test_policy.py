@@ -12,9 +12,9 @@ from gymnasium import spaces
 from stable_baselines3 import DQN
 
 from mpg_agents import MPGDQN, MPGNetPolicy, PrioritizedHeightmapReplayBuffer
-from mpg_agents.regions import region_max, target_region
-from mpg_agents.spaces import resolve_primitives
-from mpg_envs.actions import PixelActionSpace, decode_action
+from mpg_agents.network.regions import region_max, target_region
+from mpg_agents.acting.spaces import resolve_primitives
+from mpg_envs.grid.actions import PixelActionSpace, decode_action
 
 from .conftest import TINY, calibrate_bn
 from .fake_env import FakeMPGEnv, observation_space, random_scene
@@ -223,7 +223,7 @@ def test_dqn_learns_saves_loads_predicts(tmp_path, algo):
 
 
 def test_imagenet_initialisation_reaches_every_trunk(tmp_path, make_policy):
-    from mpg_agents.mobilenet import MobileNetV3Features
+    from mpg_agents.network.mobilenet import MobileNetV3Features
 
     torch.manual_seed(1)
     reference = MobileNetV3Features("small")
@@ -244,8 +244,8 @@ def test_imagenet_initialisation_reaches_every_trunk(tmp_path, make_policy):
 
 
 def test_grasp_fingers_clear_keeps_grasps_where_the_fingers_land(make_policy):
-    from mpg_agents.regions import least_blocked, target_pixels
-    from mpg_envs.grasp_geometry import fingers_blocked
+    from mpg_agents.network.regions import least_blocked, target_pixels
+    from mpg_envs.grid.grasp_geometry import fingers_blocked
 
     rng = np.random.default_rng(5)
     scene = random_scene(rng, occluded=False)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.mpgnet import MPGNet
-from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_agents.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_agents.network.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
 
 from .conftest import calibrate_bn
 

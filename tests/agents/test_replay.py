@@ -8,8 +8,8 @@ import torch
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.type_aliases import DictReplayBufferSamples
 
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
-from mpg_envs.actions import PixelActionSpace
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
+from mpg_envs.grid.actions import PixelActionSpace
 
 from .fake_env import observation_space, random_scene
 

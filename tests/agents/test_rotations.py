@@ -1,4 +1,4 @@
-"""Rotation maths (mpg_agents.rotations): the padded frame and the sampling grids."""
+"""Rotation maths (mpg_agents.network.rotations): the padded frame and the sampling grids."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 import torch
 from torch.nn import functional as F
 
-from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_agents.rotations import padded_side, rotation_grids
+from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_agents.network.rotations import padded_side, rotation_grids
 
 
 def test_padded_side_fits_the_diagonal_in_multiples_of_32():

@@ -1,7 +1,7 @@
 import pytest
 
-from mpg_agents.seeds import CALIBRATION_SEED_OFFSET, DEMONSTRATION_SEED_OFFSET, MAX_SKIPPED_SEEDS, RUN_SEED_STRIDE, episode_seed, reset_first_valid
-from mpg_envs.scenes import InvalidSceneError
+from mpg_agents.acting.seeds import CALIBRATION_SEED_OFFSET, DEMONSTRATION_SEED_OFFSET, MAX_SKIPPED_SEEDS, RUN_SEED_STRIDE, episode_seed, reset_first_valid
+from mpg_envs.scenes.generators import InvalidSceneError
 
 
 def test_episode_seeds_by_hand():

@@ -1,4 +1,4 @@
-"""The one gradient step (mpg_agents.td_step) that MPGDQN and the learner share."""
+"""The one gradient step (mpg_agents.learning.td_step) that MPGDQN and the learner share."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.replay import PrioritizedHeightmapReplayBuffer
-from mpg_agents.td_step import TDStepConfig, td_step
-from mpg_envs.actions import PixelActionSpace, encode_action
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.td_step import TDStepConfig, td_step
+from mpg_envs.grid.actions import PixelActionSpace, encode_action
 
 from .fake_env import observation_space, random_scene
 
@@ -88,7 +88,7 @@ def test_priorities_written_when_a_buffer_is_given(setup):
 
 
 def test_target_bounds_clamp_the_td_targets(setup):
-    from mpg_agents.td_step import td_targets
+    from mpg_agents.learning.td_step import td_targets
 
     policy, replay = setup
     batch = replay.sample(3)
@@ -103,7 +103,7 @@ def test_target_bounds_clamp_the_td_targets(setup):
 
 
 def test_terminal_samples_take_the_reward_and_live_ones_their_own_bootstrap(setup):
-    from mpg_agents.td_step import td_targets
+    from mpg_agents.learning.td_step import td_targets
 
     policy, replay = setup
     batch = replay.sample(3)

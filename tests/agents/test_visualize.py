@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from mpg_agents.visualize import (
+from mpg_agents.evaluation.visualize import (
     COLORBAR_PX,
     FOOTER_PX,
     HEADER_PX,
@@ -15,8 +15,8 @@ from mpg_agents.visualize import (
     save_policy_qmaps,
     save_qmap_png,
 )
-from mpg_envs.actions import PRIMITIVES, PixelAction, PixelActionSpace, encode_action
-from mpg_envs.env import observation_space
+from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, encode_action
+from mpg_envs.tasks.env import observation_space
 
 from .fake_env import random_scene
 
@@ -95,7 +95,7 @@ def _write_progress(path, iterations: int, rng) -> None:
 
 
 def test_plot_run_shorter_than_the_window(tmp_path, rng):
-    from mpg_agents.plotting import plot_run, read_progress, window_success
+    from mpg_agents.learning.plotting import plot_run, read_progress, window_success
 
     _write_progress(tmp_path / "run" / "progress.csv", 30, rng)
     data = read_progress(tmp_path / "run" / "progress.csv")
@@ -112,7 +112,7 @@ def test_plot_run_shorter_than_the_window(tmp_path, rng):
 
 
 def test_window_episode_success_counts_each_finished_episode_once_at_its_end(tmp_path):
-    from mpg_agents.plotting import plot_compare, read_progress, window_episode_success
+    from mpg_agents.learning.plotting import plot_compare, read_progress, window_episode_success
 
     # episodes 0..3 end at iterations 2 (success), 3 (failure), 6 (success); episode 3 is unfinished
     rows = [(1, 0, 0), (2, 0, 1), (3, 1, 0), (4, 2, 0), (5, 2, 0), (6, 2, 1), (7, 3, 0)]

@@ -1,13 +1,13 @@
-"""The MPGNet weight file (mpg_agents.weights): round trip, architecture checks, no unpickling."""
+"""The MPGNet weight file (mpg_agents.acting.weights): round trip, architecture checks, no unpickling."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from mpg_agents.mpgnet import MPGNet
-from mpg_agents.mpgnet_config import MPGNetConfig
-from mpg_agents.weights import load_mpgnet, load_mpgnet_weights, save_mpgnet
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_agents.acting.weights import load_mpgnet, load_mpgnet_weights, save_mpgnet
 
 
 def test_checkpoint_roundtrip_and_mismatch(tmp_path, small_net, scene):
@@ -52,7 +52,7 @@ def test_weights_file_mode_follows_the_umask(tmp_path, small_net):
 def test_export_keeps_the_weights_and_records_changed_settings(tmp_path, small_net):
     from safetensors.torch import load_file
 
-    from mpg_agents.weights import export_weights, read_checkpoint_header
+    from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
     src = tmp_path / "net.safetensors"
     save_mpgnet(small_net, src, q_star=1.25)
@@ -81,7 +81,7 @@ def test_a_checkpoint_acts_with_the_coordination_it_records(tmp_path, small_net)
 
     import mpg_envs  # noqa: F401
     from mpg_agents.sb3 import MPGNetPolicy
-    from mpg_agents.weights import export_weights, read_checkpoint_header
+    from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
     env = gym.make("MPG-Occluded-v0", num_objects=5)
     src = tmp_path / "net.safetensors"
@@ -99,7 +99,7 @@ def test_a_checkpoint_acts_with_the_coordination_it_records(tmp_path, small_net)
 
 def test_mpg_export_cli(tmp_path, small_net, capsys):
     from mpg_agents.cli import export_main
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     src = tmp_path / "net.safetensors"
     save_mpgnet(small_net, src, q_star=0.9)

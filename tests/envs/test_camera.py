@@ -18,8 +18,8 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-import mpg_envs.render as render_module  # noqa: E402
-from mpg_envs.camera import (  # noqa: E402
+import mpg_envs.perception.render as render_module  # noqa: E402
+from mpg_envs.perception.camera import (  # noqa: E402
     CameraConfig,
     CameraHeightmapper,
     FixedCamera,
@@ -28,8 +28,8 @@ from mpg_envs.camera import (  # noqa: E402
     look_at_xmat,
     opencv_camera_pose,
 )
-from mpg_envs.heightmap import RaycastHeightmapper  # noqa: E402
-from mpg_envs.workspace import Workspace  # noqa: E402
+from mpg_envs.perception.heightmap import RaycastHeightmapper  # noqa: E402
+from mpg_envs.grid.workspace import Workspace  # noqa: E402
 
 WS = Workspace()
 BOX = mujoco.mjtGeom.mjGEOM_BOX

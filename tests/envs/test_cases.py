@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mpg_envs.cases import (
+from mpg_envs.scenes.cases import (
     EPG_CASES,
     EPG_SHIFT,
     GTI_PRESETS,
@@ -25,10 +25,10 @@ from mpg_envs.cases import (
     jitter_scene,
     load_cases,
 )
-from mpg_envs.scene_io import SceneFileError, objects_outside, read_scene
-from mpg_envs.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
-from mpg_envs.vpg_scenes import GTI_COLOURS
-from mpg_envs.workspace import Workspace
+from mpg_envs.scenes.scene_io import SceneFileError, objects_outside, read_scene
+from mpg_envs.scenes.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
+from mpg_envs.scenes.vpg_scenes import GTI_COLOURS
+from mpg_envs.grid.workspace import Workspace
 
 PEERS = Path(__file__).resolve().parents[2] / ".." / "shared" / "peers"
 
@@ -168,8 +168,8 @@ def test_gti_set_has_the_twelve_presets(peers_dir):
 
 # ------------------------------------------------------------------------------ jitter
 def scene_of_cubes(positions: list[tuple[float, float]]):
-    from mpg_envs.objects import blocks_object_set
-    from mpg_envs.scene_io import SceneFile, SceneObject
+    from mpg_envs.simulation.objects import blocks_object_set
+    from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 
     cube = next(a for a in blocks_object_set() if a.name == "cube")
     objects = tuple(SceneObject(cube, np.array([x, y, 0.0257]), np.array([1.0, 0.0, 0.0, 0.0]), True, f"object {k}") for k, (x, y) in enumerate(positions))
@@ -269,7 +269,7 @@ def test_case_target_override_is_checked():
 def test_the_oracle_solves_every_challenge_case_in_strict_retrieval():
     import gymnasium as gym
 
-    from mpg_envs.oracle import OraclePolicy
+    from mpg_envs.policies.oracle import OraclePolicy
 
     env = gym.make("MPG-Occluded-v0", wrong_grasp="fail")
     oracle = OraclePolicy(env)

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 import mpg_envs
-from mpg_envs.env import MPGEnv
-from mpg_envs.occlusion import change_detected, is_occluded, surrounded_sectors
-from mpg_envs.oracle import OraclePolicy
-from mpg_envs.rewards import RewardConfig, StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
-from mpg_envs.scene_io import save_scene
+from mpg_envs.tasks.env import MPGEnv
+from mpg_envs.perception.occlusion import change_detected, is_occluded, surrounded_sectors
+from mpg_envs.policies.oracle import OraclePolicy
+from mpg_envs.tasks.rewards import RewardConfig, StepOutcome, reward_grasp_any, reward_grasp_target, reward_move, reward_push
+from mpg_envs.scenes.scene_io import save_scene
 
 ALL_IDS = mpg_envs.ENV_IDS
 INFO_KEYS = {
@@ -350,7 +350,7 @@ def test_camera_obs_mode_agrees_with_raycast(make_env):
 def test_an_unreachable_pose_is_a_motion_that_did_nothing():
     import gymnasium as gym
 
-    from mpg_envs.robot import UnreachablePoseError
+    from mpg_envs.simulation.robot import UnreachablePoseError
 
     env = gym.make("MPG-Stage2-v0")
     obs, _ = env.reset(seed=3)
@@ -379,8 +379,8 @@ def test_an_unreachable_pose_is_a_motion_that_did_nothing():
 def test_an_unreachable_trial_of_the_oracle_returns_instead_of_raising():
     import gymnasium as gym
 
-    from mpg_envs.robot import UnreachablePoseError
-    from mpg_envs.oracle import try_primitive
+    from mpg_envs.simulation.robot import UnreachablePoseError
+    from mpg_envs.policies.oracle import try_primitive
 
     env = gym.make("MPG-Stage2-v0")
     obs, _ = env.reset(seed=3)

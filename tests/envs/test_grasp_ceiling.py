@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import pytest
 
-from mpg_envs.objects import blocks_object_set
-from mpg_envs.robot import ArmIK
+from mpg_envs.simulation.objects import blocks_object_set
+from mpg_envs.simulation.robot import ArmIK
 
 
 
 @pytest.fixture(scope="module")
 def ceiling():
-    import mpg_envs.grasp_ceiling
+    import mpg_envs.tasks.grasp_ceiling
 
-    return mpg_envs.grasp_ceiling
+    return mpg_envs.tasks.grasp_ceiling
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,7 @@ def test_a_grasp_beside_the_object_fails_as_closed_empty(ceiling, ik) -> None:
     """The failure kinds are real: fingers closing 6 cm off the cube close on nothing."""
     import numpy as np
 
-    from mpg_envs.workspace import world_to_pixel
+    from mpg_envs.grid.workspace import world_to_pixel
 
     bench = ceiling.GraspBench(blocks_object_set()[0], ik=ik)
     try:

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from mpg_envs.grasp_geometry import JawGeometry, finger_landing_kernel, fingers_blocked
-from mpg_envs.oracle import OracleConfig
+from mpg_envs.grid.grasp_geometry import JawGeometry, finger_landing_kernel, fingers_blocked
+from mpg_envs.policies.oracle import OracleConfig
 
 RES = 0.002  # 2 mm pixels, the default workspace's
 # A grasp over the table: the tool centre stays at grasp_min_height 0.02, the pads' lower edge

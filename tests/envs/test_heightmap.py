@@ -13,10 +13,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from mpg_envs.footprint import fill_convex_hull, footprint_mask, geom_world_vertices, world_to_pixel_coords
-from mpg_envs.heightmap import Heightmaps, RaycastHeightmapper, geom_colors, geomgroup_mask, heights_from_world_z
-from mpg_envs.rgbd import fuse_heightmaps, heightmap_from_rgbd
-from mpg_envs.workspace import Workspace, pixel_to_world, world_to_pixel
+from mpg_envs.perception.footprint import fill_convex_hull, footprint_mask, geom_world_vertices, world_to_pixel_coords
+from mpg_envs.perception.heightmap import Heightmaps, RaycastHeightmapper, geom_colors, geomgroup_mask, heights_from_world_z
+from mpg_envs.perception.rgbd import fuse_heightmaps, heightmap_from_rgbd
+from mpg_envs.grid.workspace import Workspace, pixel_to_world, world_to_pixel
 
 WS = Workspace()
 BOX = mujoco.mjtGeom.mjGEOM_BOX

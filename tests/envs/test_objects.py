@@ -1,4 +1,4 @@
-"""Tests of mpg_envs.objects: the blocks set, mesh folders, the disk cache, MuJoCo bodies."""
+"""Tests of mpg_envs.simulation.objects: the blocks set, mesh folders, the disk cache, MuJoCo bodies."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import mujoco
 import numpy as np
 import pytest
 
-from mpg_envs import objects
-from mpg_envs.objects import (
+from mpg_envs.simulation import objects
+from mpg_envs.simulation.objects import (
     TABLEAU_10,
     ObjectAsset,
     add_object_body,

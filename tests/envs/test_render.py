@@ -11,8 +11,8 @@ import mujoco
 import numpy as np
 import pytest
 
-import mpg_envs.render as render_module
-from mpg_envs.render import RenderUnavailableError, default_gl_backend, gl_library_loads, make_renderer
+import mpg_envs.perception.render as render_module
+from mpg_envs.perception.render import RenderUnavailableError, default_gl_backend, gl_library_loads, make_renderer
 
 
 def _loads(*available: str):
@@ -66,7 +66,7 @@ def test_without_gl_render_raises_once_cleanly_and_the_next_env_works():
         import gymnasium as gym
         from gymnasium.utils.env_checker import check_env
         import mpg_envs
-        from mpg_envs.render import RenderUnavailableError
+        from mpg_envs.perception.render import RenderUnavailableError
 
         env = gym.make("MPG-Stage1-v0", render_mode="rgb_array")
         try:

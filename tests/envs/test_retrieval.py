@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401
-from mpg_envs.config import EnvConfig
-from mpg_envs.env import MPGEnv
-from mpg_envs.occlusion import VISIBILITY_BANDS, check_band, in_band, visibility_band, visible_fraction
-from mpg_envs.scene_io import SceneFile, SceneObject
-from mpg_envs.scenes import InvalidSceneError
-from mpg_envs.test_sets import TEST_SEED_START, find_test_set, load_test_set, shipped_set_path
-from mpg_envs.workspace import world_to_pixel
+from mpg_envs.tasks.config import EnvConfig
+from mpg_envs.tasks.env import MPGEnv
+from mpg_envs.perception.occlusion import VISIBILITY_BANDS, check_band, in_band, visibility_band, visible_fraction
+from mpg_envs.scenes.scene_io import SceneFile, SceneObject
+from mpg_envs.scenes.generators import InvalidSceneError
+from mpg_envs.scenes.test_sets import TEST_SEED_START, find_test_set, load_test_set, shipped_set_path
+from mpg_envs.grid.workspace import world_to_pixel
 
 UPRIGHT = np.array([1.0, 0.0, 0.0, 0.0])
 

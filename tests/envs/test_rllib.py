@@ -1,4 +1,4 @@
-"""mpg_envs.rllib: env_config parsing and seeding, then one short RLlib PPO iteration."""
+"""mpg_envs.integrations.rllib: env_config parsing and seeding, then one short RLlib PPO iteration."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ pytest.importorskip("ray.rllib")
 from ray.rllib.env.env_context import EnvContext  # noqa: E402
 
 from mpg_envs import ENV_IDS  # noqa: E402
-from mpg_envs.rllib import SEED_STRIDE, InitialSeed, make_env, register  # noqa: E402
-from mpg_envs.wrappers import GridAction, ImageObservation  # noqa: E402
+from mpg_envs.integrations.rllib import SEED_STRIDE, InitialSeed, make_env, register  # noqa: E402
+from mpg_envs.integrations.wrappers import GridAction, ImageObservation  # noqa: E402
 
 
 def test_env_config_builds_wrapped_env_with_constructor_args():

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from conftest import flat_quat
-from mpg_envs.env import END_REASONS, EnvConfig, MPGEnv
-from mpg_envs.scene_io import SceneFile, SceneFileError, objects_outside, read_scene, save_scene
-from mpg_envs.scenes import InvalidSceneError, SceneConfig, SceneLayout, keep_inside
-from mpg_envs.stages import STAGES, episode_end
-from mpg_envs.workspace import Workspace
-from mpg_envs.world import World
+from mpg_envs.tasks.env import END_REASONS, EnvConfig, MPGEnv
+from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, objects_outside, read_scene, save_scene
+from mpg_envs.scenes.generators import InvalidSceneError, SceneConfig, SceneLayout, keep_inside
+from mpg_envs.tasks.stages import STAGES, episode_end
+from mpg_envs.grid.workspace import Workspace
+from mpg_envs.simulation.world import World
 
 
 # --------------------------------------------------------------------------- valid scenes
@@ -143,7 +143,7 @@ def test_end_reason_move_success_in_stage3(make_env):
 
 @pytest.mark.parametrize("env_id, reason", [("MPG-Stage2-v0", "target_grasped"), ("MPG-Stage1-v0", "table_empty")])
 def test_end_reason_on_success(make_env, env_id, reason):
-    from mpg_envs.oracle import OraclePolicy
+    from mpg_envs.policies.oracle import OraclePolicy
 
     env = make_env(env_id, num_objects=1)
     obs, info = env.reset(seed=0)

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from mpg_envs.actions import PixelActionSpace, action_space_size, decode_action, encode_action
-from mpg_envs.workspace import (
+from mpg_envs.grid.actions import PixelActionSpace, action_space_size, decode_action, encode_action
+from mpg_envs.grid.workspace import (
     Workspace,
     check_pixel,
     pixel_to_world,

@@ -1,4 +1,4 @@
-"""mpg_envs.wrappers: the image/action maths on hand-checked cases, then the wrappers on real
+"""mpg_envs.integrations.wrappers: the image/action maths on hand-checked cases, then the wrappers on real
 envs through Gymnasium's and SB3's checkers (small scenes keep resets quick)."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401  (registers the ids)
-from mpg_envs.actions import decode_action
-from mpg_envs.wrappers import (
+from mpg_envs.grid.actions import decode_action
+from mpg_envs.integrations.wrappers import (
     ContinuousAction,
     GridAction,
     ImageObservation,
@@ -205,7 +205,7 @@ def _threads_in_a_child() -> int:
     import concurrent.futures
     import multiprocessing
 
-    from mpg_envs.heightmap import _default_threads
+    from mpg_envs.perception.heightmap import _default_threads
 
     with concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
         return pool.submit(_default_threads).result(timeout=120)

@@ -1,4 +1,4 @@
-"""Q*_g calibration (mpg_agents.grasp_threshold) and mpg-calibrate."""
+"""Q*_g calibration (mpg_agents.acting.grasp_threshold) and mpg-calibrate."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import pytest
 
 from mpg_agents.cli import calibrate_main
-from mpg_agents.grasp_threshold import Calibration, calibrate_q_star, estimate_q_star, write_calibration
-from mpg_agents.seeds import episode_seed
+from mpg_agents.acting.grasp_threshold import Calibration, calibrate_q_star, estimate_q_star, write_calibration
+from mpg_agents.acting.seeds import episode_seed
 
 
 @dataclass
@@ -145,10 +145,10 @@ def test_one_estimator_is_a_quantile_of_the_target_grasps_q():
 def test_a_calibrates_q_star_stage_estimates_from_its_own_greedy_grasps_into_its_weights(tmp_path):
     """Stage II's Q*_g: the same estimate over its last greedy grasps that took the target,
     stored in its weights header (where the next stage and the pipeline read it)."""
-    from mpg_agents.learner import Learner
-    from mpg_agents.train_config import TrainConfig
-    from mpg_agents.training_stages import TRAINING_STAGES
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.learning.learner import Learner
+    from mpg_agents.learning.train_config import TrainConfig
+    from mpg_agents.learning.training_stages import TRAINING_STAGES
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     stage = TRAINING_STAGES[1]
     assert stage.calibrates_q_star

@@ -6,10 +6,10 @@ import json
 
 import pytest
 
-from mpg_agents.case_runs import CASE_SEED_STRIDE, CaseRow, run_case_set
+from mpg_agents.evaluation.case_runs import CASE_SEED_STRIDE, CaseRow, run_case_set
 from mpg_agents.cli import eval_main
-from mpg_agents.evaluate import EpisodeRecord
-from mpg_envs.cases import CaseSet, challenge_dir, load_cases
+from mpg_agents.evaluation.evaluate import EpisodeRecord
+from mpg_envs.scenes.cases import CaseSet, challenge_dir, load_cases
 
 
 def record(index: int, success: bool, motions: int, grasps: int, target: int, wrong: int, reason: str, visible: float | None = None) -> EpisodeRecord:

@@ -1,4 +1,4 @@
-"""Paired comparison of two policies' eval records (mpg_agents.comparison, benchmarks/compare_evals.py)."""
+"""Paired comparison of two policies' eval records (mpg_agents.evaluation.comparison, benchmarks/compare_evals.py)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from mpg_agents.comparison import compare_main, compare_paired, load_eval_records
+from mpg_agents.evaluation.comparison import compare_main, compare_paired, load_eval_records
 
 
 def write_eval(path, policy, episodes, env_id="MPG-Occluded-v0", num_objects=15):

@@ -2,8 +2,8 @@
 
 import cv2
 
-import mpg_envs.render as render_module
-from mpg_agents.policy_zoo import shipped_checkpoint
+import mpg_envs.perception.render as render_module
+from mpg_agents.evaluation.policy_zoo import shipped_checkpoint
 from mpg_agents.demo import PANEL_PX, TITLE_PX, main
 
 # The Stage I-II grasp net (the learned Grasping-Only of the earlier release), kept beside
@@ -14,7 +14,7 @@ GRASP_NET = str(shipped_checkpoint().parent / "stage2_grasp_small.safetensors")
 def test_shipped_checkpoint_is_small_and_loads():
     path = shipped_checkpoint()
     assert path.stat().st_size < 10 * 2**20
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     header = read_checkpoint_header(path)
     assert header["primitives"] == ["move", "push", "grasp"] and header["variant"] == "small"
@@ -51,8 +51,8 @@ def test_demo_without_opengl_says_so_and_writes_the_heightmaps(tmp_path, capsys,
 def test_grasp_net_with_grasps_kept_on_the_target():
     import gymnasium as gym
 
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_envs.actions import decode_action
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     policy = make_policy(GRASP_NET, env, grasp_region="target")
@@ -69,9 +69,9 @@ def test_grasps_kept_off_the_target_rim():
     import gymnasium as gym
     import torch
 
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.regions import target_pixels
-    from mpg_envs.actions import decode_action
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_agents.network.regions import target_pixels
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Stage2-v0")
     policy = make_policy(GRASP_NET, env, grasp_region="target", target_margin_px=-8)
@@ -87,9 +87,9 @@ def test_moves_kept_on_the_occluders_top():
     import gymnasium as gym
     import torch
 
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.regions import footprint_top
-    from mpg_envs.actions import decode_action
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_agents.network.regions import footprint_top
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     # The paper's workflow sends an occluded target to the move net whatever the grasp Q
@@ -109,8 +109,8 @@ def test_moves_kept_on_the_occluders_top():
 def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
     import gymnasium as gym
 
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_envs.actions import decode_action
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_envs.grid.actions import decode_action
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     obs, _ = env.reset(seed=700_003)
@@ -128,7 +128,7 @@ def test_avoid_repeats_never_takes_an_action_again_on_an_unchanged_scene():
 
 
 def encode(prims, a):
-    from mpg_envs.actions import encode_action
+    from mpg_envs.grid.actions import encode_action
 
     return encode_action(prims, a.primitive, a.rotation, a.row, a.col)
 
@@ -138,10 +138,10 @@ def test_shipped_grasps_land_where_the_fingers_are_least_blocked():
     import numpy as np
     import torch
 
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.regions import least_blocked, target_pixels
-    from mpg_envs.actions import decode_action
-    from mpg_envs.grasp_geometry import fingers_blocked
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_agents.network.regions import least_blocked, target_pixels
+    from mpg_envs.grid.actions import decode_action
+    from mpg_envs.grid.grasp_geometry import fingers_blocked
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
     policy = make_policy("shipped", env)

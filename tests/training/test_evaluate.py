@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from mpg_agents.cli import eval_main
-from mpg_agents.evaluate import PRIMITIVES, EpisodeRecord, summarise
-from mpg_agents.stats import bootstrap_mean_interval, wilson_interval
-from mpg_envs.env import END_REASONS
+from mpg_agents.evaluation.evaluate import PRIMITIVES, EpisodeRecord, summarise
+from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
+from mpg_envs.tasks.env import END_REASONS
 
 
 # ----------------------------------------------------------------------------- stats
@@ -149,8 +149,8 @@ def test_mpg_eval_rejects_bad_counts(extra, message, capsys):
 def test_an_episode_of_a_continuous_action_wrapper_is_recorded():
     import gymnasium as gym
 
-    from mpg_agents.evaluate import run_episode
-    from mpg_envs.wrappers import ContinuousAction
+    from mpg_agents.evaluation.evaluate import run_episode
+    from mpg_envs.integrations.wrappers import ContinuousAction
 
     env = ContinuousAction(gym.make("MPG-Stage2-v0", num_objects=2, max_motions=2))
 

@@ -1,10 +1,10 @@
-"""The ROC AUC and summary of mpg_agents.grasp_outcomes on hand-checked cases."""
+"""The ROC AUC and summary of mpg_agents.evaluation.grasp_outcomes on hand-checked cases."""
 
 import math
 
 import pytest
 
-from mpg_agents import grasp_outcomes as bench
+from mpg_agents.evaluation import grasp_outcomes as bench
 
 
 def test_auc_separates_and_ties():

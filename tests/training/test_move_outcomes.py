@@ -1,8 +1,8 @@
-"""The pixel classes and summary of mpg_agents.move_outcomes on hand-checked cases."""
+"""The pixel classes and summary of mpg_agents.evaluation.move_outcomes on hand-checked cases."""
 
 import pytest
 
-from mpg_agents import move_outcomes as bench
+from mpg_agents.evaluation import move_outcomes as bench
 
 
 def test_a_pixel_is_table_target_occluder_or_other():

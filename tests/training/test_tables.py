@@ -7,10 +7,10 @@ import json
 
 import pytest
 
-from mpg_agents.evaluate import EpisodeRecord, summarise
-from mpg_agents.eval_runner import EvalJob, chunk_indices, evaluate_jobs, start_ray
-from mpg_agents.table_runs import PolicySpec, read_policy_specs, run_table
-from mpg_agents.tables import PAPER_ROWS, format_markdown, format_text, paper_json, rows_json, table_rows
+from mpg_agents.evaluation.evaluate import EpisodeRecord, summarise
+from mpg_agents.evaluation.eval_runner import EvalJob, chunk_indices, evaluate_jobs, start_ray
+from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table
+from mpg_agents.evaluation.tables import PAPER_ROWS, format_markdown, format_text, paper_json, rows_json, table_rows
 
 
 @pytest.fixture(scope="module")
@@ -144,7 +144,7 @@ def test_mpg_eval_json_is_the_same_for_one_and_two_workers_and_a_cluster(ray_two
 
 
 def test_a_table_from_seed_blocks_pools_their_episodes(tmp_path):
-    from mpg_agents.table_runs import table_from_evals
+    from mpg_agents.evaluation.table_runs import table_from_evals
 
     def block(start: int, successes: list[bool]) -> str:
         records = [

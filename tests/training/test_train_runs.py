@@ -1,10 +1,10 @@
-"""The launcher of independent training runs (mpg_agents.train_runs): planning and commands."""
+"""The launcher of independent training runs (mpg_agents.learning.train_runs): planning and commands."""
 
 import sys
 
 import pytest
 
-from mpg_agents.train_runs import DEFAULT_CONFIG, RUNS, RunSpec, main, plan_runs, train_run
+from mpg_agents.learning.train_runs import DEFAULT_CONFIG, RUNS, RunSpec, main, plan_runs, train_run
 
 
 def test_plan_gives_one_folder_per_run_and_seed_with_its_pipeline_flags(tmp_path):
@@ -32,7 +32,7 @@ def test_plan_rejects_what_it_cannot_run(runs, seeds, config, match):
 
 
 def test_every_run_is_mpgnet_an_ablation_or_a_learned_baseline():
-    from mpg_agents.training_stages import BASELINES
+    from mpg_agents.learning.training_stages import BASELINES
 
     for flags in RUNS.values():
         if flags[:1] == ("--baseline",):

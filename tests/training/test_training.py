@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from mpg_agents.cli import eval_main, plot_main, train_main
-from mpg_agents.learner import Learner, StopRequested
-from mpg_agents.train_config import TrainConfig
-from mpg_agents.pipeline import PipelineConfig, run_pipeline
-from mpg_agents.training_stages import TRAINING_STAGES, with_overrides
+from mpg_agents.learning.learner import Learner, StopRequested
+from mpg_agents.learning.train_config import TrainConfig
+from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
+from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -65,7 +65,7 @@ def test_a_stage_reward_setting_reaches_its_env(tmp_path):
 
 
 def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monkeypatch):
-    import mpg_agents.learner as learner_module
+    import mpg_agents.learning.learner as learner_module
 
     stage = with_overrides(TRAINING_STAGES, {"Stage5": {
         "env_id": "MPG-Occluded-v0", "objects": [6, 6], "coordination": "grasp_first", "grasp_trials": 2, "alternate_every": 1,
@@ -85,7 +85,7 @@ def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monk
 
 
 def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
-    import mpg_agents.learner as learner_module
+    import mpg_agents.learning.learner as learner_module
 
     stage = with_overrides(TRAINING_STAGES, {"Stage5": {
         "iterations": 4, "alternate_every": 1, "finish_iterations": 2, "finish_trainable": ["grasp"], "objects": [3, 3],
@@ -99,9 +99,9 @@ def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
 
 
 def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
-    from mpg_agents.policy_zoo import make_policy
-    from mpg_agents.training_stages import target_vpg_baseline
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.evaluation.policy_zoo import make_policy
+    from mpg_agents.learning.training_stages import target_vpg_baseline
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     stages = with_overrides(TRAINING_STAGES, {s.name: {"iterations": 2} for s in TRAINING_STAGES})
     table = target_vpg_baseline(stages)
@@ -183,9 +183,9 @@ def test_mpg_train_rejects_bad_input(tmp_path, capsys, argv, message):
 
 
 def test_checkpoint_of_another_architecture_is_refused(tmp_path, capsys):
-    from mpg_agents.mpgnet import MPGNet
-    from mpg_agents.mpgnet_config import MPGNetConfig
-    from mpg_agents.weights import save_mpgnet
+    from mpg_agents.network.mpgnet import MPGNet
+    from mpg_agents.network.mpgnet_config import MPGNetConfig
+    from mpg_agents.acting.weights import save_mpgnet
 
     other = tmp_path / "other.safetensors"
     save_mpgnet(MPGNet(MPGNetConfig.small(trunk_depth=3, primitives=("grasp",))), other)
@@ -236,7 +236,7 @@ def test_shipped_training_configs_load(name):
     from importlib.resources import files
 
     from mpg_agents.cli import training_settings
-    from mpg_agents.mpgnet_config import MPGNetConfig
+    from mpg_agents.network.mpgnet_config import MPGNetConfig
 
     path = files("mpg_agents") / "checkpoints" / name
     base, stages = training_settings(str(path))
@@ -259,7 +259,7 @@ def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):
     """calibration_episodes: greedy grasp-only episodes before training set Q*_g to the median
     Q of the grasps that took the target; the weights and the pipeline carry it, a resumed
     run does not calibrate again, and nothing of it enters the replay."""
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     net = {"trunk_depth": 2, "grasp_region": "target", "target_margin_px": -8}
     stages = with_overrides(
@@ -308,7 +308,7 @@ def test_calibration_with_no_target_grasp_is_an_error(tmp_path, monkeypatch):
 def test_calibrate_every_follows_the_grasp_net_and_ends_calibrated(tmp_path):
     """calibrate_every: Q*_g is measured again while the stage learns (at episode ends) and
     once at its end, on the same calibration scenes; the weights carry the last value."""
-    from mpg_agents.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import read_checkpoint_header
 
     net = {"trunk_depth": 2, "grasp_region": "target", "target_margin_px": -8}
     stage = with_overrides(
@@ -328,8 +328,8 @@ def test_calibrate_every_follows_the_grasp_net_and_ends_calibrated(tmp_path):
 def test_mpg_eval_q_star_overrides_the_checkpoint(tmp_path, capsys):
     import gymnasium as gym
 
-    from mpg_agents.policy_zoo import NetworkPolicy
-    from mpg_agents.weights import save_mpgnet
+    from mpg_agents.evaluation.policy_zoo import NetworkPolicy
+    from mpg_agents.acting.weights import save_mpgnet
 
     cfg = TrainConfig(steps=1, **TINY)
     learner = Learner(cfg, "MPG-Stage2-v0", tmp_path / "run", log=lambda s: None)

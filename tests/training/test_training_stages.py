@@ -1,10 +1,10 @@
-"""The training stages as data (mpg_agents.training_stages) and the ablations as table changes."""
+"""The training stages as data (mpg_agents.learning.training_stages) and the ablations as table changes."""
 
 from __future__ import annotations
 
 import pytest
 
-from mpg_agents.training_stages import (
+from mpg_agents.learning.training_stages import (
     TRAINING_STAGES,
     TrainingStage,
     select_stages,
@@ -13,7 +13,7 @@ from mpg_agents.training_stages import (
     without_alternation,
     without_multistage,
 )
-from mpg_envs.rewards import RewardConfig
+from mpg_envs.tasks.rewards import RewardConfig
 
 
 def test_the_paper_table():
@@ -65,7 +65,7 @@ def test_branch_init_pairs_are_checked_and_round_trip():
 
 
 def test_learned_baselines_are_table_changes_at_the_same_budget():
-    from mpg_agents.training_stages import BASELINES, at_budget, with_overrides
+    from mpg_agents.learning.training_stages import BASELINES, at_budget, with_overrides
 
     total = sum(s.iterations for s in TRAINING_STAGES)
     for name, make in BASELINES.items():

@@ -1,0 +1,98 @@
+"""Which primitive to use: the paper's coordination of the move, push and grasp nets.
+
+Pure functions of the Q values, the occlusion bit and Q*_g; no network, no env. The caller
+passes ``best_q(primitive)``, the largest Q of that primitive over the pixels where it may act
+(move and grasp: inside the rough target region), and it is asked only for the primitives
+the rule needs, so a policy computes only those branches.
+
+Rules (:data:`COORDINATIONS`):
+
+- ``"workflow"`` (paper, Section III-C): target occluded -> move; else grasp when the best
+  grasp Q is at least Q*_g; else push. Until Q*_g is calibrated (NaN) the grasp/push choice
+  is the larger of the best grasp Q and the best push Q.
+- ``"grasp_first"``: the workflow, but the grasp is asked first: a grasp whose best Q is at
+  least Q*_g is taken even when the target is occluded (a partly covered target the grasp
+  net already scores graspable needs no move); otherwise occluded -> move, else push. Not
+  the paper's rule; measured against it on the Experiments page of the documentation. Until Q*_g is calibrated it is the workflow.
+- ``"max_q"``: the primitive with the largest best Q (the paper's "w/o alternating training"
+  ablation).
+
+``available`` is what both the env allows and the network has: a grasp-only net on an env
+that allows all three always grasps (the paper's Grasping-Only baseline); a push+grasp net
+decides between push and grasp by its own rule, without move.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, Sequence
+
+from mpg_envs.grid.actions import check_primitives
+
+COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "max_q")
+"""Ways to pick the primitive: the paper's workflow, the workflow asking the grasp first, or
+the plain max over the Q maps."""
+
+
+def check_coordination(rule: str) -> str:
+    """``rule`` if it is one of :data:`COORDINATIONS`; else ``ValueError`` naming the valid ones."""
+    if rule not in COORDINATIONS:
+        raise ValueError(f"coordination must be one of {COORDINATIONS}, got {rule!r}")
+    return rule
+
+
+def usable_primitives(env_primitives: Sequence[str], net_primitives: Sequence[str]) -> tuple[str, ...]:
+    """The primitives a policy can use: those the env allows and the network has a branch for.
+
+    Raises ``ValueError`` when there are none (the network cannot act on this env at all).
+    """
+    env_p, net_p = check_primitives(env_primitives), check_primitives(net_primitives)
+    usable = tuple(p for p in env_p if p in net_p)
+    if not usable:
+        raise ValueError(f"the network's branches {net_p} include none of the primitives {env_p} this env allows")
+    return usable
+
+
+def choose_primitive(
+    rule: str,
+    available: Sequence[str],
+    occluded: bool,
+    q_star: float,
+    best_q: Callable[[str], float],
+) -> str:
+    """The primitive to use now.
+
+    Args:
+        rule: one of :data:`COORDINATIONS`.
+        available: usable primitives in canonical order (see :func:`usable_primitives`).
+        occluded: the observation's occlusion bit.
+        q_star: the grasp threshold Q*_g (NaN: not calibrated).
+        best_q: ``primitive -> best Q`` (called only for the primitives the rule compares).
+    """
+    check_coordination(rule)
+    available = check_primitives(available)
+    if len(available) == 1:
+        return available[0]
+    if rule == "max_q":
+        return _largest(available, best_q)
+    if rule == "grasp_first" and occluded and "grasp" in available and not math.isnan(q_star):
+        if best_q("grasp") >= q_star:
+            return "grasp"
+    if "move" in available and occluded:
+        return "move"
+    if "grasp" in available and "push" in available:
+        if math.isnan(q_star):
+            return _largest(("grasp", "push"), best_q)
+        return "grasp" if best_q("grasp") >= q_star else "push"
+    # Not occluded and only one of grasp/push usable besides move (e.g. a move+grasp net).
+    return next(p for p in available if p != "move")
+
+
+def _largest(candidates: Sequence[str], best_q: Callable[[str], float]) -> str:
+    """The first candidate with the largest best Q (ties keep the earlier one)."""
+    values = [(best_q(p), p) for p in candidates]
+    best = values[0]
+    for value in values[1:]:
+        if value[0] > best[0]:
+            best = value
+    return best[1]

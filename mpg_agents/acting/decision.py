@@ -1,0 +1,113 @@
+"""The greedy coordinated decision: which primitive, then its best pixel and rotation.
+
+The primitive comes from :func:`mpg_agents.acting.coordination.choose_primitive` (the occlusion bit,
+Q*_g and the best Q of the primitives the rule asks about); only the branches the rule needs
+are computed. Then the best action of that primitive's Q maps is taken where it may act
+(:meth:`mpg_agents.network.mpgnet.MPGNet.actable`).
+"""
+
+from __future__ import annotations
+
+from typing import Mapping, NamedTuple
+
+import torch
+from torch import Tensor
+
+from mpg_agents.acting.coordination import choose_primitive
+from mpg_agents.network.mpgnet import EncodedObs
+from mpg_agents.acting.q_function import MPGQFunction, mask_outside
+from mpg_agents.network.regions import region_max
+from mpg_envs.grid.actions import encode_action
+
+
+class Decision(NamedTuple):
+    """One coordinated decision: the flat action and what it was made from."""
+
+    action: int
+    primitive: str
+    rotation: int
+    row: int
+    col: int
+    q_value: float
+    grasp_score: float  # best grasp Q in the target region, NaN when the grasp net was not run
+    q_maps: dict[str, Tensor]  # the (R, H, W) maps computed for this decision
+
+
+def decide(
+    q: MPGQFunction,
+    obs: Mapping[str, Tensor],
+    coordination: str,
+    q_star: float,
+    primitive: str | None = None,
+    forbidden: Mapping[str, Tensor] | None = None,
+) -> list[Decision]:
+    """Coordinated decisions for a batch of observation tensors, one per sample.
+
+    Args:
+        q: the network on the env's action space.
+        obs: a batch (leading axis) of raw observation tensors.
+        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS`.
+        q_star: the grasp threshold Q*_g (NaN: uncalibrated).
+        primitive: overrides the coordination's choice of primitive (e.g. Stage IV's final grasp).
+        forbidden: ``{primitive: (R, H, W) bool}`` actions not to take (one sample only; e.g.
+            actions that already failed on this unchanged scene).
+
+    Raises:
+        ValueError: ``forbidden`` with a batch of more than one, or a ``primitive`` the network
+            cannot use here.
+    """
+    batch = batch_size(obs)
+    if forbidden and batch != 1:
+        raise ValueError(f"forbidden actions apply to one observation, got a batch of {batch}")
+    decisions = []
+    for i in range(batch):
+        single = {k: v[i : i + 1] for k, v in obs.items()}
+        decisions.append(_decide_one(q, q.mpgnet.encode(single), coordination, q_star, primitive, forbidden))
+    return decisions
+
+
+def _decide_one(
+    q: MPGQFunction,
+    enc: EncodedObs,
+    coordination: str,
+    q_star: float,
+    primitive: str | None,
+    forbidden: Mapping[str, Tensor] | None,
+) -> Decision:
+    net = q.mpgnet
+    maps: dict[str, Tensor] = {}
+    actable: dict[str, Tensor] = {}
+
+    def run(p: str) -> Tensor:
+        """``p``'s ``(R, H, W)`` Q maps, -inf where it may not act (each branch run once)."""
+        if p not in maps:
+            maps[p] = net.maps_from(enc, (p,))[p][0]
+            allowed = net.actable(enc, p)
+            actable[p] = mask_outside(maps[p], None if allowed is None else allowed[0])
+            if forbidden is not None and p in forbidden:
+                barred = torch.as_tensor(forbidden[p], dtype=torch.bool, device=actable[p].device)
+                kept = actable[p].masked_fill(barred, float("-inf"))
+                if bool(torch.isfinite(kept).any()):  # never bar every action: the best of them is still an action
+                    actable[p] = kept
+        return actable[p]
+
+    if primitive is not None:
+        if primitive not in q.usable_primitives:
+            raise ValueError(f"primitive {primitive!r} is not allowed here; allowed: {q.usable_primitives}")
+    else:
+        occluded = bool(enc.occluded[0]) if enc.occluded is not None else False
+        best = lambda p: float(run(p).max())  # noqa: E731
+        primitive = choose_primitive(coordination, q.usable_primitives, occluded, q_star, best)
+    chosen = run(primitive)
+    flat = int(chosen.flatten().argmax())
+    value = float(chosen.flatten()[flat])
+    rot, rest = divmod(flat, chosen.shape[1] * chosen.shape[2])
+    row, col = divmod(rest, chosen.shape[2])
+    grasp_score = float(region_max(maps["grasp"][None], net.grasp_where(enc))[0]) if "grasp" in maps else float("nan")
+    action = encode_action(q.action_primitives, primitive, rot, row, col, size=q.net_config.heightmap_size)
+    return Decision(action, primitive, rot, row, col, value, grasp_score, maps)
+
+
+def batch_size(obs: Mapping[str, Tensor]) -> int:
+    """The leading axis of a batch of observation tensors."""
+    return int(next(iter(obs.values())).shape[0])

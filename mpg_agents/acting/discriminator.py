@@ -1,0 +1,42 @@
+"""The discriminator: a fixed grasp net that scores states for the move and push rewards.
+
+Stages III-V hand it to the envs as their ``grasp_scorer`` (the paper's discriminator: the
+Stage II grasp net, frozen).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Mapping
+
+import torch
+
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.acting.weights import load_mpgnet
+
+
+class Discriminator:
+    """``callable(obs) -> float``: the best grasp Q where a grasp may act (for the envs).
+
+    Runs the grasp branch in eval mode without gradients and restores the network's mode.
+    """
+
+    def __init__(self, net: MPGNet) -> None:
+        if "grasp" not in net.primitives:
+            raise ValueError(f"the discriminator needs a grasp branch; this MPGNet has {net.primitives}")
+        self.net = net
+
+    @classmethod
+    def from_weights(cls, path: str | Path) -> "Discriminator":
+        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net)."""
+        net, _ = load_mpgnet(path, primitives=("grasp",))
+        return cls(net)
+
+    def __call__(self, obs: Mapping[str, Any]) -> float:
+        was_training = self.net.training
+        self.net.eval()
+        try:
+            with torch.inference_mode():
+                return float(self.net.grasp_score(obs)[0])
+        finally:
+            self.net.train(was_training)

@@ -1,0 +1,241 @@
+"""Q*_g, the grasp threshold of the coordination: how it is estimated, held, stored, overridden
+and recorded. Every other module reads it through this one.
+
+The paper's workflow grasps when the best grasp Q reaches Q*_g (:mod:`mpg_agents.acting.coordination`).
+
+- **Estimate**: :func:`estimate_q_star`, a quantile of the Q of greedy grasps that took the
+  target (the paper sets Q*_g from the Q of successful grasps). :func:`calibrate_q_star` measures
+  it in a stage's own scenes: ``episodes`` greedy grasp-only episodes of the net, nothing learned,
+  on the calibration seeds of :func:`~mpg_agents.acting.seeds.episode_seed` (clear of the training and
+  evaluation seeds; the same run seed gives the same scenes, so successive calibrations of one
+  run use one measuring stick). A stage with ``calibrates_q_star`` applies the same estimate to
+  its own recent greedy grasps that took the target, at its end.
+- **Hold**: :class:`GraspThreshold`, the value an agent decides with.
+- **Store**: the ``"q_star"`` field of a checkpoint's weights header (:func:`as_record`,
+  :func:`from_header`), the one place a value is kept with weights; a resumed run, the next
+  stage and the pipeline's record all read it back from there.
+- **Override**: a value given by hand (``mpg-train``/``mpg-eval``/``mpg-export --q-star``):
+  :func:`check_override`, :func:`starting_q_star`, :func:`exported_q_star` (an export keeps
+  training's value on record).
+- **Record**: ``calibration.json``, every in-scene measurement of a stage
+  (:func:`write_calibration`), and the one number of a pipeline's ``pipeline.json``
+  (:func:`as_record`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+
+from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+
+if TYPE_CHECKING:
+    from mpg_agents.acting.agent import MPGAgent
+
+UNCALIBRATED = float("nan")
+"""Q*_g before any estimate: the coordination then compares the best grasp and push Q instead."""
+
+
+class GraspThreshold(nn.Module):
+    """The Q*_g an agent decides with.
+
+    A module with one float64 buffer, so the value travels with state dicts (SB3's ``save``)
+    and a calibrated value such as 1.85 round-trips exactly.
+    """
+
+    def __init__(self, value: float = UNCALIBRATED) -> None:
+        super().__init__()
+        self.register_buffer("value", torch.tensor(float(value), dtype=torch.float64))
+
+    def __float__(self) -> float:
+        return float(self.value)
+
+    def set(self, value: float) -> None:
+        """Hold ``value`` from now on (NaN: uncalibrated)."""
+        self.value.fill_(float(value))
+
+    @property
+    def calibrated(self) -> bool:
+        """Whether a value has been set (it is not NaN)."""
+        return not math.isnan(float(self))
+
+    def extra_repr(self) -> str:
+        return f"q_star={float(self):.6g}"
+
+
+# -------------------------------------------------------------------------------- estimate
+def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = 0.5) -> float:
+    """Q*_g from the Q of greedy grasps that took the target: their ``quantile``.
+
+    0.5 is the median (where the Q of successful grasps settles, the paper's reading); a lower
+    quantile lets the workflow take more of the grasps that do succeed.
+
+    Raises:
+        ValueError: ``quantile`` outside [0, 1], or no grasp to take a quantile of.
+    """
+    if not 0.0 <= quantile <= 1.0:
+        raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
+    if len(target_grasp_q) == 0:
+        raise ValueError("Q*_g needs the Q of at least one grasp that took the target")
+    return float(np.quantile(target_grasp_q, quantile))
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """One measurement of Q*_g in a stage's scenes.
+
+    Attributes:
+        q_star: the ``quantile`` of ``target_grasp_q``.
+        quantile: 0.5 is the median (the paper's reading), 0.25 the lower quartile.
+        episodes: grasp-only episodes run.
+        grasps: grasps taken in them.
+        target_grasp_q: the Q of each grasp that took the target, in the order taken.
+    """
+
+    q_star: float
+    quantile: float
+    episodes: int
+    grasps: int
+    target_grasp_q: tuple[float, ...]
+
+
+def calibrate_q_star(
+    agent: "MPGAgent", env: gym.Env, episodes: int, seed: int, quantile: float = 0.5,
+    on_episode: Callable[[int, int, int], None] | None = None,
+) -> Calibration:
+    """Measure Q*_g of ``agent`` in ``env``'s scenes (greedy grasps only, nothing learned).
+
+    Args:
+        agent: the net (an :class:`~mpg_agents.acting.agent.MPGAgent`, or anything with
+            ``decide(obs, primitive)``, ``usable_primitives`` and ``branches``); only its grasp
+            branch acts.
+        env: the scenes; episode ``k`` is reset with ``episode_seed(seed, k, calibration=True)``.
+        episodes: how many episodes (>= 1).
+        seed: the run seed that picks the calibration scenes.
+        quantile: which quantile of the successful grasps' Q becomes Q*_g, in [0, 1].
+        on_episode: called after each episode with (episode, grasps so far, target grasps so far).
+
+    Raises:
+        ValueError: the net has no grasp branch, ``episodes`` < 1 or ``quantile`` outside [0, 1].
+        RuntimeError: no grasp took the target (there is nothing to take a quantile of).
+    """
+    if "grasp" not in agent.usable_primitives:
+        raise ValueError(f"Q*_g calibration needs a grasp branch; the net has {agent.branches}")
+    if episodes < 1:
+        raise ValueError(f"calibration needs at least one episode, got {episodes}")
+    if not 0.0 <= quantile <= 1.0:
+        raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
+    taken: list[float] = []
+    grasps = 0
+    k = -1
+    for n in range(episodes):
+        # A seed without a valid scene passes to the next one: the same scenes every calibration.
+        obs, _, k = reset_first_valid(env, lambda j: episode_seed(seed, j, calibration=True), k + 1)
+        done = False
+        while not done:
+            decision = agent.decide(obs, "grasp")
+            obs, _, terminated, truncated, info = env.step(decision.action)
+            grasps += 1
+            if info["target_grasped"] and math.isfinite(decision.q_value):
+                taken.append(float(decision.q_value))
+            done = bool(terminated or truncated)
+        if on_episode is not None:
+            on_episode(n, grasps, len(taken))
+    if not taken:
+        raise RuntimeError(f"no grasp took the target in {episodes} calibration episodes ({grasps} grasps)")
+    return Calibration(estimate_q_star(taken, quantile), quantile, episodes, grasps, tuple(taken))
+
+
+# ------------------------------------------------------------------ store and record
+def as_record(q_star: float) -> float | None:
+    """Q*_g as a weights header, ``calibration.json`` or ``pipeline.json`` holds it: ``None``
+    when uncalibrated (NaN, which JSON cannot hold)."""
+    return None if math.isnan(q_star) else float(q_star)
+
+
+def from_record(value: float | None) -> float:
+    """The inverse of :func:`as_record`: ``None`` is NaN (uncalibrated)."""
+    return UNCALIBRATED if value is None else float(value)
+
+
+def from_header(header: Mapping[str, Any]) -> float:
+    """The Q*_g a checkpoint's weights header stores (NaN when it has none)."""
+    return from_record(header.get("q_star"))
+
+
+def write_calibration(
+    path: str | Path, calibration: Calibration, iteration: int, q_star_before: float, continue_history: bool,
+) -> dict[str, Any]:
+    """Write ``calibration.json``: the latest measurement whole, and one line per calibration.
+
+    With ``continue_history`` the lines already in ``path`` are kept (a stage calibrating again);
+    otherwise the history starts with this one. Returns what was written. A NaN ``q_star_before``
+    (no Q*_g yet) is written as ``null``.
+    """
+    path = Path(path)
+    history: list[dict[str, Any]] = []
+    if continue_history and path.is_file():
+        history = json.loads(path.read_text()).get("history", [])
+    c = calibration
+    history.append({"iteration": iteration, "q_star": c.q_star, "target_grasps": len(c.target_grasp_q), "grasps": c.grasps})
+    record = {
+        "iteration": iteration, "episodes": c.episodes, "grasps": c.grasps, "target_grasps": len(c.target_grasp_q),
+        "quantile": c.quantile, "q_star_before": as_record(q_star_before),
+        "q_star": c.q_star, "target_grasp_q": list(c.target_grasp_q), "history": history,
+    }
+    path.write_text(json.dumps(record, indent=1))
+    return record
+
+
+def calibration_dict(calibration: Calibration) -> dict[str, Any]:
+    """The measurement as plain JSON types."""
+    data = asdict(calibration)
+    data["target_grasp_q"] = list(calibration.target_grasp_q)
+    return data
+
+
+# ------------------------------------------------------------------------- override
+def check_override(q_star: float) -> float:
+    """A Q*_g given by hand (``--q-star``), as a float.
+
+    Raises:
+        ValueError: it is not a finite number.
+    """
+    q_star = float(q_star)
+    if not math.isfinite(q_star):
+        raise ValueError(f"q_star must be a finite number, got {q_star!r}")
+    return q_star
+
+
+def starting_q_star(override: float, checkpoint: float) -> float:
+    """The Q*_g a training run starts with: the ``override`` (``TrainConfig.q_star``) unless it
+    is NaN, else the starting checkpoint's (NaN: none)."""
+    return checkpoint if math.isnan(override) else float(override)
+
+
+def exported_q_star(
+    header: Mapping[str, Any], override: float | None, extra: Mapping[str, Any]
+) -> tuple[float, dict[str, Any]]:
+    """The Q*_g of an exported copy of a checkpoint, and the copy's header ``extra``.
+
+    Without ``override`` the copy keeps the checkpoint's value. An ``override`` (e.g. one
+    measured under settings changed after training) replaces it, and ``extra`` keeps training's
+    as ``q_star_from_training`` (a copy of a copy keeps the first).
+
+    Raises:
+        ValueError: ``override`` is not a finite number.
+    """
+    extra = dict(extra)
+    if override is None:
+        return from_header(header), extra
+    q_star = check_override(override)
+    extra.setdefault("q_star_from_training", header.get("q_star"))
+    return q_star, extra

@@ -1,0 +1,63 @@
+"""The spaces MPGNet acts on: which primitives an action space indexes, and the observation check."""
+
+from __future__ import annotations
+
+import warnings
+from typing import Sequence
+
+import numpy as np
+from gymnasium import spaces
+
+from mpg_envs.grid.actions import PRIMITIVES, check_primitives
+
+
+def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | None = None) -> tuple[str, ...]:
+    """The primitives an action space indexes, in canonical order.
+
+    Read from ``action_space.primitives`` (``mpg_envs.grid.actions.PixelActionSpace``), else from the
+    ``primitives`` argument, else inferred from the size: 3 -> all, 2 -> push and grasp; a
+    one-primitive space is ambiguous and raises.
+    """
+    if not isinstance(action_space, spaces.Discrete):
+        raise TypeError(f"MPGNet needs a Discrete pixel action space, got {action_space}")
+    declared = getattr(action_space, "primitives", None)
+    if declared is not None:
+        found = check_primitives(declared)
+        if primitives is not None and tuple(primitives) != found:
+            raise ValueError(f"primitives={tuple(primitives)} contradicts the action space's primitives {found}")
+        return found
+    if primitives is not None:
+        return check_primitives(primitives)
+    per = 16 * 224 * 224
+    n = int(action_space.n)
+    if n % per:
+        raise ValueError(f"action space Discrete({n}) is not P * 16 * 224 * 224 pixel actions")
+    count = n // per
+    if count == 3:
+        return PRIMITIVES
+    if count == 2:
+        return ("push", "grasp")
+    raise ValueError(
+        f"cannot tell which primitive a {count}-primitive action space Discrete({n}) uses; "
+        f"pass primitives=(...) in policy_kwargs, one of {PRIMITIVES}"
+    )
+
+
+def check_observation_space(space: spaces.Space, size: int) -> None:
+    """Fail early, naming the key, when an env's observation space is not MPG-shaped."""
+    if not isinstance(space, spaces.Dict):
+        raise TypeError(f"MPGNet needs a Dict observation space with color/depth/mask, got {space}")
+    shapes = {
+        "color": ((size, size, 3), (3, size, size)),
+        "depth": ((size, size),),
+        "mask": ((size, size),),
+    }
+    for key, allowed in shapes.items():
+        if key not in space.spaces:
+            raise ValueError(f"observation space lacks {key!r}; MPGNet needs keys {sorted(shapes)}")
+        if tuple(space.spaces[key].shape) not in allowed:
+            raise ValueError(
+                f"observation space {key!r} has shape {space.spaces[key].shape}; expected one of {allowed}"
+            )
+    if space.spaces["color"].dtype != np.uint8:
+        warnings.warn("colour observations are not uint8; MPGNet reads them on the 0..255 scale", stacklevel=3)

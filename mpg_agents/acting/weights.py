@@ -1,0 +1,193 @@
+"""MPGNet's weight file: safetensors tensors with one JSON header (architecture, Q*_g, extras).
+
+Never unpickles anything. ``read_checkpoint_header`` reads the header alone (what the CLIs
+check before building a network); ``load_mpgnet_weights`` checks the architecture first and
+names any mismatch.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from mpg_agents.acting.coordination import check_coordination
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, exported_q_star
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_envs.grid.actions import check_primitives
+
+CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"
+
+
+def checkpoint_metadata(
+    net: MPGNet, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
+) -> dict[str, str]:
+    """The safetensors metadata header: one JSON document under key ``"mpgnet"``; its
+    ``"q_star"`` is where a checkpoint stores Q*_g (:mod:`mpg_agents.acting.grasp_threshold`), its
+    ``"package_version"`` the version of the package that wrote it (the env id, with its
+    version, a training run writes under ``extra``)."""
+    from mpg_envs import __version__
+
+    header = {
+        "format": CHECKPOINT_FORMAT,
+        "package_version": __version__,
+        "variant": net.config.variant,
+        "primitives": list(net.primitives),
+        "q_star": as_record(q_star),
+        "config": net.config.to_dict(),
+    }
+    if extra:
+        header["extra"] = dict(extra)
+    return {"mpgnet": json.dumps(header)}
+
+
+def save_mpgnet(
+    net: MPGNet, path: str | Path, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
+) -> None:
+    """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header."""
+    from safetensors.torch import save_file
+
+    state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    save_file(state, str(path), metadata=checkpoint_metadata(net, q_star, extra))
+    chmod_by_umask(path)
+
+
+def chmod_by_umask(path: str | Path) -> None:
+    """Give ``path`` the mode a plain ``open()`` would (0666 less the umask): safetensors
+    writes through a private temporary file and leaves 0600."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
+
+
+def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
+    """The JSON header of an MPGNet safetensors file (no tensors are read)."""
+    from safetensors import safe_open
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"MPGNet checkpoint not found: {path}")
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            meta = f.metadata() or {}
+    except Exception as exc:  # noqa: BLE001 - re-raised naming the file
+        raise ValueError(
+            f"{path} is not a safetensors file ({exc}); MPGNet weights are saved with save_weights()"
+        ) from exc
+    if "mpgnet" not in meta:
+        raise ValueError(f"{path} has no 'mpgnet' metadata header; it was not written by save_mpgnet/save_weights")
+    header = json.loads(meta["mpgnet"])
+    if header.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(
+            f"{path}: unsupported checkpoint format {header.get('format')!r}, expected {CHECKPOINT_FORMAT!r}"
+        )
+    return header
+
+
+def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = True) -> dict[str, Any]:
+    """Load a :func:`save_mpgnet` file into ``net`` after checking the architectures match.
+
+    Branches in the file that ``net`` does not have are ignored. With ``strict_branches=False``
+    branches of ``net`` missing from the file keep their current weights (e.g. a Stage II
+    grasp-only checkpoint starting Stage V); otherwise that is an error.
+
+    Returns:
+        The checkpoint header (variant, primitives, q_star, config).
+
+    Raises:
+        ValueError: naming the mismatch (variant, trunk depth, head width, a tensor's shape, a
+            missing branch) when the file holds another architecture.
+    """
+    from safetensors.torch import load_file
+
+    header = read_checkpoint_header(path)
+    file_cfg = header.get("config", {})
+    mine = net.config.to_dict()
+    for key in ("variant", "trunk_depth", "head_channels", "num_rotations", "heightmap_size"):
+        if file_cfg.get(key) != mine[key]:
+            raise ValueError(
+                f"checkpoint {path} has {key}={file_cfg.get(key)!r} but this network has {key}={mine[key]!r}; "
+                "build the network with the checkpoint's configuration (MPGNetConfig.from_dict(header['config']))"
+            )
+    missing_branches = [p for p in net.primitives if p not in header.get("primitives", [])]
+    if missing_branches and strict_branches:
+        raise ValueError(
+            f"checkpoint {path} has branches {header.get('primitives')} but this network needs {list(net.primitives)} "
+            f"(missing {missing_branches}); pass strict_branches=False to keep those branches' current weights"
+        )
+    state = load_file(str(path))
+    own = net.state_dict()
+    wanted = {}
+    for key, target in own.items():
+        if key.startswith("branches.") and key.split(".")[1] in missing_branches:
+            continue
+        if key not in state:
+            raise ValueError(f"checkpoint {path} lacks tensor {key!r} that this {net.config.variant} MPGNet needs")
+        if tuple(state[key].shape) != tuple(target.shape):
+            raise ValueError(
+                f"checkpoint {path}: tensor {key!r} has shape {tuple(state[key].shape)}, this network needs "
+                f"{tuple(target.shape)}"
+            )
+        wanted[key] = state[key]
+    net.load_state_dict(wanted, strict=False)
+    return header
+
+
+def load_mpgnet(path: str | Path, primitives: Sequence[str] | None = None) -> tuple[MPGNet, dict[str, Any]]:
+    """Build an MPGNet from a checkpoint's own configuration and load it.
+
+    Args:
+        path: a :func:`save_mpgnet` safetensors file.
+        primitives: branches to keep (default: all the file has).
+    """
+    header = read_checkpoint_header(path)
+    cfg = MPGNetConfig.from_checkpoint(header["config"])
+    if primitives is not None:
+        cfg.primitives = check_primitives(primitives)
+    net = MPGNet(cfg)
+    load_mpgnet_weights(net, path)
+    return net, header
+
+
+SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = (
+    "rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m", "grasp_fingers", "finger_tolerance_m",
+)
+"""Network settings that change where Q counts, not any weight: an exported checkpoint may
+change them (:func:`export_weights`). The execution fields (``channels_last``,
+``trunk_batch``) are not among them: loading takes those from the machine's variant defaults."""
+
+
+def export_weights(
+    src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True,
+    settings: Mapping[str, Any] | None = None, coordination: str | None = None, q_star: float | None = None,
+) -> Path:
+    """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
+    the shared mask trunk), floating tensors stored as float16 (loading casts them back).
+
+    ``settings`` change :data:`SETTINGS_WITHOUT_WEIGHTS` in the copy's configuration (e.g. a
+    move region measured better after training); the header's ``extra`` records them as
+    ``settings_after_training``, so the copy never passes for what training used.
+    ``coordination`` records the rule the copy acts with (:mod:`mpg_agents.acting.coordination`;
+    default: the checkpoint's), for checkpoints written before the learner recorded it.
+    ``q_star`` replaces Q*_g (e.g. one measured under the new settings); the header's ``extra``
+    keeps training's as ``q_star_from_training`` (:func:`~mpg_agents.acting.grasp_threshold.exported_q_star`).
+    """
+    settings = dict(settings or {})
+    weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))
+    if weighty:
+        raise ValueError(f"settings {weighty} change the architecture or its weights; only {SETTINGS_WITHOUT_WEIGHTS} may change")
+    net, header = load_mpgnet(src, primitives=primitives)
+    if settings:
+        net.config = MPGNetConfig.from_checkpoint(net.config.to_dict(), **settings)
+    if half:
+        net = net.half()
+    q_star, extra = exported_q_star(header, q_star, {**header.get("extra", {}), "exported_from": str(src), "float16": half})
+    if coordination is not None:
+        extra["coordination"] = check_coordination(coordination)
+    if settings:
+        extra["settings_after_training"] = {**extra.get("settings_after_training", {}), **settings}
+    save_mpgnet(net, dst, q_star=q_star, extra=extra)
+    return Path(dst)

@@ -1,0 +1,196 @@
+"""A policy on every case of a case set (:mod:`mpg_envs.scenes.cases`), N runs per case.
+
+Run ``r`` of case ``c`` (0-based, in the set's order) loads the case's scene jittered for
+run ``r`` (:func:`mpg_envs.scenes.cases.jitter_scene`; run 0 is the case as written) and is episode
+``r`` of :func:`mpg_agents.evaluation.evaluate.run_episode` with seed ``seed + CASE_SEED_STRIDE * c``:
+its reset, the policy and the action space are seeded ``seed + CASE_SEED_STRIDE * c + r``,
+so every run is reproducible on its own. Runs use strict retrieval by default (the env's
+``wrong_grasp="fail"``: a grasp that lifts another object ends the run as a failure).
+
+Each case gives one :class:`CaseRow`: successes out of runs, mean motions, mis-picks
+(grasps that lifted another object) per run, the grasp success rate (target grasps /
+grasp attempts) and the target's mean visible fraction at reset;
+:attr:`CaseRunResult.overall` pools every run of the set.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Sequence
+
+import gymnasium as gym
+
+from mpg_agents.evaluation.evaluate import EpisodeRecord, env_id_of, run_episode
+from mpg_envs._version import __version__
+from mpg_envs.scenes.cases import Case, CaseSet, jitter_scene
+
+CASE_SEED_STRIDE = 1000
+"""Case ``c``'s runs are seeded from ``seed + CASE_SEED_STRIDE * c``; at most this many runs."""
+
+STRICT = {"wrong_grasp": "fail"}
+"""The env settings case runs use unless told otherwise: strict retrieval."""
+
+
+@dataclass(frozen=True)
+class CaseRow:
+    """What a policy did on one case (or, for the overall row, on every case)."""
+
+    case: str
+    runs: int
+    successes: int
+    mean_motions: float  # failures count all their motions
+    mis_picks: float  # grasps that lifted another object, per run
+    grasp_attempts: int
+    target_grasps: int
+    grasp_success_rate: float | None  # target grasps / grasp attempts
+    end_reasons: dict[str, int]
+    note: str = ""
+    visible_fraction: float | None = None  # the target's mean visible fraction at reset
+
+    @classmethod
+    def of(cls, case: str, records: Sequence[EpisodeRecord], note: str = "") -> CaseRow:
+        """The row of ``records`` (at least one)."""
+        if not records:
+            raise ValueError(f"case {case!r}: no runs to summarise")
+        grasps = sum(r.grasp_attempts for r in records)
+        target = sum(r.target_grasps for r in records)
+        visible = [r.visible_fraction for r in records if r.visible_fraction is not None]
+        reasons: dict[str, int] = {}
+        for r in records:
+            reasons[r.end_reason] = reasons.get(r.end_reason, 0) + 1
+        return cls(
+            case=case,
+            runs=len(records),
+            successes=sum(r.success for r in records),
+            mean_motions=sum(r.motions for r in records) / len(records),
+            mis_picks=sum(r.wrong_grasps for r in records) / len(records),
+            grasp_attempts=grasps,
+            target_grasps=target,
+            grasp_success_rate=target / grasps if grasps else None,
+            end_reasons=dict(sorted(reasons.items())),
+            note=note,
+            visible_fraction=sum(visible) / len(visible) if visible else None,
+        )
+
+    def cells(self) -> list[str]:
+        """The row's table cells: case, visible fraction, successes, mean motions, mis-picks per
+        run, grasp success."""
+        gsr = "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.0f}% ({self.target_grasps}/{self.grasp_attempts})"
+        visible = "n/a" if self.visible_fraction is None else f"{self.visible_fraction:.2f}"
+        return [self.case, visible, f"{self.successes}/{self.runs}", f"{self.mean_motions:.2f}", f"{self.mis_picks:.2f}", gsr]
+
+
+HEADER = ["case", "visible", "success", "motions", "mis-picks/run", "grasp success"]
+"""Column names of :meth:`CaseRow.cells`."""
+
+
+@dataclass
+class CaseRunResult:
+    """Every case's row, the overall row and the runs' records."""
+
+    policy: str
+    case_set: str
+    env_id: str
+    env_kwargs: dict[str, Any]  # the env settings the runs used (gym.make keywords)
+    runs: int
+    seed: int
+    rows: list[CaseRow]
+    overall: CaseRow
+    records: dict[str, list[EpisodeRecord]]
+    wall_seconds: float = field(default=0.0, compare=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready data (wall time left out, so one seed gives one file)."""
+        return {
+            "package_version": __version__,
+            "policy": self.policy,
+            "case_set": self.case_set,
+            "env_id": self.env_id,
+            "env_kwargs": dict(self.env_kwargs),
+            "runs": self.runs,
+            "seed": self.seed,
+            "rows": [asdict(row) for row in self.rows],
+            "overall": asdict(self.overall),
+            "records": {case: [r.to_dict() for r in records] for case, records in self.records.items()},
+        }
+
+    def table(self) -> str:
+        """Aligned plain text: one line per case and the overall line."""
+        lines = [HEADER] + [row.cells() for row in self.rows] + [self.overall.cells()]
+        widths = [max(len(line[k]) for line in lines) for k in range(len(HEADER))]
+        return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(line, widths)).rstrip() for line in lines)
+
+    def markdown(self) -> str:
+        """A Markdown table: one row per case and the overall row (in bold)."""
+        rows = [row.cells() for row in self.rows] + [[f"**{c}**" for c in self.overall.cells()]]
+        lines = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+        return "\n".join(lines + ["| " + " | ".join(cells) + " |" for cells in rows])
+
+
+def run_cases(
+    policy,
+    env: gym.Env,
+    case_set: CaseSet,
+    runs: int = 1,
+    seed: int = 0,
+    on_record: Callable[[Case, EpisodeRecord], None] | None = None,
+) -> CaseRunResult:
+    """Run ``policy`` on ``env`` for ``runs`` runs of every case of ``case_set`` (see the module docstring)."""
+    if isinstance(runs, bool) or not isinstance(runs, int) or not 1 <= runs <= CASE_SEED_STRIDE:
+        raise ValueError(f"runs must be an integer in 1..{CASE_SEED_STRIDE}, got {runs!r}")
+    if not len(case_set):
+        raise ValueError(f"case set {case_set.name!r} has no cases")
+    start = time.perf_counter()
+    unwrapped = env.unwrapped
+    rows, records = [], {}
+    for c, case in enumerate(case_set):
+        scene = case.scene_file(unwrapped.config.workspace, unwrapped.config.object_set_seed)
+        done = []
+        for r in range(runs):
+            options = {"scene": jitter_scene(scene, r, case.name, unwrapped.config.workspace)}
+            record = run_episode(policy, env, r, seed + CASE_SEED_STRIDE * c, reset_options=options)
+            done.append(record)
+            if on_record is not None:
+                on_record(case, record)
+        records[case.name] = done
+        rows.append(CaseRow.of(case.name, done, case.note))
+    overall = CaseRow.of("overall", [r for done in records.values() for r in done])
+    return CaseRunResult(
+        policy=getattr(policy, "name", type(policy).__name__),
+        case_set=case_set.name,
+        env_id=env_id_of(env),
+        env_kwargs={"wrong_grasp": unwrapped.wrong_grasp},
+        runs=runs,
+        seed=seed,
+        rows=rows,
+        overall=overall,
+        records=records,
+        wall_seconds=time.perf_counter() - start,
+    )
+
+
+def run_case_set(
+    policy_name: str,
+    case_set: CaseSet,
+    runs: int = 1,
+    seed: int = 0,
+    env_id: str = "MPG-Occluded-v0",
+    env_kwargs: dict[str, Any] | None = None,
+    policy_kwargs: dict[str, Any] | None = None,
+    on_record: Callable[[Case, EpisodeRecord], None] | None = None,
+) -> CaseRunResult:
+    """:func:`run_cases` with a fresh ``gym.make(env_id)`` (strict retrieval, :data:`STRICT`,
+    unless ``env_kwargs`` says otherwise) and :func:`mpg_agents.evaluation.policy_zoo.make_policy`'s
+    ``policy_name``."""
+    from mpg_agents.evaluation.policy_zoo import make_policy
+
+    settings = {**STRICT, **(env_kwargs or {})}
+    env = gym.make(env_id, **settings)
+    try:
+        policy = make_policy(policy_name, env, seed=seed, **(policy_kwargs or {}))
+        result = run_cases(policy, env, case_set, runs, seed, on_record)
+    finally:
+        env.close()
+    result.env_kwargs = settings
+    return result

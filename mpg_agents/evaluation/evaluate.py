@@ -1,0 +1,350 @@
+"""Evaluation with the paper's metrics (Table I) and the ones that separate methods.
+
+The paper's: task success within the motion cap and mean motions per episode, and the grasp
+success rate (target grasps / grasp attempts). Beside them: success without a mis-pick (no
+grasp lifted a non-target object on the way; under strict retrieval every success is one),
+mis-picks per episode, and success by the target's visible fraction at reset
+(:data:`mpg_envs.perception.occlusion.VISIBILITY_BANDS`). Every rate has its 95% Wilson interval.
+
+An evaluation is a list of per-episode records, then one summary. Episode ``i`` is the
+seeded reset ``reset(seed=seed + i)`` run until the env ends it (target grasped, motion
+cap, target out of the workspace, ...). Before it starts, the env's action space and the
+policy (if it has ``seed(s)``) are seeded with the same ``seed + i`` and the policy is
+``reset()``, so an episode's actions depend only on its index: any split of the episodes
+over workers (:mod:`mpg_agents.evaluation.eval_runner`) gives the same records.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Iterable, Sequence
+
+import gymnasium as gym
+import numpy as np
+
+from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
+from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
+
+PRIMITIVES = ("move", "push", "grasp")
+UNREPORTED = "unreported"  # an env that does not (yet) put end_reason in the last step's info
+
+
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """What one episode did; wall time is kept out of equality and JSON."""
+
+    index: int
+    seed: int
+    success: bool
+    motions: int
+    end_reason: str
+    primitives: dict[str, int]  # motions per primitive
+    grasp_attempts: int
+    target_grasps: int  # grasps that lifted the target
+    wrong_grasps: int  # grasps that lifted another object
+    objects_left: int | None
+    visible_fraction: float | None = None  # the target's visible fraction at reset
+    # The actions taken, to replay or compare an episode: flat indices, or for a wrapped env
+    # with a continuous action space (mpg_envs.integrations.wrappers.ContinuousAction) tuples of floats.
+    actions: tuple[int | tuple[float, ...], ...] = ()
+    seconds: float = field(default=0.0, compare=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        del data["seconds"]
+        return data
+
+    @property
+    def clean_success(self) -> bool:
+        """Succeeded without a mis-pick (no grasp lifted another object first)."""
+        return self.success and self.wrong_grasps == 0
+
+    def describe(self) -> str:
+        outcome = "success" if self.success else "failure"
+        used = ", ".join(f"{n} {p}" for p, n in self.primitives.items() if n)
+        return f"episode {self.index} (seed {self.seed}): {outcome} after {self.motions} motions ({used}); end: {self.end_reason}"
+
+
+@dataclass
+class EvalResult:
+    """The paper's metrics, their 95% intervals, and the episodes they were measured on."""
+
+    policy: str
+    env_id: str
+    num_objects: int
+    episodes: int
+    seed: int
+    task_success_rate: float  # episodes ending with the target grasped
+    success_interval: tuple[float, float]  # Wilson 95%
+    average_motions: float  # mean motions per episode (failures count all their motions)
+    motions_interval: tuple[float, float] | None  # bootstrap 95% (None for one episode)
+    average_motions_success: float | None  # mean motions of the successful episodes
+    grasp_success_rate: float | None  # target grasps / grasp attempts
+    grasp_attempts: int
+    end_reasons: dict[str, int]
+    primitive_counts: dict[str, int]  # motions per primitive over all episodes
+    records: list[EpisodeRecord]
+    seconds_per_motion: float
+    wall_seconds: float = 0.0
+    workers: int = 1
+    clean_success_rate: float = 0.0  # success without a mis-pick
+    clean_success_interval: tuple[float, float] = (0.0, 1.0)  # Wilson 95%
+    mispicks_per_episode: float = 0.0  # grasps that lifted a non-target object, per episode
+    # visibility band at reset -> {"episodes", "successes", "rate", "interval"}
+    success_by_visibility: dict[str, dict[str, Any]] = field(default_factory=dict)
+    env_options: dict[str, Any] = field(default_factory=dict)  # keywords the env was made with
+    versions: dict[str, str] = field(default_factory=dict)  # package and env versions
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready data; wall time and the worker count are left out so one seed gives one file."""
+        data = asdict(self)
+        for key in ("seconds_per_motion", "wall_seconds", "workers"):
+            del data[key]
+        data["records"] = [r.to_dict() for r in self.records]
+        return data
+
+    def table(self) -> str:
+        lo, hi = self.success_interval
+        motions = f"{self.average_motions:.2f}"
+        if self.motions_interval is not None:
+            motions += f" [{self.motions_interval[0]:.2f}, {self.motions_interval[1]:.2f}]"
+        rows = [
+            ("policy", self.policy),
+            ("env", f"{self.env_id} ({self.num_objects} objects)" + "".join(f", {k}={v}" for k, v in self.env_options.items())),
+            ("episodes", f"{self.episodes} (seeds {self.seed}..{self.seed + self.episodes - 1})"),
+            ("task success rate", f"{100 * self.task_success_rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"),
+            ("average motion number", motions),
+            ("  in successful episodes", "n/a" if self.average_motions_success is None else f"{self.average_motions_success:.2f}"),
+            ("  without a mis-pick", f"{100 * self.clean_success_rate:.1f}% [{100 * self.clean_success_interval[0]:.1f}, {100 * self.clean_success_interval[1]:.1f}]"),
+            ("mis-picks per episode", f"{self.mispicks_per_episode:.2f}"),
+            ("grasp success rate", "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.1f}% of {self.grasp_attempts}"),
+            ("success by visibility", ", ".join(f"{band}: {c['successes']}/{c['episodes']}" for band, c in self.success_by_visibility.items()) or "n/a"),
+            ("primitives used", ", ".join(f"{p} {n}" for p, n in self.primitive_counts.items())),
+            ("episodes ended by", ", ".join(f"{r} {n}" for r, n in self.end_reasons.items())),
+            ("seconds per motion", f"{self.seconds_per_motion:.2f} ({self.workers} worker{'s' if self.workers > 1 else ''}, {self.wall_seconds:.1f} s)"),
+        ]
+        width = max(len(k) for k, _ in rows)
+        return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+
+
+def env_id_of(env: gym.Env) -> str:
+    """The registered id of ``env`` (or its stage's, for an env built without ``gym.make``)."""
+    unwrapped = env.unwrapped
+    if unwrapped.spec is not None:
+        return unwrapped.spec.id
+    stage = getattr(unwrapped, "stage", None) or getattr(unwrapped, "spec_stage", None)
+    if stage is None:
+        raise ValueError(f"cannot tell the env id of {unwrapped!r}: it was not made by gym.make and has no stage")
+    return stage.env_id
+
+
+def start_episode(policy, env: gym.Env, episode_seed: int, options: dict[str, Any] | None = None) -> tuple[dict, dict]:
+    """Seed the action space and the policy with ``episode_seed``, reset both, reset the env
+    (with reset ``options``, e.g. a scene file to load)."""
+    env.action_space.seed(episode_seed)
+    seed = getattr(policy, "seed", None)
+    if callable(seed):
+        seed(episode_seed)
+    reset = getattr(policy, "reset", None)
+    if callable(reset):
+        reset()
+    return env.reset(seed=episode_seed, options=options)
+
+
+def _recorded(action: Any) -> int | tuple[float, ...]:
+    """An action as the record keeps it: an int for a discrete action, floats for a vector."""
+    arr = np.asarray(action)
+    if arr.ndim == 0:
+        return int(arr)
+    return tuple(float(v) for v in arr.reshape(-1))
+
+
+def run_episode(
+    policy,
+    env: gym.Env,
+    index: int,
+    seed: int,
+    on_reset: Callable[[int, dict], None] | None = None,
+    on_step: Callable[[int, float, dict], None] | None = None,
+    reset_options: dict[str, Any] | None = None,
+) -> EpisodeRecord:
+    """Run episode ``index`` (reset seed ``seed + index``, with ``reset_options``) to its end
+    and record it."""
+    start = time.perf_counter()
+    episode_seed = seed + index
+    obs, info = start_episode(policy, env, episode_seed, reset_options)
+    visible = info.get("visible_fraction")
+    if on_reset is not None:
+        on_reset(index, obs)
+    primitives = dict.fromkeys(PRIMITIVES, 0)
+    grasps = target_grasps = wrong_grasps = 0
+    actions = []
+    while True:
+        actions.append(_recorded(policy.act(obs)))
+        obs, reward, terminated, truncated, info = env.step(actions[-1])
+        if on_step is not None:
+            on_step(index, reward, info)
+        primitives[info["primitive"]] += 1
+        if info["primitive"] == "grasp":
+            grasps += 1
+            target_grasps += int(info["target_grasped"])
+            wrong_grasps += int(info.get("wrong_grasp", False))
+        if terminated or truncated:
+            break
+    return EpisodeRecord(
+        index=index,
+        seed=episode_seed,
+        success=bool(info["is_success"]),
+        motions=int(info["num_motions"]),
+        end_reason=str(info.get("end_reason") or UNREPORTED),
+        primitives=primitives,
+        grasp_attempts=grasps,
+        target_grasps=target_grasps,
+        wrong_grasps=wrong_grasps,
+        objects_left=None if info.get("objects_left") is None else int(info["objects_left"]),
+        visible_fraction=None if visible is None else float(visible),
+        actions=tuple(actions),
+        seconds=time.perf_counter() - start,
+    )
+
+
+def summarise(
+    records: Iterable[EpisodeRecord],
+    policy: str,
+    env_id: str,
+    num_objects: int,
+    seed: int,
+    wall_seconds: float,
+    workers: int = 1,
+    env_options: dict[str, Any] | None = None,
+) -> EvalResult:
+    """The metrics over ``records`` (episodes 0..n-1 of one evaluation, in any order);
+    ``env_options``: the keywords the env was made with, for the record."""
+    ordered = sorted(records, key=lambda r: r.index)
+    if not ordered:
+        raise ValueError("no episode records to summarise")
+    indices = [r.index for r in ordered]
+    if indices != list(range(len(ordered))):
+        raise ValueError(f"episode records must be episodes 0..{len(ordered) - 1} once each, got indices {indices}")
+    motions = [r.motions for r in ordered]
+    success_motions = [r.motions for r in ordered if r.success]
+    successes = sum(r.success for r in ordered)
+    grasps = sum(r.grasp_attempts for r in ordered)
+    end_reasons: dict[str, int] = {}
+    for r in ordered:
+        end_reasons[r.end_reason] = end_reasons.get(r.end_reason, 0) + 1
+    primitive_counts = {p: sum(r.primitives.get(p, 0) for r in ordered) for p in PRIMITIVES}
+    clean = sum(r.clean_success for r in ordered)
+    return EvalResult(
+        policy=policy,
+        env_id=env_id,
+        num_objects=int(num_objects),
+        episodes=len(ordered),
+        seed=seed,
+        task_success_rate=successes / len(ordered),
+        success_interval=wilson_interval(successes, len(ordered)),
+        average_motions=float(np.mean(motions)),
+        motions_interval=bootstrap_mean_interval(motions, seed=seed) if len(motions) > 1 else None,
+        average_motions_success=float(np.mean(success_motions)) if success_motions else None,
+        grasp_success_rate=sum(r.target_grasps for r in ordered) / grasps if grasps else None,
+        grasp_attempts=grasps,
+        end_reasons=dict(sorted(end_reasons.items())),
+        primitive_counts=primitive_counts,
+        records=ordered,
+        seconds_per_motion=sum(r.seconds for r in ordered) / max(1, sum(motions)),
+        wall_seconds=wall_seconds,
+        workers=workers,
+        clean_success_rate=clean / len(ordered),
+        clean_success_interval=wilson_interval(clean, len(ordered)),
+        mispicks_per_episode=sum(r.wrong_grasps for r in ordered) / len(ordered),
+        success_by_visibility=success_by_visibility(ordered),
+        env_options=dict(env_options or {}),
+        versions=versions(env_id),
+    )
+
+
+def success_by_visibility(records: Sequence[EpisodeRecord]) -> dict[str, dict[str, Any]]:
+    """Task success per band of the target's visible fraction at reset (episodes whose
+    env reports none are left out)."""
+    cells: dict[str, dict[str, Any]] = {}
+    for low, high in VISIBILITY_BANDS:
+        label = f"{low:g}-{high:g}"
+        band = [r for r in records if r.visible_fraction is not None and visibility_band(r.visible_fraction) == label]
+        if band:
+            k = sum(r.success for r in band)
+            cells[label] = {"episodes": len(band), "successes": k, "rate": k / len(band), "interval": list(wilson_interval(k, len(band)))}
+    return cells
+
+
+def versions(env_id: str) -> dict[str, str]:
+    """The package version and the env id's version (``v0`` of ``MPG-Occluded-v0``)."""
+    import mpg_envs
+
+    return {"package": str(getattr(mpg_envs, "__version__", "unknown")), "env": env_id.rsplit("-", 1)[-1]}
+
+
+def env_options_of(env: gym.Env) -> dict[str, Any]:
+    """The keywords ``env`` was made with besides its registered ones (from its spec),
+    JSON-ready (other values by ``repr``)."""
+    spec = env.unwrapped.spec
+    if spec is None:
+        return {}
+    options = {}
+    for key, value in spec.kwargs.items():
+        if key in ("stage", "num_objects"):  # the env and the object count are recorded apart
+            continue
+        options[key] = value if isinstance(value, (bool, int, float, str, type(None), list, tuple)) else repr(value)
+    return options
+
+
+def run_episodes(
+    policy,
+    env: gym.Env,
+    indices: Sequence[int],
+    seed: int,
+    on_record: Callable[[EpisodeRecord], None] | None = None,
+    on_reset: Callable[[int, dict], None] | None = None,
+    on_step: Callable[[int, float, dict], None] | None = None,
+    reset_options: dict[str, Any] | None = None,
+) -> list[EpisodeRecord]:
+    """Records of the episodes ``indices`` (each seeded ``seed + index``, reset with
+    ``reset_options``) on one env and policy."""
+    records = []
+    for index in indices:
+        record = run_episode(policy, env, index, seed, on_reset=on_reset, on_step=on_step, reset_options=reset_options)
+        records.append(record)
+        if on_record is not None:
+            on_record(record)
+    return records
+
+
+def evaluate(
+    policy,
+    env: gym.Env,
+    episodes: int,
+    seed: int,
+    progress: bool = False,
+    on_reset: Callable[[int, dict], None] | None = None,
+    on_step: Callable[[int, float, dict], None] | None = None,
+) -> EvalResult:
+    """Run ``policy`` (with ``act(obs)``) for ``episodes`` seeded episodes of ``env``, in this process.
+
+    ``on_reset(episode, obs)`` and ``on_step(episode, reward, info)`` let a caller (the demo)
+    watch the episodes without keeping its own tally of the metrics. For several worker
+    processes see :func:`mpg_agents.evaluation.eval_runner.evaluate_parallel` (same records).
+    """
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    start = time.perf_counter()
+    on_record = (lambda r: print("  " + r.describe(), flush=True)) if progress else None
+    records = run_episodes(policy, env, range(episodes), seed, on_record=on_record, on_reset=on_reset, on_step=on_step)
+    return summarise(
+        records,
+        policy=getattr(policy, "name", type(policy).__name__),
+        env_id=env_id_of(env),
+        num_objects=int(env.unwrapped.num_objects),
+        seed=seed,
+        wall_seconds=time.perf_counter() - start,
+        env_options=env_options_of(env),
+    )

@@ -1,0 +1,197 @@
+"""The policies ``mpg-eval``, the demo and the benchmarks ask for by name: a checkpoint or a
+built-in baseline (:func:`make_policy`). The learned baselines of Table I are stage tables
+(:data:`mpg_agents.learning.training_stages.BASELINES`); once trained they load here as checkpoints.
+
+Every policy is a :class:`mpg_envs.policies.policy.Policy`: ``name``, ``reset()`` at each episode's
+start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(path, obs)`` and
+``primitives`` (what they act with).
+
+- ``oracle``: :class:`mpg_envs.policies.oracle.OraclePolicy` (reads the simulator: upper baseline).
+- ``random``: uniform over the whole action space (seeded).
+- ``grasp-only``: the pixel-only heuristic grasp at the target mask, every step.
+- ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V) that
+  ships in ``mpg_agents/checkpoints/`` (:data:`SHIPPED_CHECKPOINT`).
+- a path: an MPGNet safetensors checkpoint (``mpg-train``'s ``weights.safetensors``).
+
+A checkpoint lacking some of the env's primitives acts with those it has and says so in its
+name, e.g. ``stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded-v0``
+(the paper's Grasping-Only baseline).
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import gymnasium as gym
+import numpy as np
+
+from mpg_agents.acting.heuristics import heuristic_grasp_action
+
+BUILTIN = ("oracle", "random", "grasp-only", "shipped")
+SHIPPED_CHECKPOINT = "mpgnet_small.safetensors"
+
+
+def shipped_checkpoint() -> Path:
+    """Path of the checkpoint shipped with the package."""
+    path = Path(str(resources.files("mpg_agents").joinpath("checkpoints", SHIPPED_CHECKPOINT)))
+    if not path.is_file():
+        raise FileNotFoundError(f"the shipped checkpoint {path} is missing from this installation")
+    return path
+
+
+class RandomBaseline:
+    """Uniform over the whole action space."""
+
+    def __init__(self, env: gym.Env, seed: int = 0):
+        self.name = "random"
+        self._space = gym.spaces.Discrete(int(env.action_space.n), seed=seed)
+
+    def seed(self, seed: int) -> None:
+        """Restart the action stream; evaluation calls it with each episode's seed."""
+        self._space.seed(seed)
+
+    def reset(self) -> None:
+        """Nothing to forget between episodes."""
+
+    def act(self, obs: Mapping[str, np.ndarray]) -> int:
+        return int(self._space.sample())
+
+
+class GraspOnlyBaseline:
+    """The pixel-only heuristic grasp at the target every step (random when no target is visible)."""
+
+    def __init__(self, env: gym.Env):
+        self.name = "grasp-only"
+        self.primitives = tuple(env.unwrapped.primitives)
+        if "grasp" not in self.primitives:
+            raise ValueError(f"grasp-only needs an env that allows grasping; this one allows {self.primitives}")
+        self._space = env.action_space
+
+    def reset(self) -> None:
+        """Nothing to forget between episodes."""
+
+    def act(self, obs: Mapping[str, np.ndarray]) -> int:
+        if not np.asarray(obs["mask"]).any():
+            return int(self._space.sample())  # no target visible: nothing better to do
+        return heuristic_grasp_action(obs, self.primitives)
+
+
+class NetworkPolicy:
+    """An MPGNet checkpoint with the paper's coordination (greedy, no exploration).
+
+    ``policy`` is the :class:`~mpg_agents.acting.agent.MPGAgent` it acts with. ``primitives`` are the
+    env's primitives the network has branches for; when that is fewer than the env allows,
+    ``name`` ends with e.g. ``(grasp-only net)``. The keyword settings override the
+    checkpoint's: the coordination, Q*_g (:func:`~mpg_agents.acting.grasp_threshold.check_override`)
+    and settings that change no weight.
+
+    A greedy Q policy is a function of the observation: when an action changes nothing (a
+    grasp that closes on air), it meets the same observation and takes the same action until
+    the motion cap. With ``avoid_repeats`` it remembers its actions in the episode
+    (:class:`mpg_envs.policies.action_memory.ActionMemory`, as the oracle does) and takes the best one
+    that would not repeat an action on an unchanged scene; the name ends with ``[no repeats]``.
+    """
+
+    def __init__(
+        self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
+        grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
+        move_region: str | None = None, q_star: float | None = None, grasp_fingers: str | None = None,
+    ):
+        import torch
+
+        from mpg_agents.acting.agent import MPGAgent
+        from mpg_agents.acting.grasp_threshold import check_override
+
+        torch.set_flush_denormal(True)  # see mpg_agents.learning.learner: denormals slow CPUs down
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"checkpoint {str(path)!r} does not exist")
+        overrides: dict[str, Any] = {"grasp_region": grasp_region} if grasp_region is not None else {}
+        if target_margin_px is not None:
+            overrides["target_margin_px"] = int(target_margin_px)
+        if move_region is not None:
+            overrides["move_region"] = move_region
+        if grasp_fingers is not None:
+            overrides["grasp_fingers"] = grasp_fingers
+        self.policy = MPGAgent.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
+        if coordination is not None:
+            self.policy.set_coordination(coordination)
+        if q_star is not None:
+            self.policy.set_q_star(check_override(q_star))
+        self.primitives: tuple[str, ...] = self.policy.usable_primitives
+        self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
+        if grasp_region is not None:
+            self.name += f" [grasp region: {grasp_region}]"
+        if target_margin_px is not None:
+            self.name += f" [target margin: {target_margin_px} px]"
+        if move_region is not None:
+            self.name += f" [move region: {move_region}]"
+        if grasp_fingers is not None:
+            self.name += f" [grasp fingers: {grasp_fingers}]"
+        if q_star is not None:
+            self.name += f" [Q*_g: {q_star:g}]"
+        self.memory = None
+        if avoid_repeats:
+            from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
+
+            self.memory = ActionMemory(RepeatRule())
+            self.name += " [no repeats]"
+
+    def reset(self) -> None:
+        """Forget the episode's actions (only ``avoid_repeats`` keeps any)."""
+        if self.memory is not None:
+            self.memory.clear()
+
+    def act(self, obs: Mapping[str, np.ndarray]) -> int:
+        if self.memory is None:
+            return int(self.policy.decide(obs).action)
+        depth = np.asarray(obs["depth"])
+        rotations = self.policy.net_config.num_rotations
+        forbidden = {p: self.memory.forbidden(p, depth, rotations) for p in self.primitives} if len(self.memory) else None
+        decision = self.policy.decide(obs, forbidden=forbidden)
+        self.memory.record(decision.primitive, decision.rotation, decision.row, decision.col, depth)
+        return int(decision.action)
+
+    def save_qmaps(self, path: str | Path, obs: Mapping[str, np.ndarray]) -> None:
+        from mpg_agents.evaluation.visualize import save_policy_qmaps
+
+        save_policy_qmaps(path, self.policy, obs)  # every branch's map, not only the decision's
+
+
+def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
+    """``" (grasp-only net)"`` / ``" (push+grasp net)"`` when a net uses fewer primitives than allowed."""
+    if tuple(used) == tuple(allowed):
+        return ""
+    return f" ({used[0]}-only net)" if len(used) == 1 else f" ({'+'.join(used)} net)"
+
+
+def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
+    """A policy by name (see the module docstring) for ``env``."""
+    if name == "oracle":
+        from mpg_envs.policies.oracle import OraclePolicy
+
+        return OraclePolicy(env)
+    if name == "random":
+        return RandomBaseline(env, seed)
+    if name == "grasp-only":
+        return GraspOnlyBaseline(env)
+    if name == "shipped":
+        return NetworkPolicy(shipped_checkpoint(), env, name="shipped:" + SHIPPED_CHECKPOINT, **kwargs)
+    path = Path(name)
+    if path.suffix == ".safetensors" or path.exists():
+        return NetworkPolicy(path, env, **kwargs)
+    raise ValueError(f"unknown policy {name!r}: use one of {BUILTIN} or the path of a .safetensors checkpoint")
+
+
+def make_network_policy(name: str, env: gym.Env, **kwargs: Any) -> NetworkPolicy:
+    """:func:`make_policy` for a name that must give an MPGNet checkpoint (``shipped`` or a path).
+
+    Raises:
+        ValueError: ``name`` is a built-in baseline without a network, or unknown.
+    """
+    policy = make_policy(name, env, **kwargs)
+    if not isinstance(policy, NetworkPolicy):
+        raise ValueError(f"--policy must be an MPGNet checkpoint (or 'shipped'), got {name!r}")
+    return policy

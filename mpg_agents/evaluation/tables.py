@@ -1,0 +1,170 @@
+"""The results tables: cells (policy, object count) of measured metrics, per track.
+
+A track (:data:`TRACKS`) is an env and what its table shows. ``table1`` is the paper's
+Table I on ``MPG-Occluded-v0``: the paper's rows above the measured ones, task success rate
+per object count, then average motion number per object count. ``hard`` is the strict
+retrieval track ``MPG-OccludedHard-v0`` (target at most 30% visible, a mis-pick fails the
+episode), which adds mis-picks per episode and the grasp success rate (target grasps /
+grasp attempts). A measured cell shows its 95% intervals: Wilson for rates, a seeded
+bootstrap for mean motions. :func:`rows_json` gives the same cells as data, keyed by the
+policy's label, each with the name the policy gave itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+from mpg_agents.evaluation.evaluate import EvalResult
+
+ENV_ID = "MPG-Occluded-v0"
+
+
+@dataclass(frozen=True)
+class Track:
+    """One results table: the env its cells run on and whether the paper's rows head it."""
+
+    name: str
+    env_id: str
+    paper_rows: bool
+    strict_columns: bool  # mis-picks per episode and grasp success rate as columns
+
+
+TRACKS: dict[str, Track] = {
+    "table1": Track("table1", ENV_ID, paper_rows=True, strict_columns=False),
+    "hard": Track("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True),
+}
+"""The tracks by name: the paper's Table I and the strict, hidden-target hard track."""
+
+
+@dataclass(frozen=True)
+class PaperRow:
+    """One method's published Table I figures: success rate and mean motions per object count."""
+
+    method: str
+    success: Mapping[int, float]
+    motions: Mapping[int, float]
+
+
+# Table I of the paper (50 tests per scenario; target one of the first five objects dropped).
+PAPER_ROWS: tuple[PaperRow, ...] = (
+    PaperRow("Grasping-Only", {15: 0.26, 30: 0.12}, {15: 6.46, 30: 8.33}),
+    PaperRow("Target-Oriented VPG", {15: 0.32, 30: 0.26}, {15: 5.43, 30: 6.54}),
+    PaperRow("Grasping the Invisible", {15: 0.72, 30: 0.66}, {15: 4.64, 30: 5.33}),
+    PaperRow("Efficient Push-Grasping", {15: 0.84, 30: 0.74}, {15: 3.88, 30: 4.97}),
+    PaperRow("MPGNet", {15: 0.92, 30: 0.84}, {15: 2.85, 30: 3.74}),
+)
+
+
+def cell_json(result: EvalResult) -> dict[str, Any]:
+    """One cell's figures as data."""
+    return {
+        "name": result.policy,
+        "episodes": result.episodes,
+        "success": result.task_success_rate,
+        "success_ci": list(result.success_interval),
+        "motions": result.average_motions,
+        "motions_ci": None if result.motions_interval is None else list(result.motions_interval),
+        "motions_success": result.average_motions_success,
+        "grasp_success_rate": result.grasp_success_rate,
+        "grasp_attempts": result.grasp_attempts,
+        "clean_success": result.clean_success_rate,
+        "clean_success_ci": list(result.clean_success_interval),
+        "mispicks_per_episode": result.mispicks_per_episode,
+        "success_by_visibility": result.success_by_visibility,
+        "end_reasons": dict(result.end_reasons),
+        "primitive_counts": dict(result.primitive_counts),
+        "env_options": dict(result.env_options),
+        "versions": dict(result.versions),
+    }
+
+
+def rows_json(cells: Mapping[tuple[str, int], EvalResult]) -> dict[str, dict[str, dict[str, Any]]]:
+    """``{policy: {"15": cell, "30": cell}}`` from cells keyed by (policy as asked, objects)."""
+    rows: dict[str, dict[str, dict[str, Any]]] = {}
+    for (policy, objects), result in cells.items():
+        rows.setdefault(policy, {})[str(objects)] = cell_json(result)
+    return rows
+
+
+def paper_json(objects: Sequence[int]) -> dict[str, dict[str, dict[str, float]]]:
+    """The paper's rows for the object counts it reports among ``objects``."""
+    return {
+        row.method: {str(n): {"success": row.success[n], "motions": row.motions[n]} for n in objects if n in row.success}
+        for row in PAPER_ROWS
+    }
+
+
+def _success_text(result: EvalResult) -> str:
+    lo, hi = result.success_interval
+    return f"{100 * result.task_success_rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
+
+
+def _motions_text(result: EvalResult) -> str:
+    if result.motions_interval is None:
+        return f"{result.average_motions:.2f}"
+    lo, hi = result.motions_interval
+    return f"{result.average_motions:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
+def _row_label(policy: str, results: Sequence[EvalResult]) -> str:
+    """The name the policy gave itself (it says e.g. which branches a net has), else as asked."""
+    names = list(dict.fromkeys(r.policy for r in results))
+    return " / ".join(names) if names else policy
+
+
+def table_rows(
+    policies: Sequence[str],
+    objects: Sequence[int],
+    cells: Mapping[tuple[str, int], EvalResult],
+    track: Track = TRACKS["table1"],
+    labels: Mapping[str, str] | None = None,
+) -> tuple[list[str], list[list[str]], int]:
+    """Header, body rows (the paper's first on a track that shows them, then the measured
+    ones) and how many paper rows. A row is named ``labels[policy]`` where given, else by
+    the name the policy gave itself."""
+    header = ["Method"] + [f"success, {n} obj." for n in objects] + [f"motions, {n} obj." for n in objects]
+    if track.strict_columns:
+        header += [f"mis-picks/ep., {n} obj." for n in objects] + [f"grasp success, {n} obj." for n in objects]
+    body = []
+    if track.paper_rows:
+        for row in PAPER_ROWS:
+            success = [f"{100 * row.success[n]:.0f}%" if n in row.success else "-" for n in objects]
+            motions = [f"{row.motions[n]:.2f}" if n in row.motions else "-" for n in objects]
+            body.append([f"{row.method} (paper)"] + success + motions)
+    paper_count = len(body)
+    for policy in policies:
+        results = [cells[(policy, n)] for n in objects if (policy, n) in cells]
+        row = [labels[policy] if labels and policy in labels else _row_label(policy, results)]
+        row += [_success_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
+        row += [_motions_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
+        if track.strict_columns:
+            row += [f"{cells[(policy, n)].mispicks_per_episode:.2f}" if (policy, n) in cells else "-" for n in objects]
+            row += [_grasp_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
+        body.append(row)
+    return header, body, paper_count
+
+
+def _grasp_text(result: EvalResult) -> str:
+    if result.grasp_success_rate is None:
+        return "n/a"
+    return f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
+
+
+def format_text(header: list[str], body: list[list[str]], paper_rows: int) -> str:
+    """A fixed-width table, a rule between the paper's rows and the measured ones."""
+    widths = [max(len(r[i]) for r in [header] + body) for i in range(len(header))]
+
+    def line(cells: list[str]) -> str:
+        return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
+    rule = "-" * len(line(header))
+    paper = [line(r) for r in body[:paper_rows]] + [rule] if paper_rows else []
+    return "\n".join([line(header), rule] + paper + [line(r) for r in body[paper_rows:]])
+
+
+def format_markdown(header: list[str], body: list[list[str]]) -> str:
+    """The same table as GitHub Markdown."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|"]
+    lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in body]
+    return "\n".join(lines)

@@ -1,0 +1,15 @@
+"""Learning: how MPGNet is trained (paper Sections III-C and III-D).
+
+The training stages as data (:mod:`~mpg_agents.learning.training_stages`) and the algorithm's
+settings (:mod:`~mpg_agents.learning.train_config`), the one gradient step
+(:mod:`~mpg_agents.learning.td_step`), the replay buffer (:mod:`~mpg_agents.learning.replay`),
+exploration (:mod:`~mpg_agents.learning.exploration`), oracle demonstrations
+(:mod:`~mpg_agents.learning.demonstrations`), the learner of one stage
+(:mod:`~mpg_agents.learning.learner`), its resumable state and log
+(:mod:`~mpg_agents.learning.run_state`, :mod:`~mpg_agents.learning.train_log`), learning curves
+(:mod:`~mpg_agents.learning.plotting`), the multi-stage pipeline
+(:mod:`~mpg_agents.learning.pipeline`) and independent runs as Ray tasks
+(:mod:`~mpg_agents.learning.train_runs`, on evaluation's Ray session). Builds on
+:mod:`mpg_agents.acting` (and :mod:`mpg_agents.evaluation` for that session); only the SB3
+adapter and the command lines import it.
+"""

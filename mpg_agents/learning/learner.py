@@ -1,0 +1,400 @@
+"""The DQN learner of MPGNet for one training stage (paper Sections III-C and III-D).
+
+One iteration: observe, decide (the agent's coordination, :class:`~mpg_agents.acting.agent.MPGAgent`;
+Stage IV's forced grasp after its push budget), explore (:mod:`mpg_agents.learning.exploration`), act,
+store the transition, and take one gradient step (:func:`mpg_agents.learning.td_step.td_step`) on a
+prioritised batch with the stage's frozen branches left out. What the stage trains comes from
+its :class:`~mpg_agents.learning.training_stages.TrainingStage`; the algorithm's settings from
+:class:`~mpg_agents.learning.train_config.TrainConfig`.
+
+Q*_g (:mod:`mpg_agents.acting.grasp_threshold`): a run starts with ``TrainConfig.q_star`` or else the
+starting checkpoint's; a stage with ``calibration_episodes`` calibrates it in its own scenes,
+one with ``calibrates_q_star`` estimates it from its own greedy grasps at its end. The weights
+carry it.
+
+Everything needed to continue is saved every ``checkpoint_every`` iterations and when the
+process is asked to stop (SIGINT/SIGTERM) (:mod:`mpg_agents.learning.run_state`): a killed run resumes
+with the same counters, replay, weights, optimiser and random generators. An episode
+interrupted by the kill is started afresh (its scene comes from the episode counter, so it is
+the same scene). The log (:mod:`mpg_agents.learning.train_log`) goes to TensorBoard and ``progress.csv``.
+
+Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
+fresh run first fills the replay with the oracle's transitions
+(:mod:`mpg_agents.learning.demonstrations`); they are no iterations or episodes of the run. With
+``TrainingStage.grasp_trials`` (off by default) each grasp is also tried at other gripper
+orientations in the simulation and undone, and those transitions are stored too (privileged,
+labelled like the demonstrations).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.acting.agent import MPGAgent
+from mpg_agents.learning.demonstrations import collect_demonstrations
+from mpg_agents.acting.discriminator import Discriminator
+from mpg_agents.learning.exploration import Choice, Explorer, linear_epsilon
+from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
+from mpg_agents.acting.q_function import MPGQFunction
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.run_state import load_run_state, save_run_state, state_folder
+from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+from mpg_agents.learning.td_step import td_step
+from mpg_agents.learning.train_config import TrainConfig, json_safe
+from mpg_agents.learning.train_log import IterationRecord, TrainingLog
+from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
+from mpg_agents.acting.weights import load_mpgnet_weights
+from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.tasks.config import EnvConfig
+from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
+
+
+@dataclass
+class Counters:
+    """Progress of a run (saved with the state)."""
+
+    iteration: int = 0
+    episode: int = 0
+    episode_motions: int = 0
+    failed_grasps_in_a_row: int = 0
+    pushes_in_episode: int = 0
+    gradient_steps: int = 0
+    window_grasps: int = 0
+    window_target_grasps: int = 0
+    # The Q of the last 200 greedy grasps that took the target (a calibrates_q_star stage's estimate).
+    successful_grasp_q: list[float] = field(default_factory=list)
+    calibrated_at: int = -1  # iteration of the last in-scene Q*_g calibration (-1: none)
+    grasp_trials: int = 0  # grasps tried in the simulation and undone (TrainingStage.grasp_trials)
+    grasp_trial_targets: int = 0  # of those, the ones that took the target
+    skipped_scenes: int = 0  # training episodes whose seed gave no valid scene (logged, see seeds.reset_first_valid)
+
+
+class StopRequested(Exception):
+    """Raised inside the loop when SIGINT/SIGTERM arrived; the state is saved first."""
+
+
+class Learner:
+    """Trains an MPGNet on one stage; ``run()`` does the configured iterations (resumable).
+
+    Args:
+        config: the algorithm's settings.
+        stage: what to train (a row of :data:`~mpg_agents.learning.training_stages.TRAINING_STAGES`,
+            or :func:`~mpg_agents.learning.training_stages.stage_for_env` of an env id).
+        out: the run folder.
+        init: start from this MPGNet checkpoint (branches it lacks keep their initialisation).
+    """
+
+    def __init__(
+        self,
+        config: TrainConfig,
+        stage: TrainingStage | str,
+        out: str | Path,
+        init: str | Path | None = None,
+        log: Callable[[str], None] = print,
+    ):
+        self.config = config
+        self.stage = stage_for_env(stage) if isinstance(stage, str) else stage
+        self.steps = config.steps if config.steps is not None else self.stage.iterations
+        self.out = Path(out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.log = log
+        torch.set_num_threads(config.torch_threads)
+        # A young network's eval-mode activations go denormal and slow the CPU down 10x.
+        torch.set_flush_denormal(True)
+        torch.manual_seed(config.seed)  # before the networks are built: the seed fixes their initial weights
+        self.env = self._make_env(self._objects_now(0))
+        env = self.env.unwrapped
+        self.primitives: tuple[str, ...] = tuple(env.primitives)
+        # The online agent, then the target network: their initial weights come from the seed in this order.
+        self.policy = MPGAgent.build(
+            env.observation_space, env.action_space, variant=config.variant, branches=self.stage.branches or PRIMITIVES,
+            coordination=self.stage.coordination, net_config=config.net_config,
+        )
+        self.target_q = MPGQFunction(self.policy.net_config, self.policy.action_primitives)
+        self.target_q.set_training_mode(False)
+        # What the agent acts with: the env's primitives it has a branch for.
+        self.trainable = self.stage.trainable if self.stage.trainable is not None else self.policy.usable_primitives
+        self.net = self.policy.q_net.mpgnet
+        self.target = self.target_q.mpgnet
+        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=config.learning_rate, **config.optimizer_kwargs())
+        header = load_mpgnet_weights(self.net, init, strict_branches=False) if init is not None else {}
+        self.policy.set_q_star(starting_q_star(config.q_star, from_header(header)))
+        for to, source in self.stage.branch_init:
+            self.net.branches[to].load_state_dict(self.net.branches[source].state_dict())
+        self.target.load_state_dict(self.net.state_dict())
+        self.replay = PrioritizedHeightmapReplayBuffer(
+            config.replay_capacity, env.observation_space, env.action_space, device="cpu", alpha=config.priority_alpha, seed=config.seed
+        )
+        self.rng = np.random.default_rng(config.seed)
+        self.explorer = Explorer(
+            self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q",
+            grasp_on_target=self.policy.net_config.grasp_region == "target", usable=self.policy.usable_primitives,
+            target_margin_px=self.policy.net_config.target_margin_px,
+            move_band_m=self.policy.net_config.move_band_m if self.policy.net_config.move_region == "top" else None,
+        )
+        self.counters = Counters()
+        self._calibration_env: gym.Env | None = None
+        self._stop = False
+        self._log: TrainingLog | None = None
+        self.resumed = False
+        self._resume()
+
+    def _make_env(self, num_objects: int | None) -> gym.Env:
+        kwargs: dict[str, Any] = {}
+        if num_objects is not None:
+            kwargs["num_objects"] = num_objects
+        if self.config.discriminator is not None:
+            kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator)
+        if self.stage.reward:
+            kwargs["config"] = EnvConfig(reward=self.stage.reward_config())
+        return gym.make(self.stage.env_id, **kwargs)
+
+    def _objects_now(self, iteration: int) -> int | None:
+        """The scene's object count at ``iteration``: the fixed count, else the curriculum's."""
+        if self.config.num_objects is not None:
+            return self.config.num_objects
+        return self.stage.objects_at(iteration / max(1, self.steps))
+
+    def _saved_config(self) -> dict[str, Any]:
+        return json_safe({**self.config.to_dict(), "stage": self.stage.to_dict()})
+
+    def _resume(self) -> None:
+        folder = state_folder(self.out)
+        if folder is None:
+            return
+        saved = json.loads((folder / "config.json").read_text())
+        saved_env = saved.get("stage", {}).get("env_id", saved.get("env_id"))
+        if saved_env != self.stage.env_id or saved["variant"] != self.config.variant:
+            raise ValueError(
+                f"{self.out} holds a run of {saved_env} ({saved['variant']}); "
+                f"asked for {self.stage.env_id} ({self.config.variant}): use another --out"
+            )
+        self.resumed = True
+        counters, _, q_star = load_run_state(
+            folder, online=self.net, target=self.target, optimizer=self.optimizer, replay=self.replay, rng=self.rng
+        )
+        self.counters = Counters(**counters)
+        if not math.isnan(q_star):  # the Q*_g the saved weights carry
+            self.policy.set_q_star(q_star)
+        self.log(f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})")
+
+    def save_state(self) -> None:
+        """Write weights and the full resumable state (atomically)."""
+        save_run_state(
+            self.out, online=self.net, target=self.target, q_star=self.policy.q_star, optimizer=self.optimizer,
+            replay=self.replay, rng=self.rng, counters=asdict(self.counters), config=self._saved_config(),
+        )
+        self.policy.save_weights(self.out / "weights.safetensors", extra={"env_id": self.stage.env_id})
+
+    # ------------------------------------------------------------------ loop
+    def run(self) -> dict[str, Any]:
+        """Train until the configured iterations are done; returns the final summary."""
+        from tqdm import tqdm
+
+        if self.stage.calibration_episodes and self.counters.calibrated_at < 0:  # the starting net
+            self.calibrate_in_scenes(self.stage.calibration_episodes)
+        if self.config.demonstration_episodes and not self.resumed:  # a fresh run: iteration 0, empty replay
+            self.add_demonstrations()
+        handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)
+        try:
+            with TrainingLog(self.out) as self._log:
+                obs = self._reset_episode()
+                while self.counters.iteration < self.steps:
+                    obs = self.iteration(obs)
+                    bar.update(1)
+                    if self.counters.iteration % self.config.checkpoint_every == 0 or self.counters.iteration == self.steps:
+                        self.save_state()
+                    if self._stop:
+                        self.save_state()
+                        raise StopRequested()
+        finally:
+            bar.close()
+            for s, h in handlers.items():
+                signal.signal(s, h)
+        if self.stage.calibrate_every and self.counters.calibrated_at != self.counters.iteration:
+            self.calibrate_in_scenes(self.stage.calibration_episodes)  # the weights ship with it
+        if self.stage.calibrates_q_star:
+            self.calibrate_from_own_grasps()
+        summary = {"iteration": self.counters.iteration, "episodes": self.counters.episode}
+        if self.stage.grasp_trials:
+            summary.update(grasp_trials=self.counters.grasp_trials, grasp_trial_targets=self.counters.grasp_trial_targets)
+        return summary
+
+    def calibrate_in_scenes(self, episodes: int) -> float:
+        """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.acting.grasp_threshold.calibrate_q_star`,
+        at the stage's ``calibration_quantile``) and save the state (a resumed run keeps it);
+        ``calibration.json`` in the run folder keeps every value of the stage.
+
+        Raises:
+            RuntimeError: no grasp took the target.
+        """
+        if self._calibration_env is None:  # its own env: a training episode in progress is left as it is
+            self._calibration_env = self._make_env(self.env.unwrapped.num_objects)
+        try:
+            measured = calibrate_q_star(
+                self.policy, self._calibration_env, episodes, self.config.seed, self.stage.calibration_quantile
+            )
+        except (ValueError, RuntimeError) as exc:
+            raise type(exc)(f"stage {self.stage.name}: {exc}") from exc
+        before = self.policy.q_star
+        self.policy.set_q_star(measured.q_star)
+        c = self.counters
+        write_calibration(self.out / "calibration.json", measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
+        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {measured.q_star:.4g} in its scenes at iteration {c.iteration} "
+                 f"({len(measured.target_grasp_q)} of {measured.grasps} greedy grasps took the target in {episodes} episodes)")
+        c.calibrated_at = c.iteration
+        self.save_state()
+        return measured.q_star
+
+    def calibrate_from_own_grasps(self) -> float:
+        """A ``calibrates_q_star`` stage at its end: Q*_g estimated from the Q of its recent
+        greedy grasps that took the target (:func:`~mpg_agents.acting.grasp_threshold.estimate_q_star`
+        at the stage's ``calibration_quantile``), and the state saved; unchanged when no greedy
+        grasp took the target. Returns Q*_g."""
+        taken = self.counters.successful_grasp_q
+        if not taken:
+            self.log(f"{self.stage.name}: no greedy grasp took the target; Q*_g stays {self.policy.q_star:.4g}")
+            return self.policy.q_star
+        before = self.policy.q_star
+        self.policy.set_q_star(estimate_q_star(taken, self.stage.calibration_quantile))
+        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {self.policy.q_star:.4g} from its last {len(taken)} "
+                 "greedy grasps that took the target")
+        self.save_state()
+        return self.policy.q_star
+
+    def add_demonstrations(self) -> None:
+        """Fill the replay with the oracle's transitions on this stage's env and save the state
+        (a resumed run keeps them and collects none). Every primitive the net has a branch for
+        is kept, frozen ones too (:func:`td_step` leaves them out); the counters stay at 0."""
+        stats = collect_demonstrations(
+            self.env, self.config.demonstration_episodes, episode_seed(self.config.seed, 0, demonstration=True),
+            self.policy.branches, self.store,
+        )
+        self.log(f"{self.stage.name}: {stats.summary()}")
+        self.save_state()
+
+    def _request_stop(self, signum, frame) -> None:
+        self._stop = True
+
+    def _reset_episode(self) -> dict[str, np.ndarray]:
+        c = self.counters
+        n = self._objects_now(c.iteration)
+        options = None if n is None else {"num_objects": n}  # the curriculum's count, without rebuilding the env
+        obs, _, c.episode = reset_first_valid(
+            self.env, lambda k: episode_seed(self.config.seed, k), c.episode, options, self._skipped_scene
+        )
+        c.episode_motions = c.failed_grasps_in_a_row = c.pushes_in_episode = 0
+        return obs
+
+    def _skipped_scene(self, k: int, error: Exception) -> None:
+        self.counters.skipped_scenes += 1
+        self.log(f"{self.stage.name}: episode {k} skipped, its seed gave no valid scene ({error})")
+
+    def epsilon(self) -> float:
+        cfg = self.config
+        decay = cfg.epsilon_decay_steps if cfg.epsilon_decay_steps is not None else self.steps
+        return linear_epsilon(self.counters.iteration, cfg.epsilon_start, cfg.epsilon_end, decay)
+
+    def active_branches(self) -> tuple[str, ...]:
+        """The branches learning this iteration (an alternating stage trains them in turn, a
+        stage with a finish trains its ``finish_trainable`` alone at the end)."""
+        return self.stage.branches_at(self.counters.iteration, self.steps, self.trainable)
+
+    def iteration(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        c = self.counters
+        start = time.perf_counter()
+        choice = self.act(obs)
+        t_decide = time.perf_counter() - start
+        trials = self.stage.grasp_trials if choice.primitive == "grasp" else 0
+        if trials:
+            self.store_grasp_trials(obs, choice.action, trials)
+        next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
+        t_act = time.perf_counter() - start - t_decide
+        self.store(obs, next_obs, choice.action, float(reward), bool(terminated))
+        loss = self.learn()
+        if trials:
+            self.learn()  # the replay grew by 1 + trials transitions
+        c.iteration += 1
+        c.episode_motions += 1
+        if choice.primitive == "grasp":
+            c.window_grasps += 1
+            c.window_target_grasps += int(info["target_grasped"])
+            c.failed_grasps_in_a_row = 0 if info["grasp_success"] else c.failed_grasps_in_a_row + 1
+            if info["target_grasped"] and choice.how == "greedy" and math.isfinite(choice.q_value):
+                c.successful_grasp_q = (c.successful_grasp_q + [choice.q_value])[-200:]
+        if choice.primitive == "push":
+            c.pushes_in_episode += 1
+        rate = None
+        if c.iteration % self.config.window == 0 and c.window_grasps:
+            rate = c.window_target_grasps / c.window_grasps
+            c.window_grasps = c.window_target_grasps = 0
+        assert self._log is not None
+        self._log.record(
+            IterationRecord(c.iteration, c.episode, choice.primitive, choice.how, float(reward), loss, self.epsilon(), info,
+                            t_decide, t_act, time.perf_counter() - start, rate)
+        )
+        if terminated or truncated:
+            self._log.episode_end(c.iteration, info)
+            c.episode += 1
+            every = self.stage.calibrate_every
+            if every and c.iteration < self.steps and c.iteration // every > max(c.calibrated_at, 0) // every:
+                self.calibrate_in_scenes(self.stage.calibration_episodes)
+            return self._reset_episode()
+        return next_obs
+
+    def store(self, obs: dict[str, np.ndarray], next_obs: dict[str, np.ndarray], action: int, reward: float, terminated: bool) -> None:
+        """Add one transition to the replay (batch of one; a truncation is no terminal state)."""
+        self.replay.add(
+            {k: v[None] for k, v in obs.items()},
+            {k: v[None] for k, v in next_obs.items()},
+            np.array([[action]]),
+            np.array([reward], dtype=np.float32),
+            np.array([terminated], dtype=np.float32),
+            [{}],
+        )
+
+    def store_grasp_trials(self, obs: dict[str, np.ndarray], action: int, trials: int) -> None:
+        """Try the grasp ``action`` at ``trials`` other gripper orientations at its pixel, in
+        the simulation and undone, and store each as a transition from ``obs``."""
+        env = self.env.unwrapped
+        primitive, rotation, row, col = env.action_space.decode(action)
+        for k in self.rng.choice(other_grasp_angles(rotation), size=trials, replace=False):
+            other = int(k) + GRASP_ROTATIONS * int(self.rng.integers(2))  # either of the angle's two rotations
+            trial = env.action_space.encode(primitive, other, row, col)
+            next_obs, reward, terminated, _, info = env.try_step(trial)
+            self.store(obs, next_obs, trial, float(reward), bool(terminated))
+            self.counters.grasp_trials += 1
+            self.counters.grasp_trial_targets += int(info["target_grasped"])
+
+    def act(self, obs: dict[str, np.ndarray]) -> Choice:
+        """The action to take: the policy's decision, then exploration and the training aids."""
+        c, budget = self.counters, self.stage.push_budget
+        forced = "grasp" if budget is not None and c.pushes_in_episode >= budget and "grasp" in self.primitives else None
+        decision = self.policy.decide(obs, forced)
+        return self.explorer.choose(obs, decision, self.epsilon(), c.failed_grasps_in_a_row)
+
+    def learn(self) -> float:
+        """One gradient step on a prioritised batch; returns the loss (NaN when nothing learnt)."""
+        if self.replay.size() == 0:
+            return float("nan")
+        batch = self.replay.sample(min(self.config.batch_size, self.replay.size()))
+        result = td_step(
+            self.policy.q_net, self.target_q, self.optimizer, batch, self.config.step_config(), self.active_branches(), self.replay,
+        )
+        if result.trained:
+            self.counters.gradient_steps += 1
+            if self.counters.gradient_steps % self.config.target_update_every == 0:
+                self.target.load_state_dict(self.net.state_dict())
+        return result.loss

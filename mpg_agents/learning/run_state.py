@@ -1,0 +1,192 @@
+"""A training run's resumable state on disk (not the network's weight format: see
+:mod:`mpg_agents.acting.weights`), without pickle.
+
+A run directory holds ``weights.safetensors`` (the online MPGNet, usable on its own) and a
+``state/`` folder: the target network (safetensors), the optimiser (tensors in safetensors,
+its scalar settings in JSON), the replay buffer (``replay.npz``: each distinct compressed
+observation once, transitions as indices into them), the random generators and the
+counters (JSON). Everything is written to a temporary folder first and swapped in whole,
+so a run killed while saving still has its previous state.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+
+from mpg_agents.acting.grasp_threshold import from_header
+from mpg_agents.network.mpgnet import MPGNet
+from mpg_agents.learning.replay import Frame, PrioritizedHeightmapReplayBuffer
+from mpg_agents.acting.weights import chmod_by_umask
+from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
+
+STATE_FORMAT = "mpg-train-state-v1"
+
+
+def save_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
+    """Write the buffer's transitions, priorities and compressed frames to ``path`` (npz)."""
+    n = buffer.size()
+    frames: dict[int, int] = {}
+    blobs: list[Frame] = []
+
+    def index(frame: Frame) -> int:
+        if id(frame) not in frames:
+            frames[id(frame)] = len(blobs)
+            blobs.append(frame)
+        return frames[id(frame)]
+
+    obs_idx = np.array([[index(f) for f in row] for row in buffer.obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
+    next_idx = np.array([[index(f) for f in row] for row in buffer.next_obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
+    arrays: dict[str, np.ndarray] = {
+        "obs_idx": obs_idx,
+        "next_idx": next_idx,
+        "actions": buffer.actions[:n],
+        "rewards": buffer.rewards[:n],
+        "dones": buffer.dones[:n],
+        "timeouts": buffer.timeouts[:n],
+        "priorities": buffer.priorities[:n],
+        "meta": np.array([buffer.pos, int(buffer.full), n], dtype=np.int64),
+        "max_priority": np.array(buffer.max_priority),
+    }
+    keys = sorted(buffer.codecs)
+    for k, frame in enumerate(blobs):
+        for key in keys:
+            kind, blob = frame.planes[key]
+            arrays[f"f{k}/{key}/{kind}"] = np.frombuffer(blob, dtype=np.uint8)
+    np.savez(path, **arrays)
+
+
+def load_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
+    """Restore a :func:`save_replay` file into an empty buffer of the same spaces."""
+    with np.load(path, allow_pickle=False) as data:
+        pos, full, n = (int(v) for v in data["meta"])
+        planes: dict[int, dict[str, tuple[str, bytes]]] = {}
+        for name in data.files:
+            if name.startswith("f") and "/" in name:
+                k, key, kind = name.split("/")
+                planes.setdefault(int(k[1:]), {})[key] = (kind, data[name].tobytes())
+        frames = [Frame(planes[k]) for k in range(len(planes))]
+        if n > buffer.buffer_size:
+            raise ValueError(f"saved replay holds {n} transitions, more than the buffer's capacity {buffer.buffer_size}")
+        for i in range(n):
+            for e in range(buffer.n_envs):
+                buffer.obs_frames[i, e] = frames[int(data["obs_idx"][i, e])]
+                buffer.next_obs_frames[i, e] = frames[int(data["next_idx"][i, e])]
+        buffer.actions[:n] = data["actions"]
+        buffer.rewards[:n] = data["rewards"]
+        buffer.dones[:n] = data["dones"]
+        buffer.timeouts[:n] = data["timeouts"]
+        buffer.priorities[:n] = data["priorities"]
+        buffer.max_priority = float(data["max_priority"])
+    buffer.pos, buffer.full = pos, bool(full)
+    # The next add starts a fresh episode: nothing to share with the last stored frame.
+    buffer.forget_last_frames()
+
+
+def save_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
+    state = optimizer.state_dict()
+    tensors = {}
+    scalars: dict[str, Any] = {"param_groups": state["param_groups"], "state": {}}
+    for pid, pstate in state["state"].items():
+        scalars["state"][str(pid)] = {}
+        for name, value in pstate.items():
+            if isinstance(value, torch.Tensor):
+                tensors[f"{pid}/{name}"] = value.detach().cpu().contiguous()
+            else:
+                scalars["state"][str(pid)][name] = value
+    save_file(tensors, str(folder / "optimizer.safetensors"))
+    chmod_by_umask(folder / "optimizer.safetensors")
+    (folder / "optimizer.json").write_text(json.dumps(scalars))
+
+
+def load_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
+    tensors = load_file(str(folder / "optimizer.safetensors"))
+    scalars = json.loads((folder / "optimizer.json").read_text())
+    state: dict[int, dict[str, Any]] = {int(pid): dict(values) for pid, values in scalars["state"].items()}
+    for name, value in tensors.items():
+        pid, key = name.split("/", 1)
+        state.setdefault(int(pid), {})[key] = value
+    optimizer.load_state_dict({"state": state, "param_groups": scalars["param_groups"]})
+
+
+def write_state(run_dir: Path, writer) -> None:
+    """Call ``writer(tmp_folder)`` and swap the result in as ``run_dir/state`` atomically."""
+    tmp = run_dir / "state.tmp"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    writer(tmp)
+    (tmp / "FORMAT").write_text(STATE_FORMAT)
+    final = run_dir / "state"
+    old = run_dir / "state.old"
+    if final.exists():
+        final.rename(old)
+    tmp.rename(final)
+    if old.exists():
+        shutil.rmtree(old)
+
+
+def state_folder(run_dir: Path) -> Path | None:
+    """The run's saved state folder, or ``None`` when there is nothing to resume."""
+    for name in ("state", "state.old"):  # state.old survives a kill between the two renames
+        folder = run_dir / name
+        if (folder / "FORMAT").is_file() and (folder / "FORMAT").read_text() == STATE_FORMAT:
+            return folder
+    return None
+
+
+def save_run_state(
+    run_dir: Path,
+    *,
+    online: MPGNet,
+    target: MPGNet,
+    q_star: float,
+    optimizer: torch.optim.Optimizer,
+    replay: PrioritizedHeightmapReplayBuffer,
+    rng: np.random.Generator,
+    counters: dict[str, Any],
+    config: dict[str, Any],
+) -> None:
+    """Write everything a run needs to continue (atomically, see :func:`write_state`); Q*_g
+    goes into the online network's weights header."""
+
+    def writer(tmp: Path) -> None:
+        save_mpgnet(online, tmp / "online.safetensors", q_star=q_star)
+        save_mpgnet(target, tmp / "target.safetensors")
+        save_optimizer(optimizer, tmp)
+        save_replay(replay, tmp / "replay.npz")
+        rngs = {"numpy": rng.bit_generator.state, "replay": replay.rng_state, "torch": torch.get_rng_state().tolist()}
+        (tmp / "rng.json").write_text(json.dumps(rngs))
+        (tmp / "counters.json").write_text(json.dumps(counters))
+        (tmp / "config.json").write_text(json.dumps(config))
+
+    write_state(run_dir, writer)
+
+
+def load_run_state(
+    folder: Path,
+    *,
+    online: MPGNet,
+    target: MPGNet,
+    optimizer: torch.optim.Optimizer,
+    replay: PrioritizedHeightmapReplayBuffer,
+    rng: np.random.Generator,
+) -> tuple[dict[str, Any], dict[str, Any], float]:
+    """Restore a :func:`save_run_state` folder into the given objects; returns the saved
+    ``(counters, config, Q*_g)`` (Q*_g NaN when the run had none)."""
+    header = load_mpgnet_weights(online, folder / "online.safetensors")
+    load_mpgnet_weights(target, folder / "target.safetensors")
+    load_optimizer(optimizer, folder)
+    load_replay(replay, folder / "replay.npz")
+    rngs = json.loads((folder / "rng.json").read_text())
+    rng.bit_generator.state = rngs["numpy"]
+    replay.rng_state = rngs["replay"]
+    torch.set_rng_state(torch.tensor(rngs["torch"], dtype=torch.uint8))
+    counters, config = json.loads((folder / "counters.json").read_text()), json.loads((folder / "config.json").read_text())
+    return counters, config, from_header(header)

@@ -1,0 +1,315 @@
+"""The paper's training stages as data (Section III-C): one :class:`TrainingStage` per stage.
+
+I target-agnostic grasping -> II target-oriented grasping (then Q*_g is calibrated) -> III
+moving (the Stage II grasp net scores states; objects grow from 2) -> IV pushing (grasp and
+move frozen; a grasp ends the episode after the push budget) -> V joint training (the three
+nets in turn). The pipeline, the learner and ``mpg-train`` read this table; the ablations are
+changes of it (:func:`without_multistage`, :func:`without_alternation`).
+
+The envs' own differences (scene, rewards, motion cap) are in :mod:`mpg_envs.tasks.stages`; this
+table holds only how the agent trains on them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Callable, Mapping, Sequence
+
+from mpg_agents.acting.coordination import check_coordination
+from mpg_envs.grid.actions import check_primitives
+from mpg_envs.tasks.rewards import RewardConfig
+from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
+
+
+@dataclass(frozen=True)
+class TrainingStage:
+    """How one training stage trains.
+
+    Attributes:
+        name: the stage's name (also its run folder, ``out/<name>/``).
+        env_id: the env it trains on.
+        trainable: the branches that learn (``None``: the env's primitives); the rest are frozen.
+        objects: curriculum ``(start, end)``: objects grow linearly from ``start`` to ``end``
+            over the stage; ``None`` keeps the env's count.
+        alternate_every: train the trainable nets in turn, switching every this many
+            iterations (0: all together).
+        alternate_shares: ``((branch, turns), ...)``: in each round of the alternation this
+            branch trains ``turns`` turns of ``alternate_every`` iterations in a row (the others
+            one), e.g. ``(("grasp", 3),)`` gives the grasp net 3/5 of a three-net stage's steps.
+        finish_iterations: the stage's last this many iterations train only ``finish_trainable``
+            (0: no finish), e.g. the grasp net alone after the three nets' alternation.
+        finish_trainable: the branches that learn in the finish.
+        coordination: how the primitive is chosen (:mod:`mpg_agents.acting.coordination`).
+        calibrates_q_star: at its end, the stage estimates Q*_g from the Q of its own recent
+            greedy grasps that took the target (at ``calibration_quantile``;
+            :mod:`mpg_agents.acting.grasp_threshold`).
+        calibration_episodes: before it trains, the stage calibrates Q*_g again in its own
+            scenes from the Q of the greedy grasps that take the target in this many
+            grasp-only episodes of the starting net, no learning (0: keep the Q*_g it is given).
+            Q*_g from isolated targets (Stage II) sits above what a sure grasp in clutter
+            scores, and the workflow then pushes instead of grasping.
+        calibration_quantile: which quantile of those grasps' Q (either kind) becomes Q*_g:
+            0.5, the median (where the Q of successful grasps settles, the paper's reading); a
+            lower one lets the workflow take more of the grasps that do succeed.
+        calibrate_every: with ``calibration_episodes``, calibrate again at the first episode
+            end after every this many iterations and once at the stage's end, so Q*_g follows
+            the grasp net's Q scale while it learns (0: only before training). A fixed Q*_g
+            that the learning grasp Q drifts below turns the workflow into pushing.
+        uses_discriminator: the envs score states with the discriminator, the grasp net of the
+            stage that ``calibrates_q_star``.
+        push_budget: after this many pushes in an episode the grasp is forced (``None``: never).
+        iterations: default number of training iterations.
+        branches: the nets the agent has and acts with (``None``: all three); a baseline
+            without move is ``("push", "grasp")``. Its checkpoint holds only these.
+        branch_init: ``((to, from), ...)``: at the stage's start, branch ``to`` is copied from
+            branch ``from`` of the starting weights, e.g. ``(("move", "grasp"),)``: a move is a
+            grasp of the occluder, carried away, so the move net starts as the grasp net.
+        reward: ``((field, value), ...)`` (a TOML table in a config) of
+            :class:`~mpg_envs.tasks.rewards.RewardConfig` fields that this stage's training envs
+            set, e.g. ``{"move_needs_lift": True}``; empty: the paper's rewards.
+        grasp_trials: each grasp the stage takes is also tried at this many other gripper
+            orientations at the same pixel (drawn from the other ``GRASP_ROTATIONS - 1``, each
+            in either of its two rotations), in the simulation and undone
+            (:meth:`~mpg_envs.tasks.env.MPGEnv.try_step`); those transitions go into the replay, with
+            one more gradient step per grasp. A grasp in clutter is decided by its angle, and
+            one executed grasp labels one angle. Privileged (a simulator's counterfactual, like
+            demonstrations, not the paper's pure RL); 0: off.
+    """
+
+    name: str
+    env_id: str
+    trainable: tuple[str, ...] | None = None
+    objects: tuple[int, int] | None = None
+    alternate_every: int = 0
+    alternate_shares: tuple[tuple[str, int], ...] = ()
+    finish_iterations: int = 0
+    finish_trainable: tuple[str, ...] = ()
+    coordination: str = "workflow"
+    calibrates_q_star: bool = False
+    calibration_episodes: int = 0
+    calibration_quantile: float = 0.5
+    calibrate_every: int = 0
+    uses_discriminator: bool = False
+    push_budget: int | None = None
+    iterations: int = 1000
+    branch_init: tuple[tuple[str, str], ...] = ()
+    branches: tuple[str, ...] | None = None
+    reward: tuple[tuple[str, Any], ...] = ()
+    grasp_trials: int = 0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.grasp_trials, bool) or not isinstance(self.grasp_trials, int) or not 0 <= self.grasp_trials < GRASP_ROTATIONS:
+            raise ValueError(f"stage {self.name}: grasp_trials must be an integer in 0..{GRASP_ROTATIONS - 1}, got {self.grasp_trials!r}")
+        pairs = tuple(self.reward.items()) if isinstance(self.reward, Mapping) else tuple(tuple(p) for p in self.reward)
+        known = {f.name for f in fields(RewardConfig)}
+        for pair in pairs:
+            if len(pair) != 2 or pair[0] not in known:
+                raise ValueError(f"stage {self.name}: reward takes RewardConfig fields {sorted(known)} with values, got {pair}")
+        object.__setattr__(self, "reward", tuple(sorted(pairs)))
+        if self.branches is not None:
+            object.__setattr__(self, "branches", check_primitives(self.branches))
+            outside = sorted((set(self.trainable or ()) | set(self.finish_trainable)) - set(self.branches))
+            if outside:
+                raise ValueError(f"stage {self.name}: trains {outside}, which are not among its branches {self.branches}")
+        pairs = tuple(tuple(pair) for pair in self.branch_init)
+        for pair in pairs:
+            if len(pair) != 2 or pair[0] == pair[1]:
+                raise ValueError(f"stage {self.name}: branch_init takes (to, from) pairs of two primitives, got {pair}")
+            for primitive in pair:
+                check_primitives((primitive,))
+        object.__setattr__(self, "branch_init", pairs)
+        shares = tuple((str(branch), int(turns)) for branch, turns in self.alternate_shares)
+        for branch, turns in shares:
+            check_primitives((branch,))
+            if turns < 1:
+                raise ValueError(f"stage {self.name}: alternate_shares gives {branch!r} {turns} turns; need >= 1")
+        object.__setattr__(self, "alternate_shares", shares)
+        if self.finish_trainable:
+            object.__setattr__(self, "finish_trainable", check_primitives(self.finish_trainable))
+        if not 0 <= self.finish_iterations < self.iterations:
+            raise ValueError(f"stage {self.name}: finish_iterations must be in [0, iterations={self.iterations}), got {self.finish_iterations}")
+        if bool(self.finish_iterations) != bool(self.finish_trainable):
+            raise ValueError(f"stage {self.name}: finish_iterations and finish_trainable go together (got {self.finish_iterations}, {self.finish_trainable})")
+        if self.trainable is not None:
+            object.__setattr__(self, "trainable", check_primitives(self.trainable))
+        if self.objects is not None:
+            start, end = (int(v) for v in self.objects)
+            if not 1 <= start <= end:
+                raise ValueError(f"stage {self.name}: objects must be (start, end) with 1 <= start <= end, got {self.objects}")
+            object.__setattr__(self, "objects", (start, end))
+        check_coordination(self.coordination)
+        if self.calibration_episodes < 0:
+            raise ValueError(f"stage {self.name}: calibration_episodes must be >= 0, got {self.calibration_episodes}")
+        if not 0.0 <= self.calibration_quantile <= 1.0:
+            raise ValueError(f"stage {self.name}: calibration_quantile must be in [0, 1], got {self.calibration_quantile}")
+        if self.calibrate_every < 0 or (self.calibrate_every and not self.calibration_episodes):
+            raise ValueError(f"stage {self.name}: calibrate_every must be 0, or >= 1 with calibration_episodes, got {self.calibrate_every}")
+        if self.calibration_episodes and self.calibrates_q_star:
+            raise ValueError(f"stage {self.name}: calibrates_q_star and calibration_episodes both set Q*_g; choose one")
+        if self.alternate_every < 0 or self.iterations < 1:
+            raise ValueError(f"stage {self.name}: need alternate_every >= 0 and iterations >= 1")
+        if self.push_budget is not None and self.push_budget < 0:
+            raise ValueError(f"stage {self.name}: push_budget must be None or >= 0, got {self.push_budget}")
+
+    def branches_at(self, iteration: int, steps: int, trainable: tuple[str, ...]) -> tuple[str, ...]:
+        """The branches that learn at ``iteration`` (0-based) of a run of ``steps`` iterations
+        whose trainable branches are ``trainable``: the finish's, else the alternation's turn."""
+        if self.finish_iterations and iteration >= steps - self.finish_iterations:
+            return self.finish_trainable
+        if self.alternate_every <= 0:
+            return trainable
+        shares = dict(self.alternate_shares)
+        rounds = [branch for branch in trainable for _ in range(shares.get(branch, 1))]
+        return (rounds[(iteration // self.alternate_every) % len(rounds)],)
+
+    @property
+    def reads_q_star(self) -> bool:
+        """Whether this stage's coordination ever consults Q*_g: not by the largest Q, not with
+        one branch."""
+        return self.coordination != "max_q" and (self.branches is None or len(self.branches) > 1)
+
+    def reward_config(self, base: RewardConfig = RewardConfig()) -> RewardConfig:
+        """``base`` with this stage's :attr:`reward` settings."""
+        return replace(base, **dict(self.reward))
+
+    def objects_at(self, fraction: float) -> int | None:
+        """The curriculum's object count after ``fraction`` (0..1) of the stage; ``None``: the env's."""
+        if self.objects is None:
+            return None
+        start, end = self.objects
+        return int(round(start + min(1.0, max(0.0, fraction)) * (end - start)))
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["branch_init"] = [list(pair) for pair in self.branch_init]
+        data["alternate_shares"] = [list(pair) for pair in self.alternate_shares]
+        data["reward"] = dict(self.reward)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "TrainingStage":
+        check_fields(cls, data, "training stage")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+
+
+TRAINING_STAGES: tuple[TrainingStage, ...] = (
+    TrainingStage("Stage1", "MPG-Stage1-v0", trainable=("grasp",), iterations=500),
+    TrainingStage("Stage2", "MPG-Stage2-v0", trainable=("grasp",), calibrates_q_star=True, iterations=1000),
+    TrainingStage("Stage3", "MPG-Stage3-v0", trainable=("move",), objects=(2, 4), uses_discriminator=True, iterations=600),
+    TrainingStage("Stage4", "MPG-Stage4-v0", trainable=("push",), uses_discriminator=True, push_budget=5, iterations=600),
+    TrainingStage(
+        "Stage5", "MPG-Stage5-v0", trainable=("move", "push", "grasp"), alternate_every=50, uses_discriminator=True,
+        iterations=1500,
+    ),
+)
+"""The paper's five stages, in order."""
+
+
+def stage_for_env(env_id: str, stages: Sequence[TrainingStage] = TRAINING_STAGES) -> TrainingStage:
+    """The stage that trains on ``env_id``; an env no stage names (e.g. ``MPG-Occluded-v0``)
+    trains all its primitives together, with no curriculum, budget or discriminator."""
+    for stage in stages:
+        if stage.env_id == env_id:
+            return stage
+    return TrainingStage(env_id, env_id)
+
+
+def select_stages(stages: Sequence[TrainingStage], which: Sequence[str]) -> tuple[TrainingStage, ...]:
+    """The stages named in ``which``: stage names (``Stage2``) or 1-based positions (``2``)."""
+    by_name = {s.name: s for s in stages}
+    chosen = []
+    for item in which:
+        item = str(item).strip()
+        if item in by_name:
+            chosen.append(by_name[item])
+        elif item.isdigit() and 1 <= int(item) <= len(stages):
+            chosen.append(stages[int(item) - 1])
+        else:
+            raise ValueError(f"unknown stage {item!r}; valid: {', '.join(by_name)} or 1..{len(stages)}")
+    return tuple(chosen)
+
+
+def without_multistage(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Ablation "w/o multi-stage training": only the last (joint) stage, from scratch."""
+    return (stages[-1],)
+
+
+def without_alternation(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Ablation "w/o alternating training": stages that alternate (or finish with some nets
+    alone) train all their nets at once and choose actions by the largest Q."""
+    return tuple(
+        _without_unused_calibration(
+            replace(s, alternate_every=0, alternate_shares=(), finish_iterations=0, finish_trainable=(), coordination="max_q")
+        )
+        if s.alternate_every or s.finish_iterations else s
+        for s in stages
+    )
+
+
+def _without_unused_calibration(stage: TrainingStage) -> TrainingStage:
+    """``stage`` without in-scene Q*_g calibrations when its coordination never reads Q*_g:
+    each costs 50 episodes (about a minute and a half on 2 cores) for a value nothing uses."""
+    if stage.reads_q_star or not stage.calibration_episodes:
+        return stage
+    return replace(stage, calibration_episodes=0, calibrate_every=0)
+
+
+def at_budget(stages: Sequence[TrainingStage], iterations: int) -> tuple[TrainingStage, ...]:
+    """``stages`` with the last one's iterations set so that all together do ``iterations``."""
+    before = sum(s.iterations for s in stages[:-1])
+    if iterations <= before:
+        raise ValueError(f"a budget of {iterations} iterations leaves none for {stages[-1].name} (the others take {before})")
+    return (*stages[:-1], replace(stages[-1], iterations=iterations - before))
+
+
+def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str, ...]], **last: Any) -> tuple[TrainingStage, ...]:
+    """The earlier stages that train only ``keep``'s branch sets, then the last stage changed by
+    ``last`` (no branch initialisation), with the whole budget of ``stages``."""
+    kept = tuple(s for s in stages[:-1] if s.trainable in keep)
+    final = _without_unused_calibration(replace(stages[-1], branch_init=(), **last))
+    return at_budget((*kept, final), sum(s.iterations for s in stages))
+
+
+def grasp_only_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter
+    (no Q*_g calibration there: a net with one primitive never consults Q*_g)."""
+    return _learned_baseline(stages, [("grasp",)], trainable=("grasp",), branches=("grasp",), alternate_every=0)
+
+
+def target_vpg_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Baseline "Target-Oriented VPG": after the grasp stages, push and grasp nets trained
+    together in the joint stage's clutter, the action by the larger Q (no move, no Q*_g rule,
+    so no Q*_g calibration there)."""
+    return _learned_baseline(
+        stages, [("grasp",)], trainable=("push", "grasp"), branches=("push", "grasp"), alternate_every=0, coordination="max_q"
+    )
+
+
+def push_grasp_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
+    """Baseline "Efficient Push-Grasping" style: the grasp stages and Q*_g, the push stage, then
+    push and grasp trained in turn in the joint stage's clutter, grasping when grasp Q >= Q*_g (no move)."""
+    return _learned_baseline(stages, [("grasp",), ("push",)], trainable=("push", "grasp"), branches=("push", "grasp"))
+
+
+BASELINES: dict[str, Callable[[Sequence[TrainingStage]], tuple[TrainingStage, ...]]] = {
+    "grasp-only": grasp_only_baseline,
+    "to-vpg": target_vpg_baseline,
+    "push-grasp": push_grasp_baseline,
+}
+"""The learned baselines of Table I, each a change of the stage table at MPGNet's budget."""
+
+
+def with_overrides(stages: Sequence[TrainingStage], overrides: Mapping[str, Mapping[str, Any]]) -> tuple[TrainingStage, ...]:
+    """``stages`` with fields replaced per stage name, e.g. ``{"Stage3": {"objects": [2, 3]}}``."""
+    unknown = sorted(set(overrides) - {s.name for s in stages})
+    if unknown:
+        raise ValueError(f"overrides for unknown stages {unknown}; valid: {[s.name for s in stages]}")
+    return tuple(TrainingStage.from_dict({**s.to_dict(), **overrides[s.name]}) if s.name in overrides else s for s in stages)
+
+
+def check_fields(cls: type, data: Mapping[str, Any], what: str) -> None:
+    """``ValueError`` naming the keys of ``data`` that are not fields of dataclass ``cls``."""
+    known = {f.name for f in fields(cls)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise ValueError(f"unknown {what} settings {unknown}; valid: {sorted(known)}")

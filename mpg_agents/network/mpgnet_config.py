@@ -1,0 +1,209 @@
+"""MPGNet's configuration: architecture, input normalisation and how it runs (paper defaults)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields
+from typing import Any, Mapping
+
+from mpg_agents.network.mobilenet import DEFAULT_BN_MOMENTUM, full_depth
+from mpg_agents.network.rotations import padded_side
+from mpg_envs.grid.actions import HEIGHTMAP_SIZE, PRIMITIVES, check_primitives
+from mpg_envs.grid.workspace import NUM_ROTATIONS
+
+IMAGENET_MEAN: tuple[float, float, float] = (0.485, 0.456, 0.406)
+IMAGENET_STD: tuple[float, float, float] = (0.229, 0.224, 0.225)
+
+# Primitives whose Q maps the rough target mask restricts (paper, Training Details).
+ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
+
+# Where a grasp may act: the paper's bounding rectangle, or the target's own pixels (dilated).
+GRASP_REGIONS: tuple[str, ...] = ("rectangle", "target")
+MOVE_REGIONS: tuple[str, ...] = ("rectangle", "top")
+HEAD_INITS: tuple[str, ...] = ("kaiming", "zero")
+# Which grasps may act: any (the paper), or only those whose open fingers land least blocked.
+GRASP_FINGERS: tuple[str, ...] = ("any", "clear")
+
+# Trunk depth of the CPU-friendly variant: features.0-3 of MobileNetV3-small, output stride 8
+# (24 channels). The whole trunk (stride 32) maps the 320-pixel padded input to 10 x 10 cells
+# of 6.4 cm, coarser than the blocks themselves: trained from scratch on a CPU, its greedy
+# grasps landed on the edges of the target's rectangle (14% target grasp success after 2000
+# iterations, below random pixels inside the rectangle). Stride 8 gives 1.6 cm cells and a
+# receptive field the size of a block, and a decision costs less. ``trunk_depth=None`` keeps
+# the whole trunk.
+SMALL_TRUNK_DEPTH: int | None = 4
+
+# Settings of how the network runs, not of what it computes: a checkpoint's values of these
+# are not imposed on the machine that loads it (see MPGNetConfig.from_checkpoint).
+EXECUTION_FIELDS: tuple[str, ...] = ("channels_last", "trunk_batch")
+
+
+@dataclass
+class MPGNetConfig:
+    """Architecture and input normalisation of MPGNet (paper defaults: ``variant="large"``).
+
+    Attributes:
+        variant: MobileNetV3 size of every trunk, ``"large"`` (paper) or ``"small"``.
+        primitives: the branches to build, a subset of ``("move", "push", "grasp")`` in that order.
+        trunk_depth: ``features`` modules kept in each trunk; ``None`` = the whole trunk
+            (output stride 32). :meth:`small` uses :data:`SMALL_TRUNK_DEPTH`.
+        head_channels: width of the hidden 1x1 convolution (VPG's 64).
+        head_dilation: 0 (the paper): the head's first convolution is 1x1; ``d`` > 0: it is
+            3x3 with dilation ``d``, so a Q value also reads the trunk cells ``d`` away. The
+            small trunk's features see about +-9 pixels (90% of an output's input gradient),
+            the open gripper's finger pads come down +-23 pixels (9.3 cm apart) from the grasp
+            point: without wider context a grasp net cannot tell which angle keeps the fingers
+            clear of the neighbours. 3 on the stride-8 trunk reaches +-24 pixels further.
+        head_init: the head's last convolution starts as ``"kaiming"`` (VPG's He-normal, the
+            default) or ``"zero"`` (every Q 0 until trained). He-normal gives the untrained
+            small net, in training mode, grasp Q values of standard deviation 0.5 with a maximum
+            of 10 over one scene's 16 x 224 x 224 outputs, beyond every return the rewards
+            allow; the TD targets and the greedy Q*_g calibration start from that random
+            landscape. Zero removes it; the gradient reaches the earlier layers from the
+            second step on.
+        num_rotations: orientations per primitive (16, 22.5 degrees apart).
+        heightmap_size: side of the square heightmaps (224).
+        depth_max: depth is clipped to ``[0, depth_max]`` metres (the workspace height).
+        depth_mean, depth_std: depth normalisation (VPG's heightmap statistics: most pixels
+            are table at 0 m, objects a few cm high).
+        color_mean, color_std: ImageNet statistics applied to colour / 255.
+        rough_mask: zero move and grasp Q outside the target's bounding rectangle.
+        grasp_region: where grasp Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
+            (the paper's rough mask) or ``"target"`` (the visible target pixels grown by
+            ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object).
+        target_margin_px: growth (> 0) or shrinking (< 0) of the target pixels for
+            ``grasp_region="target"``, in 2 mm pixels (see :func:`mpg_agents.network.regions.target_pixels`).
+        move_region: where move Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
+            (the paper's rough mask) or ``"top"`` (the target footprint's pixels within
+            ``move_band_m`` of its highest point: the occluder's top; see
+            :func:`mpg_agents.network.regions.footprint_top`).
+        move_band_m: height band of ``move_region="top"``, metres.
+        grasp_fingers: which grasps may act: ``"any"`` (the paper) or ``"clear"``: only those
+            (pixel, angle) pairs whose open fingers come down least blocked, read off the depth
+            heightmap with the 2F-85's geometry (:func:`mpg_envs.grid.grasp_geometry.fingers_blocked`,
+            the env's default grasp depth and workspace): the free ones when a grasp in the grasp
+            region has free landing strips, else the least blocked in that region, each up to
+            ``finger_tolerance_m`` more blocked (:func:`mpg_agents.network.regions.least_blocked`). Two
+            thirds of a trained net's greedy grasps in 15-object clutter lifted nothing, most
+            with a neighbour under a finger; the small trunk does not see 4 cm to each side.
+            It restricts greedy grasps, the grasp score compared with Q*_g and the TD target's
+            greedy next action; exploratory grasps stay unrestricted.
+        finger_tolerance_m: the slack of ``grasp_fingers="clear"``, metres.
+        bn_momentum: batch-norm momentum of the trunks (see ``mobilenet.DEFAULT_BN_MOMENTUM``).
+        channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
+            depthwise convolutions on CPU. Not part of the architecture (checkpoints load
+            either way).
+        trunk_batch: most rotated images per trunk convolution at inference; ``None`` = all
+            16 at once. The rotations still form one batch (resampled together, one set of BN
+            statistics in training); this only splits the inference convolutions so their
+            activations stay in the CPU caches: a 16-image batch at 320 x 320 has ~100 MB per
+            expanded layer of MobileNetV3-large (26 MB for the small stem), past a 32 MB L3,
+            and 4-image micro-batches were the fastest on 2 cores for both variants
+            (``benchmarks/policy_speed.py``). Not part of the architecture.
+    """
+
+    variant: str = "large"
+    primitives: tuple[str, ...] = PRIMITIVES
+    trunk_depth: int | None = None
+    head_channels: int = 64
+    head_dilation: int = 0
+    head_init: str = "kaiming"
+    num_rotations: int = NUM_ROTATIONS
+    heightmap_size: int = HEIGHTMAP_SIZE
+    depth_max: float = 0.4
+    depth_mean: float = 0.01
+    depth_std: float = 0.03
+    color_mean: tuple[float, float, float] = IMAGENET_MEAN
+    color_std: tuple[float, float, float] = IMAGENET_STD
+    rough_mask: bool = True
+    grasp_region: str = "rectangle"
+    target_margin_px: int = 2
+    move_region: str = "rectangle"
+    move_band_m: float = 0.015
+    grasp_fingers: str = "any"
+    finger_tolerance_m: float = 0.005
+    bn_momentum: float = DEFAULT_BN_MOMENTUM
+    channels_last: bool = True
+    trunk_batch: int | None = 4
+
+    def __post_init__(self) -> None:
+        self.primitives = check_primitives(self.primitives)
+        self.color_mean = tuple(float(v) for v in self.color_mean)  # type: ignore[assignment]
+        self.color_std = tuple(float(v) for v in self.color_std)  # type: ignore[assignment]
+        if self.variant not in ("large", "small"):
+            raise ValueError(f"variant must be 'large' or 'small', got {self.variant!r}")
+        if self.trunk_depth is not None and not 1 <= self.trunk_depth <= full_depth(self.variant):
+            raise ValueError(
+                f"trunk_depth for variant {self.variant!r} must be None or in 1..{full_depth(self.variant)}, "
+                f"got {self.trunk_depth}"
+            )
+        if self.head_dilation < 0:
+            raise ValueError(f"head_dilation must be >= 0 (0: 1x1 head convolutions), got {self.head_dilation}")
+        if self.head_init not in HEAD_INITS:
+            raise ValueError(f"head_init must be one of {HEAD_INITS}, got {self.head_init!r}")
+        if self.heightmap_size <= 0 or self.heightmap_size % 2:
+            raise ValueError(f"heightmap_size must be a positive even number, got {self.heightmap_size}")
+        if self.num_rotations < 1:
+            raise ValueError(f"num_rotations must be positive, got {self.num_rotations}")
+        if self.depth_std <= 0 or self.depth_max <= 0:
+            raise ValueError("depth_std and depth_max must be positive")
+        if self.grasp_region not in GRASP_REGIONS:
+            raise ValueError(f"grasp_region must be one of {GRASP_REGIONS}, got {self.grasp_region!r}")
+        if self.move_region not in MOVE_REGIONS:
+            raise ValueError(f"move_region must be one of {MOVE_REGIONS}, got {self.move_region!r}")
+        if not self.move_band_m >= 0:
+            raise ValueError(f"move_band_m must be >= 0 metres, got {self.move_band_m}")
+        if self.grasp_fingers not in GRASP_FINGERS:
+            raise ValueError(f"grasp_fingers must be one of {GRASP_FINGERS}, got {self.grasp_fingers!r}")
+        if not self.finger_tolerance_m >= 0:
+            raise ValueError(f"finger_tolerance_m must be >= 0 metres, got {self.finger_tolerance_m}")
+        if self.trunk_batch is not None and self.trunk_batch < 1:
+            raise ValueError(f"trunk_batch must be None or positive, got {self.trunk_batch}")
+
+    @classmethod
+    def small(cls, **overrides: Any) -> "MPGNetConfig":
+        """The CPU-friendly variant: MobileNetV3-small trunks (depth :data:`SMALL_TRUNK_DEPTH`)."""
+        overrides.setdefault("trunk_depth", SMALL_TRUNK_DEPTH)
+        return cls(variant="small", **overrides)
+
+    @classmethod
+    def large(cls, **overrides: Any) -> "MPGNetConfig":
+        """The paper's variant: full MobileNetV3-large trunks."""
+        return cls(variant="large", **overrides)
+
+    @classmethod
+    def for_variant(cls, variant: str, **overrides: Any) -> "MPGNetConfig":
+        """:meth:`small` or :meth:`large` by name."""
+        if variant == "small":
+            return cls.small(**overrides)
+        if variant == "large":
+            return cls.large(**overrides)
+        raise ValueError(f"variant must be 'large' or 'small', got {variant!r}")
+
+    @property
+    def padded_size(self) -> int:
+        """Side of the padded heightmap: ``ceil(size * sqrt 2)`` rounded up to a multiple of 32."""
+        return padded_side(self.heightmap_size)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable form (tuples become lists)."""
+        data = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
+
+    @classmethod
+    def from_checkpoint(cls, data: Mapping[str, Any], **overrides: Any) -> "MPGNetConfig":
+        """A checkpoint's architecture (its header's ``config``) with this variant's execution
+        settings (:data:`EXECUTION_FIELDS`), then ``overrides``."""
+        if "variant" not in data:
+            raise ValueError("checkpoint config has no 'variant'")
+        architecture = {k: v for k, v in data.items() if k not in EXECUTION_FIELDS}
+        return cls.from_dict({**cls.for_variant(data["variant"]).to_dict(), **architecture, **overrides})
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "MPGNetConfig":
+        """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown MPGNetConfig keys {unknown}; valid keys: {sorted(known)}")
+        kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        return cls(**kwargs)

@@ -1,0 +1,400 @@
+"""The scripted reference policy, a :class:`~mpg_envs.policies.policy.Policy` that reads the simulator.
+
+:class:`OraclePolicy` reads the simulator's state (object poses and shapes, which object is
+the target, which object each heightmap pixel shows), never pixels alone, and, as a planner
+with a perfect model of the physics, tries candidate actions in a checkpointed copy of the
+simulation (:func:`try_primitive`) before taking one. It proves the suite is solvable
+and is the upper baseline of evaluations. Each step it re-plans from the current state:
+
+1. its best target grasps (across the short axis, where the open fingers come down on the
+   freest space; through partial cover too) are tried in the copy, and the first that holds
+   the target is taken;
+2. otherwise its candidate preparations -- moves of the objects seen on the target (topmost
+   first), moves of the objects in the fingers' way, pushes of those out along the closing
+   direction -- are each tried and followed by grasp trials; the first after which a grasp
+   holds is taken, else the one leaving the target least covered and least blocked.
+
+With ``OracleConfig(verify_grasps=0)`` it plans by geometry alone (no trials). It remembers
+every action it took or tried with the heightmap it was on and never repeats one whose
+surroundings did not change (:class:`ActionMemory`), so a failed action is never retried
+unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
+from mpg_envs.grid.grasp_geometry import (
+    GRASP_ROTATIONS,
+    JawGeometry,
+    angle_gap,
+    angle_to_rotation,
+    extent_along,
+    footprint_rect,
+    jaw_strip_heights,
+)
+from mpg_envs.policies.policy import Policy
+from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
+from mpg_envs.simulation.world import WorldCheckpoint
+from mpg_envs.grid.workspace import NUM_ROTATIONS, world_to_pixel
+
+__all__ = ["ActionMemory", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect", "try_primitive"]
+
+
+def try_primitive(
+    primitives: Primitives, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None = None
+) -> PrimitiveResult:
+    """Run a primitive on ``primitives.world`` and undo it exactly (:class:`WorldCheckpoint`,
+    warm starts included): what a planner with a perfect model of the physics can do."""
+    checkpoint = WorldCheckpoint(primitives.world)
+    try:
+        return primitives.execute(primitive, rotation, row, col, depth, target)
+    finally:
+        checkpoint.restore()
+
+
+@dataclass(frozen=True)
+class OracleConfig:
+    """Geometry the oracle plans with (metres); the finger sizes are the 2F-85's."""
+
+    max_grasp_width: float = 0.075  # wider than this across the fingers: not graspable
+    # The 2F-85's open fingers (mpg_envs.grid.grasp_geometry.JawGeometry, shared with MPGNet's finger mask).
+    finger_open_inner: float = JawGeometry.finger_open_inner  # an open finger's inner face, from the jaw's centre
+    finger_thickness: float = JawGeometry.finger_thickness  # a finger's thickness along the closing direction, with a margin
+    finger_half_width: float = JawGeometry.finger_half_width  # half a pad's width across the jaw, with a margin
+    offset_step: float = 0.004  # the jaw slides along the closing direction in steps of this
+    finger_margin: float = 0.004  # the swept strip starts this far off the object's side
+    pad_below_tcp: float = JawGeometry.pad_below_tcp  # the pads' lower edge lies this far below the TCP
+    finger_clearance: float = JawGeometry.finger_clearance  # a strip is free if nothing in it rises above the pads' lower edge + this
+    grasp_tolerance: float = 0.02  # a grasp this little blocked is tried before any push (the pads push small things aside)
+    push_start_gap: float = 0.012  # a push starts this far outside the target's edge
+    occluder_tolerance: float = 0.01  # as the env's occlusion test: higher than the target's top by this
+    # When an action repeats a tried one (mpg_envs.policies.action_memory.RepeatRule's defaults).
+    repeat_pixels: int = RepeatRule.repeat_pixels
+    repeat_window: int = RepeatRule.repeat_window
+    repeat_height_change: float = RepeatRule.repeat_height_change
+    verify_grasps: int = 4  # target grasps tried in a copy of the simulation before acting (0: plan by geometry alone)
+    verify_preparations: int = 5  # with trials: moves/pushes tried, each followed by verify_grasps grasp trials
+
+
+@dataclass(frozen=True)
+class GraspPlan:
+    """One grasp of one object: angle index (0..7), pixel, and how badly the fingers collide."""
+
+    obj: int
+    rotation: int
+    row: int
+    col: int
+    blocked: float  # metres the highest thing under the open fingers rises above their lower edge (<= 0: free)
+    blockers: tuple[tuple[int, int], ...]  # (side, object) pairs in the fingers' way
+    angle_off: float  # radians from the object's short axis
+
+    @property
+    def free(self) -> bool:
+        return self.blocked <= 0.0
+
+
+class OraclePolicy:
+    """The scripted reference policy for any MPG env (a :class:`Policy`); also SB3's ``predict``."""
+
+    name = "oracle"
+
+    def __init__(self, env: gym.Env, config: OracleConfig = OracleConfig()):
+        self.env = env
+        self.config = config
+        self.memory = ActionMemory(config)
+        self.last_plan: dict[str, Any] | None = None  # what the last act() decided and why
+        self._episode_motions = -1
+        self._obs: dict[str, np.ndarray] | None = None
+        self._ids_model = None
+        self._ids_caster = None
+
+    def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
+        """SB3-style: ``(action, state)`` for the env's current state."""
+        return self.act(obs), state
+
+    def reset(self) -> None:
+        """Forget the actions tried in the last episode."""
+        self.memory.clear()
+        self.last_plan = None
+
+    def act(self, obs: Any = None) -> int:
+        """The flat action index the oracle chooses now, for the env's current observation
+        ``obs`` (``None``: the env's last one) and the simulator state behind it."""
+        env = self.env.unwrapped
+        if env.num_motions == 0 and self._episode_motions != 0:
+            self.reset()  # a new episode even if the caller did not say so
+        self._episode_motions = env.num_motions
+        self._obs = env._obs if obs is None else obs
+        depth = np.asarray(self._obs["depth"])
+        primitive, rotation, row, col, plan = self._choose(env, depth)
+        self.memory.record(primitive, rotation, row, col, depth)
+        self.last_plan = plan
+        return env.action_space.encode(primitive, rotation, row, col)
+
+    # ------------------------------------------------------------ planning
+    def _choose(self, env, depth: np.ndarray):
+        world, allowed, target = env.world, env.primitives, env.target
+        ids = self._object_ids(world)
+        if target is None or env.stage.mask_all_objects or not world.active[target]:
+            inside = set(world.active_objects().tolist()) - set(world.objects_outside_workspace().tolist())
+            for i in sorted(inside, key=lambda i: -world.object_top(i)):
+                step = self._first_new("grasp", self._grasp_plans(env, i, depth, ids), depth)
+                if step:
+                    return (*step, {"kind": "grasp_any"})
+            return self._last_resort(env, depth, "grasp")
+        verify = "grasp" in allowed and self.config.verify_grasps > 0
+        if verify:
+            step = self._verified_grasp(env, target, depth, ids)
+            if step:
+                return (*step, {"kind": "grasp_verified"})
+        plans = self._grasp_plans(env, target, depth, ids) if "grasp" in allowed else []
+        if not verify:
+            occluded = bool(self._obs["occluded"][0])
+            if "move" in allowed and (occluded or "grasp" not in allowed):
+                moves = list(self._moves(env, target, depth, ids, plans, blockers=False))[: max(1, self.config.verify_preparations)]
+                step = self._tried_move(env, target, depth, ids, moves)
+                if step:
+                    return step
+            good = [p for p in plans if p.blocked <= self.config.grasp_tolerance]
+            step = self._first_new("grasp", good, depth)
+            if step:
+                return (*step, {"kind": "grasp_free" if good[0].free else "grasp_tolerated", "blocked": round(good[0].blocked, 4)})
+            step = next(self._pushes(env, target, depth, plans), None)
+            if step:
+                return step
+        else:
+            step = self._look_ahead(env, target, depth, ids, plans)
+            if step:
+                return step
+        step = self._first_new("grasp", plans, depth)
+        if step:
+            return (*step, {"kind": "grasp_blocked", "no_free_grasp": True})
+        return self._last_resort(env, depth, "grasp" if "grasp" in allowed else allowed[0])
+
+    def _tried_move(self, env, target: int, depth: np.ndarray, ids: np.ndarray, moves: list):
+        """With trials (Stage III, no grasp to verify), the first move, over the movers' angles
+        (up to ``2 * verify_grasps`` trials), that lifts the object it aims at and leaves the
+        target in place (going 4 cm below a thin occluder's top can pinch the target under it);
+        without trials, or if none does, the first move."""
+        budget = 2 * self.config.verify_grasps
+        for move in moves:
+            j = move[4]["object"]
+            for p in self._grasp_plans(env, j, depth, ids, require_fit=False):
+                if budget <= 0:
+                    return moves[0]
+                if self.memory.repeats("move", p.rotation, p.row, p.col, depth):
+                    continue
+                budget -= 1
+                result = try_primitive(env._primitives, "move", p.rotation, p.row, p.col, depth, target)
+                if result.grasp_success and result.grasped_object == j and not result.target_moved:
+                    return "move", p.rotation, p.row, p.col, move[4]
+        return moves[0] if moves else None
+
+    def _moves(self, env, target: int, depth: np.ndarray, ids: np.ndarray, plans: list[GraspPlan], blockers: bool = True):
+        """Untried moves, in order: the objects seen on the target (topmost first); with no
+        grasp allowed and none on top, the nearest neighbours; with ``blockers``, then the
+        objects in the open fingers' way of the least blocked target grasps."""
+        world, allowed = env.world, env.primitives
+        if "move" not in allowed:
+            return
+        movers = self._occluders(env, target, depth, ids)
+        if not movers and "grasp" not in allowed:  # Stage III, nothing on top: clear the nearest
+            movers = self._neighbours(world, target)
+        kinds = {j: "move_occluder" for j in movers}
+        if blockers:
+            for p in sorted(plans, key=lambda p: p.blocked):
+                for _, j in p.blockers:
+                    if j not in kinds:
+                        movers.append(j)
+                        kinds[j] = "move_blocker"
+        for j in movers:
+            step = self._first_new("move", self._grasp_plans(env, j, depth, ids, require_fit=False), depth)
+            if step:
+                yield (*step, {"kind": kinds[j], "object": j})
+
+    def _pushes(self, env, target: int, depth: np.ndarray, plans: list[GraspPlan]):
+        """Untried pushes that open a finger gap (see :meth:`_push_options`)."""
+        if "push" not in env.primitives or not plans:
+            return
+        seen = set()
+        for _, start, rotation in self._push_options(env, target, plans):
+            r, c = self._clip_pixel(env.world, start)
+            if (rotation, r, c) not in seen and not self.memory.repeats("push", rotation, r, c, depth):
+                seen.add((rotation, r, c))
+                yield "push", rotation, r, c, {"kind": "push", "no_free_grasp": True}
+
+    def _look_ahead(self, env, target: int, depth: np.ndarray, ids: np.ndarray, plans: list[GraspPlan]):
+        """Of the first ``verify_preparations`` untried moves and pushes, the first after which
+        a target grasp holds in the simulation; else the one leaving the target least covered
+        and its fingers least blocked; ``None`` when there is none."""
+        c = self.config
+        candidates = list(self._moves(env, target, depth, ids, plans))[: c.verify_preparations]
+        candidates += list(self._pushes(env, target, depth, plans))[: max(0, c.verify_preparations - len(candidates))]
+        best, best_score = None, None
+        obs = self._obs
+        for cand in candidates:
+            primitive, rotation, row, col, info = cand
+            checkpoint = WorldCheckpoint(env.world)
+            try:
+                env._primitives.execute(primitive, rotation, row, col, depth, target)
+                if not env.world.active[target] or target in set(env.world.objects_outside_workspace().tolist()):
+                    continue
+                after, ids_after = self._cast(env.world)
+                mask, occluded = env._target_view(after, target)
+                self._obs = {"depth": after, "mask": mask, "occluded": np.array([int(occluded)])}
+                plans_after = self._grasp_plans(env, target, after, ids_after)
+                for p in plans_after[: c.verify_grasps]:
+                    result = try_primitive(env._primitives, "grasp", p.rotation, p.row, p.col, after, target)
+                    if result.grasp_success and result.grasped_object == target:
+                        return primitive, rotation, row, col, {**info, "verified_next": True}
+                score = (len(self._occluders(env, target, after, ids_after)), min((p.blocked for p in plans_after), default=1.0))
+                if best_score is None or score < best_score:
+                    best, best_score = cand, score
+            finally:
+                self._obs = obs
+                checkpoint.restore()
+        return best
+
+    def _verified_grasp(self, env, target: int, depth: np.ndarray, ids: np.ndarray):
+        """The first of the best ``verify_grasps`` untried target grasps that holds the target
+        when tried in a copy of the simulation; the ones that did not are remembered as tried."""
+        tried = 0
+        for p in self._grasp_plans(env, target, depth, ids):
+            if tried >= self.config.verify_grasps:
+                break
+            if self.memory.repeats("grasp", p.rotation, p.row, p.col, depth):
+                continue
+            tried += 1
+            result = try_primitive(env._primitives, "grasp", p.rotation, p.row, p.col, depth, target)
+            if result.grasp_success and result.grasped_object == target:
+                return "grasp", p.rotation, p.row, p.col
+            self.memory.record("grasp", p.rotation, p.row, p.col, depth)
+        return None
+
+    def _first_new(self, primitive: str, plans: list[GraspPlan], depth: np.ndarray):
+        """The first plan (with small pixel shifts) that does not repeat a tried action."""
+        for p in plans:
+            for dr, dc in ((0, 0), (3, 0), (0, 3), (-3, 0), (0, -3)):
+                r = int(np.clip(p.row + dr, 0, depth.shape[0] - 1))
+                c = int(np.clip(p.col + dc, 0, depth.shape[1] - 1))
+                if not self.memory.repeats(primitive, p.rotation, r, c, depth):
+                    return primitive, p.rotation, r, c
+        return None
+
+    def _last_resort(self, env, depth: np.ndarray, primitive: str):
+        """Nothing new left to try at the planned spots: the first untried angle at the target."""
+        world = env.world
+        i = env.target if env.target is not None and world.active[env.target] else int(world.active_objects()[0])
+        centre, _, _ = footprint_rect(world.object_vertices(i)[:, :2])
+        r, c = self._clip_pixel(world, centre)
+        for k in range(NUM_ROTATIONS):
+            if not self.memory.repeats(primitive, k, r, c, depth):
+                return primitive, k, r, c, {"kind": "last_resort", "no_free_grasp": True}
+        return primitive, 0, r, c, {"kind": "last_resort", "no_free_grasp": True}
+
+    # ------------------------------------------------------------ pieces
+    def _grasp_plans(self, env, i: int, depth: np.ndarray, ids: np.ndarray, require_fit: bool = True) -> list[GraspPlan]:
+        """Grasps of object ``i`` at the 8 angles, best first: free ones nearest the short
+        axis, then the least blocked. At each angle the jaw slides along the closing
+        direction (the open fingers span 85 mm) to where both fingers come down on free space."""
+        world, c, pc = env.world, self.config, env.config.primitives
+        ws = world.workspace
+        verts = world.object_vertices(i)[:, :2]
+        centre, _, short_dir = footprint_rect(verts)
+        gx, gy = ws.pixel_centers()
+        reach = c.finger_open_inner + c.finger_thickness
+        plans = []
+        for k in range(GRASP_ROTATIONS):
+            theta = k * math.pi / GRASP_ROTATIONS
+            d = np.array([math.cos(theta), math.sin(theta)])
+            n = np.array([-d[1], d[0]])
+            lo, hi = extent_along(verts, centre, d)
+            width = hi - lo
+            if require_fit and width > c.max_grasp_width:
+                continue
+            nlo, nhi = extent_along(verts, centre, n)
+            mid = centre + d * (lo + hi) / 2 + n * (nlo + nhi) / 2
+            max_offset = max(0.0, c.finger_open_inner - width / 2 - c.finger_margin)
+            rel_x, rel_y = gx - mid[0], gy - mid[1]
+            s, t = rel_x * d[0] + rel_y * d[1], rel_x * n[0] + rel_y * n[1]
+            band = (np.abs(t) <= c.finger_half_width) & (np.abs(s) <= reach + max_offset)
+            sb, hb, ib = s[band], depth[band], ids[band]
+            best = None
+            for offset in sorted(np.arange(-max_offset, max_offset + 1e-9, c.offset_step).tolist() + [0.0], key=abs):
+                row, col = self._clip_pixel(world, mid + offset * d)
+                z = max(float(depth[row, col]) - pc.grasp_depth, pc.grasp_min_height)
+                limit = z - c.pad_below_tcp + c.finger_clearance
+                heights = jaw_strip_heights(sb, hb, width, offset, c.finger_open_inner, c.finger_thickness, c.finger_margin)
+                blocked = max(heights) - limit
+                if best is None or blocked < best[0] - 1e-4:
+                    best = (blocked, offset, row, col, limit)
+                if blocked <= 0:
+                    break
+            blocked, offset, row, col, limit = best
+            edge = width / 2 + c.finger_margin
+            in_low = (sb <= -edge) & (sb >= offset - reach) & (hb > limit)
+            in_high = (sb >= edge) & (sb <= offset + reach) & (hb > limit)
+            blockers = [(side, int(j)) for side, sel in ((-1, in_low), (1, in_high)) for j in np.unique(ib[sel]) if j >= 0 and j != i]
+            plans.append(GraspPlan(i, k, row, col, blocked, tuple(blockers), angle_gap(theta, short_dir)))
+        # Free first, nearest the short axis; then the least blocked.
+        return sorted(plans, key=lambda p: (not p.free, p.angle_off if p.free else p.blocked, p.angle_off))
+
+    def _push_options(self, env, target: int, plans: list[GraspPlan]):
+        """Pushes that open a finger gap: each blocker pushed straight out along the closing
+        direction, from just outside the target's edge; least blocked angles first."""
+        world, c = env.world, self.config
+        verts = world.object_vertices(target)[:, :2]
+        options = []
+        for p in sorted(plans, key=lambda p: p.blocked):
+            theta = p.rotation * math.pi / GRASP_ROTATIONS
+            for side in sorted({s for s, _ in p.blockers}) or (-1, 1):
+                d = side * np.array([math.cos(theta), math.sin(theta)])
+                centre = verts.mean(axis=0)
+                _, reach = extent_along(verts, centre, d)
+                start = centre + d * (reach + c.push_start_gap)
+                rotation = angle_to_rotation(math.atan2(d[1], d[0]) % (2 * math.pi), symmetric=False)
+                options.append((side, start, rotation))
+        return options
+
+    def _occluders(self, env, target: int, depth: np.ndarray, ids: np.ndarray) -> list[int]:
+        """Objects seen above the target's footprint higher than its top, topmost first."""
+        world = env.world
+        mask = np.asarray(self._obs["mask"]) > 0
+        over = mask & (depth > world.object_top(target) + self.config.occluder_tolerance)
+        found = {int(j): float(depth[over & (ids == j)].max()) for j in np.unique(ids[over]) if j >= 0 and j != target}
+        return sorted(found, key=lambda j: -found[j])
+
+    def _neighbours(self, world, target: int) -> list[int]:
+        t = world.object_position(target)[:2]
+        others = [int(j) for j in world.active_objects() if j != target]
+        return sorted(others, key=lambda j: float(np.linalg.norm(world.object_position(j)[:2] - t)))
+
+    def _object_ids(self, world) -> np.ndarray:
+        """Which object each heightmap pixel shows (-1 for the table)."""
+        return self._cast(world)[1]
+
+    def _cast(self, world) -> tuple[np.ndarray, np.ndarray]:
+        """The oracle's own ray-cast view of the current state: depth heightmap and which
+        object each pixel shows (its own caster, so trials never touch the env's cameras or RNG)."""
+        if self._ids_model is not world.model:
+            from mpg_envs.perception.heightmap import RaycastHeightmapper
+
+            if self._ids_caster is not None:
+                self._ids_caster.close()
+            self._ids_caster = RaycastHeightmapper(world.model, world.workspace, num_threads=1)
+            self._ids_model = world.model
+        hm = self._ids_caster.heightmaps(world.data)
+        return hm.depth.astype(np.float32), world.object_of_geom(hm.geom_id)
+
+    @staticmethod
+    def _clip_pixel(world, xy: np.ndarray) -> tuple[int, int]:
+        rows, cols = world.workspace.shape
+        r, c = world_to_pixel(world.workspace, float(xy[0]), float(xy[1]))
+        return int(np.clip(r, 0, rows - 1)), int(np.clip(c, 0, cols - 1))

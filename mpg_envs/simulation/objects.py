@@ -1,0 +1,76 @@
+"""Object sets: rigid objects made of convex parts, ready to be added to a MuJoCo scene.
+
+:func:`load_object_set` picks a set by name (``"blocks"``) or by the path of a folder of
+meshes. The pieces live in modules of their own and are re-exported here:
+
+* :mod:`mpg_envs.simulation.assets` -- the :class:`ObjectAsset` type, colours and material defaults;
+* :mod:`mpg_envs.simulation.blocks` -- the generated "blocks" set (:func:`blocks_object_set`);
+* :mod:`mpg_envs.simulation.meshes` -- mesh folders and coacd decomposition (:func:`load_mesh_folder`);
+* :mod:`mpg_envs.simulation.geometry_cache` -- the on-disk geometry cache (:func:`default_cache_dir`);
+* :mod:`mpg_envs.simulation.bodies` -- :func:`add_object_body`, an asset as a free body of an ``MjSpec``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from mpg_envs.simulation.assets import DEFAULT_FRICTION, MASS_RANGE, MIN_PART_VOLUME, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part
+from mpg_envs.simulation.blocks import ARCH_TUNNEL_RATIO, BLOCK_SHAPES, BLOCKS_JITTER, CYLINDER_SECTIONS, blocks_object_set
+from mpg_envs.simulation.bodies import OBJECT_CONDIM, OBJECT_GEOM_GROUP, ROLLING_FRICTION, TORSIONAL_FRICTION, add_object_body
+from mpg_envs.simulation.geometry_cache import CACHE_FORMAT_VERSION, default_cache_dir
+from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, load_mesh_folder
+
+__all__ = [
+    "ARCH_TUNNEL_RATIO",
+    "BLOCKS_JITTER",
+    "BLOCK_SHAPES",
+    "CACHE_FORMAT_VERSION",
+    "CONVEX_VOLUME_RATIO",
+    "CYLINDER_SECTIONS",
+    "CoacdParams",
+    "DEFAULT_FRICTION",
+    "MASS_RANGE",
+    "MESH_SUFFIXES",
+    "MIN_PART_VOLUME",
+    "OBJECT_CONDIM",
+    "OBJECT_GEOM_GROUP",
+    "ObjectAsset",
+    "Part",
+    "ROLLING_FRICTION",
+    "TABLEAU_10",
+    "TORSIONAL_FRICTION",
+    "WOOD_DENSITY",
+    "add_object_body",
+    "blocks_object_set",
+    "default_cache_dir",
+    "load_mesh_folder",
+    "load_object_set",
+]
+
+
+def load_object_set(
+    name_or_path: str | os.PathLike[str],
+    seed: int = 0,
+    cache_dir: str | os.PathLike[str] | None = None,
+) -> list[ObjectAsset]:
+    """An object set by name (``"blocks"``) or by the path of a folder of OBJ/STL meshes.
+
+    The name ``"blocks"`` wins over a folder that happens to be called ``blocks`` in the
+    working directory; pass ``"./blocks"`` to load such a folder.
+
+    Raises:
+        ValueError: neither a known set name nor an existing folder (lists the choices).
+    """
+    if isinstance(name_or_path, str) and name_or_path == "blocks":
+        return blocks_object_set(seed=seed, cache_dir=cache_dir)
+    # str(...) guards against "" silently meaning the working directory.
+    path = Path(name_or_path).expanduser()
+    if str(name_or_path).strip() and path.is_dir():
+        return load_mesh_folder(path, seed=seed, cache_dir=cache_dir)
+    raise ValueError(
+        f"unknown object set {str(name_or_path)!r}: valid choices are 'blocks' or the path of an "
+        f"existing folder of {'/'.join(MESH_SUFFIXES)} meshes"
+    )
+
+

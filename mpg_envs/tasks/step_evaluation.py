@@ -1,0 +1,70 @@
+"""What one step did, as data: the env's ``evaluate`` hook fills a :class:`StepEvaluation`;
+the reward, the episode's end and the step's ``info`` are read off it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from mpg_envs.simulation.primitives import PrimitiveResult
+from mpg_envs.tasks.rewards import StepOutcome
+
+
+def action_info(primitive: str, rotation: int, row: int, col: int, result: PrimitiveResult) -> dict[str, Any]:
+    """The step-``info`` entries that say what was done and how the motion went."""
+    return {
+        "primitive": primitive,
+        "rotation": int(rotation),
+        "pixel": (int(row), int(col)),
+        "position": tuple(float(v) for v in result.position),
+        "grasp_failure": result.grasp_failure,  # why a grasp or move held nothing (GRASP_FAILURES), else None
+        "unreachable": bool(result.unreachable),  # the arm could not reach the pose: nothing moved
+        "physics_steps": int(result.physics_steps),
+    }
+
+
+@dataclass(frozen=True)
+class StepEvaluation:
+    """The judged outcome of one step.
+
+    Attributes:
+        outcome: the facts the paper's rewards need (:class:`~mpg_envs.tasks.rewards.StepOutcome`).
+        wrong_grasp: a grasp lifted an object other than the target (a mis-pick).
+        ends_wrong_object: ... and strict retrieval (``wrong_grasp="fail"``) ends the
+            episode for it.
+        is_success: the task is done (the target grasped; Stage I: the table empty).
+        target_out: the target left the workspace.
+        occluded_before: the target was occluded before the step (the paper's flag).
+        occluded: ... and after it.
+        visible_fraction: share of the target's footprint where the target is the top
+            surface after the step (``None`` without a target in view).
+        objects_left: objects still in the scene and inside the workspace.
+    """
+
+    outcome: StepOutcome
+    wrong_grasp: bool
+    ends_wrong_object: bool
+    is_success: bool
+    target_out: bool
+    occluded_before: bool
+    occluded: bool
+    visible_fraction: float | None
+    objects_left: int
+
+    def info(self) -> dict[str, Any]:
+        """The step-``info`` entries this evaluation owns (a fresh dict)."""
+        o = self.outcome
+        return {
+            "grasp_success": bool(o.grasp_success),
+            "target_grasped": bool(o.target_grasped),
+            "wrong_grasp": bool(self.wrong_grasp),
+            "change_detected": bool(o.change_detected),
+            "occluded_before": self.occluded_before,
+            "occluded": self.occluded,
+            "visible_fraction": self.visible_fraction,
+            "move_success": bool(o.move_success),
+            "is_success": bool(self.is_success),
+            "objects_left": int(self.objects_left),
+            "target_out_of_workspace": bool(self.target_out),
+            "grasp_q_gain": float(o.grasp_q_gain),
+        }
