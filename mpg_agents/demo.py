@@ -1,15 +1,15 @@
 """The short demo: build a scene, run a policy, print metrics, write pictures.
 
-    python -m mpg_agents.demo [--policy shipped|oracle|random|CKPT] [--env MPG-OccludedHard-v0]
-                              [--episodes 3] [--seed 500002] [--out demo_out]
+    python -m mpg_agents.demo [--policy shipped|oracle|random|CKPT] [--env MPG-Occluded-v0]
+                              [--episodes 3] [--seed 500000] [--out demo_out]
 
 Runs ``--episodes`` seeded episodes, prints each step and a summary (task success,
 motions, grasp success), and writes ``scene.png`` (the first scene's colour heightmap with
 the target outlined and its depth heightmap, beside ``env.render()``'s view when OpenGL is
 available) and, for a network policy, ``qmaps_<k>.png`` for each motion ``k`` of the first
-episode (every branch's Q map at that decision, the chosen action drawn and named). The
-default scene is a held-out hard-track scene (the target at most 30% visible, strict
-retrieval) where the shipped MPGNet moves an occluder aside and then grasps the target.
+episode (every branch's Q map at that decision, the chosen action drawn and named).
+``--env MPG-OccludedHard-v0`` shows the hard track (the target at most 30% visible, strict
+retrieval), where a policy has to move occluders aside before it grasps.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ import numpy as np
 import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
 from mpg_envs.perception.render import RenderUnavailableError
 
-DEMO_SEED = 500_002
-"""The demo's first scene: a held-out hard-track scene whose target a grasp alone cannot take."""
+DEMO_SEED = 500_000
+"""The demo's first scene: the first held-out test seed (training never uses it)."""
 
 PANEL_PX = 448
 TITLE_PX = 34
@@ -93,7 +93,7 @@ class QMapsOfFirstEpisode:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="MPG demo: a policy on a few seeded scenes.")
     parser.add_argument("--policy", default="shipped", help="shipped (the trained checkpoint), oracle, random, grasp-only or a checkpoint path")
-    parser.add_argument("--env", default="MPG-OccludedHard-v0", help="a registered env id (default: MPG-OccludedHard-v0, the hard track's test scenes, 15 objects)")
+    parser.add_argument("--env", default="MPG-Occluded-v0", help="a registered env id (default: MPG-Occluded-v0, the paper's test scenes, 15 objects; MPG-OccludedHard-v0: the hard track)")
     parser.add_argument("--episodes", type=int, default=3, help="episodes to run (default 3)")
     # A held-out test seed (the shipped net trained on its own seeds, from 0), so the demo
     # shows a scene it never trained on.
