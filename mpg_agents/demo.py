@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import gymnasium as gym
@@ -73,19 +72,20 @@ def scene_picture(env: gym.Env, obs: dict[str, np.ndarray]) -> np.ndarray:
 
 class QMapsOfFirstEpisode:
     """A network policy that also writes ``qmaps_<k>.png`` (every branch's Q maps) before each
-    motion ``k`` of the first episode; otherwise the policy itself."""
+    motion ``k`` of the first episode; otherwise the policy itself. The evaluation resets a
+    policy once at every episode's start, so the resets count the episodes."""
 
-    def __init__(self, policy, out: Path, recording: Callable[[], bool]):
-        self.policy, self.out, self.recording, self.motion = policy, out, recording, 0
-        self.name = policy.name
+    def __init__(self, policy, out: Path):
+        self.policy, self.out, self.name = policy, out, policy.name
+        self.episodes, self.motion = 0, 0
 
     def reset(self) -> None:
         self.policy.reset()
-        self.motion = 0
+        self.episodes, self.motion = self.episodes + 1, 0
 
     def act(self, obs: dict[str, np.ndarray]) -> int:
         self.motion += 1
-        if self.recording():
+        if self.episodes == 1:
             self.policy.save_qmaps(self.out / f"qmaps_{self.motion}.png", obs)
         return self.policy.act(obs)
 
@@ -113,10 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     policy = make_policy(args.policy, env)
     print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}, {threads} torch threads")
 
-    episode_now = [-1]
-
     def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
-        episode_now[0] = episode
         if episode == 0:
             cv2.imwrite(str(out / "scene.png"), cv2.cvtColor(scene_picture(env, obs), cv2.COLOR_RGB2BGR))
 
@@ -128,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         )
 
     if hasattr(policy, "save_qmaps"):
-        policy = QMapsOfFirstEpisode(policy, out, lambda: episode_now[0] == 0)
+        policy = QMapsOfFirstEpisode(policy, out)
     result = evaluate(policy, env, args.episodes, args.seed, on_reset=on_reset, on_step=on_step)
     grasps = "n/a" if result.grasp_success_rate is None else f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
     print(
