@@ -110,6 +110,7 @@ class Calibration:
 def calibrate_q_star(
     agent: "MPGAgent", env: gym.Env, episodes: int, seed: int, quantile: float = 0.5,
     on_episode: Callable[[int, int, int], None] | None = None,
+    on_skip: Callable[[int, Exception], None] | None = None,
 ) -> Calibration:
     """Measure Q*_g of ``agent`` in ``env``'s scenes (greedy grasps only, nothing learned).
 
@@ -117,11 +118,14 @@ def calibrate_q_star(
         agent: the net (an :class:`~mpg_agents.acting.agent.MPGAgent`, or anything with
             ``decide(obs, primitive)``, ``usable_primitives`` and ``branches``); only its grasp
             branch acts.
-        env: the scenes; episode ``k`` is reset with ``episode_seed(seed, k, calibration=True)``.
+        env: the scenes; episode ``k`` is reset with ``episode_seed(seed, k, calibration=True)``,
+            a seed that gives no valid scene passing to the next
+            (:func:`~mpg_agents.acting.seeds.reset_first_valid`).
         episodes: how many episodes (>= 1).
         seed: the run seed that picks the calibration scenes.
         quantile: which quantile of the successful grasps' Q becomes Q*_g, in [0, 1].
         on_episode: called after each episode with (episode, grasps so far, target grasps so far).
+        on_skip: called with (seed index, error) for each calibration seed passed over.
 
     Raises:
         ValueError: the net has no grasp branch, ``episodes`` < 1 or ``quantile`` outside [0, 1].
@@ -138,7 +142,7 @@ def calibrate_q_star(
     k = -1
     for n in range(episodes):
         # A seed without a valid scene passes to the next one: the same scenes every calibration.
-        obs, _, k = reset_first_valid(env, lambda j: episode_seed(seed, j, calibration=True), k + 1)
+        obs, _, k = reset_first_valid(env, lambda j: episode_seed(seed, j, calibration=True), k + 1, on_skip=on_skip)
         done = False
         while not done:
             decision = agent.decide(obs, "grasp")

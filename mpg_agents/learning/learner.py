@@ -22,8 +22,7 @@ Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is
 fresh run first fills the replay with the oracle's transitions
 (:mod:`mpg_agents.learning.demonstrations`); they are no iterations or episodes of the run. With
 ``TrainingStage.grasp_trials`` (off by default) each grasp is also tried at other gripper
-orientations in the simulation and undone, and those transitions are stored too (privileged,
-labelled like the demonstrations).
+orientations in the simulation and undone, those transitions stored too (privileged, labelled).
 """
 
 from __future__ import annotations
@@ -244,7 +243,8 @@ class Learner:
             self._calibration_env = self._make_env(self.env.unwrapped.num_objects)
         try:
             measured = calibrate_q_star(
-                self.policy, self._calibration_env, episodes, self.config.seed, self.stage.calibration_quantile
+                self.policy, self._calibration_env, episodes, self.config.seed, self.stage.calibration_quantile,
+                on_skip=lambda k, error: self.log(f"{self.stage.name}: calibration episode {k} skipped, no valid scene ({error})"),
             )
         except (ValueError, RuntimeError) as exc:
             raise type(exc)(f"stage {self.stage.name}: {exc}") from exc

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import pytest
 
+from mpg_envs.scenes.generators import InvalidSceneError
+
 from mpg_agents.cli import calibrate_main
 from mpg_agents.acting.grasp_threshold import Calibration, calibrate_q_star, estimate_q_star, write_calibration
 from mpg_agents.acting.seeds import episode_seed
@@ -68,6 +70,23 @@ def test_q_star_is_the_quantile_of_the_target_grasps_q_on_calibration_seeds():
     assert seen == [(0, 2, 1), (1, 3, 2), (2, 5, 2)]
     low = calibrate_q_star(ScriptedPolicy([5.0, 0.2, 0.6]), ScriptedEnv([[False, True], [True]]), 2, seed=4, quantile=0.0)
     assert low.q_star == pytest.approx(0.2)
+
+
+class SceneFailsOnce(ScriptedEnv):
+    """A ScriptedEnv whose second calibration seed gives no valid scene."""
+
+    def reset(self, seed):
+        if seed == episode_seed(0, 1, calibration=True):
+            raise InvalidSceneError(f"seed {seed}")
+        return super().reset(seed)
+
+
+def test_a_calibration_seed_without_a_scene_passes_to_the_next_and_is_reported():
+    env, skipped = SceneFailsOnce([[True], [True]]), []
+    result = calibrate_q_star(ScriptedPolicy([0.2, 0.6]), env, 2, seed=0, on_skip=lambda k, e: skipped.append(k))
+    assert result.episodes == 2 and result.target_grasp_q == (0.2, 0.6)
+    assert env.seeds == [episode_seed(0, 0, calibration=True), episode_seed(0, 2, calibration=True)]
+    assert skipped == [1]
 
 
 def test_an_infinite_q_is_not_a_calibration_value():
