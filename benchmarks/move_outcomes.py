@@ -25,11 +25,12 @@ from grasp_q_outcomes import check_episodes, checkpoint_episodes_parser  # noqa:
 def main() -> None:
     parser = checkpoint_episodes_parser(__doc__.splitlines()[0])
     parser.add_argument("--move-region", choices=("rectangle", "top"), help="override where the net's moves may act")
+    parser.add_argument("--move-fingers", choices=("any", "clear"), help="override which moves may act (finger mask)")
     args = parser.parse_args()
     check_episodes(parser, args)
     set_torch_threads(1)
     try:
-        name, records = move_records(args.policy, args.env, args.num_objects, args.episodes, args.seed, args.move_region)
+        name, records = move_records(args.policy, args.env, args.num_objects, args.episodes, args.seed, args.move_region, args.move_fingers)
     except ValueError as exc:
         parser.error(str(exc))
     out = {"policy": name, "env": args.env, "num_objects": args.num_objects, "episodes": args.episodes,

@@ -71,12 +71,15 @@ def _add_net_setting_arguments(parser: argparse.ArgumentParser, prefix: str) -> 
                         help=prefix + "where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
     parser.add_argument("--grasp-fingers", choices=("any", "clear"),
                         help=prefix + "which grasps may act (override the checkpoint's): any, or only those whose open fingers land least blocked")
+    parser.add_argument("--move-fingers", choices=("any", "clear"),
+                        help=prefix + "which moves may act (override the checkpoint's): any, or only those whose open fingers land least blocked")
 
 
 def _net_settings(args: argparse.Namespace) -> dict[str, Any]:
     """``MPGNetConfig`` field -> value of the :func:`_add_net_setting_arguments` options given."""
     given = (("grasp_region", args.grasp_region), ("target_margin_px", args.target_margin),
-             ("move_region", args.move_region), ("grasp_fingers", args.grasp_fingers))
+             ("move_region", args.move_region), ("grasp_fingers", args.grasp_fingers),
+             ("move_fingers", args.move_fingers))
     return {name: value for name, value in given if value is not None}
 
 

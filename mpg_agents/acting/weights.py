@@ -153,7 +153,8 @@ def load_mpgnet(path: str | Path, primitives: Sequence[str] | None = None) -> tu
 
 
 SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = (
-    "rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m", "grasp_fingers", "finger_tolerance_m",
+    "rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m", "grasp_fingers", "move_fingers",
+    "finger_tolerance_m",
 )
 """Network settings that change where Q counts, not any weight: an exported checkpoint may
 change them (:func:`export_weights`). The execution fields (``channels_last``,

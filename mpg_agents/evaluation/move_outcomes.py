@@ -116,15 +116,17 @@ def summarise_moves(records: list[dict[str, Any]], angle_limit_deg: float = ANGL
 
 def move_records(
     policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int, move_region: str | None = None,
+    move_fingers: str | None = None,
 ) -> tuple[str, list[dict[str, Any]]]:
     """The policy's name and a look at every move of ``episodes`` greedy episodes (episode ``i``
-    reset with ``seed + i``, as ``mpg-eval`` runs them); ``move_region`` overrides the net's.
+    reset with ``seed + i``, as ``mpg-eval`` runs them); ``move_region`` and ``move_fingers``
+    override the net's.
 
     Raises:
         ValueError: ``policy_name`` is not an MPGNet checkpoint (or ``shipped``).
     """
     env = gym.make(env_id, num_objects=num_objects)
-    net = make_network_policy(policy_name, env, move_region=move_region)
+    net = make_network_policy(policy_name, env, move_region=move_region, move_fingers=move_fingers)
     probe = MoveProbe(net, env)
     run_episodes(probe, env, range(episodes), seed)
     env.close()

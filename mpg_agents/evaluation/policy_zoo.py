@@ -98,6 +98,7 @@ class NetworkPolicy:
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
         grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
         move_region: str | None = None, q_star: float | None = None, grasp_fingers: str | None = None,
+        move_fingers: str | None = None,
     ):
         import torch
 
@@ -115,6 +116,8 @@ class NetworkPolicy:
             overrides["move_region"] = move_region
         if grasp_fingers is not None:
             overrides["grasp_fingers"] = grasp_fingers
+        if move_fingers is not None:
+            overrides["move_fingers"] = move_fingers
         self.policy = MPGAgent.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
         if coordination is not None:
             self.policy.set_coordination(coordination)
@@ -130,6 +133,8 @@ class NetworkPolicy:
             self.name += f" [move region: {move_region}]"
         if grasp_fingers is not None:
             self.name += f" [grasp fingers: {grasp_fingers}]"
+        if move_fingers is not None:
+            self.name += f" [move fingers: {move_fingers}]"
         if q_star is not None:
             self.name += f" [Q*_g: {q_star:g}]"
         self.memory = None

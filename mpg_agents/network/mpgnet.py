@@ -57,6 +57,7 @@ class PreparedObs:
     grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
     move_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
     grasp_fingers: Tensor | None = field(default=None)  # (B, R, H, W) bool: grasps whose fingers land clear enough
+    move_fingers: Tensor | None = field(default=None)  # (B, R, H, W) bool: moves whose fingers land clear enough
 
 
 @dataclass
@@ -76,6 +77,7 @@ class EncodedObs:
     grasp_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
     move_region: Tensor | None = field(default=None)  # (B, H, W) bool; None: ``region``
     grasp_fingers: Tensor | None = field(default=None)  # (B, R, H, W) bool; None: every grasp
+    move_fingers: Tensor | None = field(default=None)  # (B, R, H, W) bool; None: every move
 
     def region_of(self, primitive: str) -> Tensor:
         """``(B, H, W)`` bool: where ``primitive`` may act (before ``rough_mask`` is consulted)."""
@@ -185,22 +187,26 @@ class MPGNet(nn.Module):
         # Depth is normalised here: the band is scaled by the same std (the clip at depth_max is far above).
         move_region = footprint_top(binary, depth, cfg.move_band_m / cfg.depth_std) if cfg.move_region == "top" else None
         region = target_region(binary)
-        fingers = None
+        blocked = self._finger_blocking(depth) if "clear" in (cfg.grasp_fingers, cfg.move_fingers) else None
+        grasp_fingers = move_fingers = None
         if cfg.grasp_fingers == "clear":
-            fingers = self._clear_fingers(depth, region if grasp_region is None else grasp_region)
-        return PreparedObs(torch.cat([color, depth, mask], dim=1), region, occluded, grasp_region, move_region, fingers)
+            grasp_fingers = least_blocked(blocked, region if grasp_region is None else grasp_region, cfg.finger_tolerance_m)
+        if cfg.move_fingers == "clear":
+            move_fingers = least_blocked(blocked, region if move_region is None else move_region, cfg.finger_tolerance_m)
+        return PreparedObs(
+            torch.cat([color, depth, mask], dim=1), region, occluded, grasp_region, move_region, grasp_fingers, move_fingers
+        )
 
-    def _clear_fingers(self, depth: Tensor, grasp_region: Tensor) -> Tensor:
-        """``grasp_fingers="clear"``: the grasps whose fingers land least blocked ``(B, R, H, W)``,
-        from the normalised depth planes ``(B, 1, H, W)`` (the clip at ``depth_max`` lies far
-        above any finger)."""
+    def _finger_blocking(self, depth: Tensor) -> Tensor:
+        """How far the open fingers of a grasp (or a move, which grasps the same way) at every
+        pixel and rotation land blocked, ``(B, R, H, W)`` metres, from the normalised depth
+        planes ``(B, 1, H, W)`` (the clip at ``depth_max`` lies far above any finger)."""
         cfg = self.config
         metres = (depth[:, 0].float() * cfg.depth_std + cfg.depth_mean).cpu().numpy()
         grasp, resolution = PrimitiveConfig(), Workspace().resolution
-        blocked = torch.from_numpy(
+        return torch.from_numpy(
             np.stack([fingers_blocked(m, resolution, grasp.grasp_depth, grasp.grasp_min_height, cfg.num_rotations) for m in metres])
         ).to(depth.device)
-        return least_blocked(blocked, grasp_region, cfg.finger_tolerance_m)
 
     def encode(self, obs: Mapping[str, Any] | PreparedObs, rotations: Tensor | None = None) -> EncodedObs:
         """Pad and rotate a batch and run the shared mask trunk once.
@@ -234,6 +240,7 @@ class MPGNet(nn.Module):
             grasp_region=prep.grasp_region,
             move_region=prep.move_region,
             grasp_fingers=prep.grasp_fingers,
+            move_fingers=prep.move_fingers,
         )
 
     def branch_q(self, enc: EncodedObs, primitive: str, subset: Tensor | None = None) -> Tensor:
@@ -253,10 +260,11 @@ class MPGNet(nn.Module):
 
     def actable(self, enc: EncodedObs, primitive: str) -> Tensor | None:
         """``(B, R, H, W)`` or ``(B, 1, H, W)`` bool: where ``primitive`` may act (the rough mask's
-        region for move and grasp, and for grasp the finger mask); ``None``: everywhere."""
+        region for move and grasp, and their finger masks); ``None``: everywhere."""
         allowed = enc.region_of(primitive)[:, None] if self.config.rough_mask and primitive in ROUGH_MASKED else None
-        if primitive == "grasp" and enc.grasp_fingers is not None:
-            allowed = enc.grasp_fingers if allowed is None else allowed & enc.grasp_fingers
+        fingers = {"grasp": enc.grasp_fingers, "move": enc.move_fingers}.get(primitive)
+        if fingers is not None:
+            allowed = fingers if allowed is None else allowed & fingers
         return allowed
 
     def grasp_where(self, enc: EncodedObs) -> Tensor:

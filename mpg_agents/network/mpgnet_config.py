@@ -87,7 +87,12 @@ class MPGNetConfig:
             with a neighbour under a finger; the small trunk does not see 4 cm to each side.
             It restricts greedy grasps, the grasp score compared with Q*_g and the TD target's
             greedy next action; exploratory grasps stay unrestricted.
-        finger_tolerance_m: the slack of ``grasp_fingers="clear"``, metres.
+        move_fingers: which moves may act, as ``grasp_fingers`` for grasps: ``"any"`` (the paper)
+            or ``"clear"``: only the (pixel, angle) pairs in the move region whose open fingers
+            come down least blocked. A move grasps the occluder to carry it aside; most of a
+            trained net's moves in hard clutter closed at an angle where a finger landed on
+            the occluder or a neighbour and lifted nothing.
+        finger_tolerance_m: the slack of ``grasp_fingers="clear"`` and ``move_fingers="clear"``, metres.
         bn_momentum: batch-norm momentum of the trunks (see ``mobilenet.DEFAULT_BN_MOMENTUM``).
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
@@ -120,6 +125,7 @@ class MPGNetConfig:
     move_region: str = "rectangle"
     move_band_m: float = 0.015
     grasp_fingers: str = "any"
+    move_fingers: str = "any"
     finger_tolerance_m: float = 0.005
     bn_momentum: float = DEFAULT_BN_MOMENTUM
     channels_last: bool = True
@@ -154,6 +160,8 @@ class MPGNetConfig:
             raise ValueError(f"move_band_m must be >= 0 metres, got {self.move_band_m}")
         if self.grasp_fingers not in GRASP_FINGERS:
             raise ValueError(f"grasp_fingers must be one of {GRASP_FINGERS}, got {self.grasp_fingers!r}")
+        if self.move_fingers not in GRASP_FINGERS:
+            raise ValueError(f"move_fingers must be one of {GRASP_FINGERS}, got {self.move_fingers!r}")
         if not self.finger_tolerance_m >= 0:
             raise ValueError(f"finger_tolerance_m must be >= 0 metres, got {self.finger_tolerance_m}")
         if self.trunk_batch is not None and self.trunk_batch < 1:

@@ -280,3 +280,33 @@ def test_grasp_fingers_clear_keeps_grasps_where_the_fingers_land(make_policy):
     assert expected[rot, row, col]
     with pytest.raises(ValueError, match="grasp_fingers"):
         make_policy(net_config={**TINY["net_config"], "grasp_fingers": "free"})
+
+
+def test_move_fingers_clear_keeps_moves_where_the_fingers_land(make_policy):
+    from mpg_agents.network.regions import least_blocked, target_region
+    from mpg_envs.grid.grasp_geometry import fingers_blocked
+
+    scene = random_scene(np.random.default_rng(6), occluded=True)
+    depth = np.zeros((224, 224), np.float32)
+    mask = np.zeros((224, 224), np.uint8)
+    depth[100:130, 100:120] = 0.03
+    mask[100:130, 100:120] = 1  # the target, 6 cm x 4 cm
+    depth[110:120, 90:130] = 0.06  # an occluder lying across it
+    depth[95:135, 132:140] = 0.10  # a tall wall to its right
+    scene = dict(scene, depth=depth, mask=mask)
+    policy = make_policy(net_config={**TINY["net_config"], "move_fingers": "clear"})
+    calibrate_bn(policy.q_net.mpgnet, scene)
+    policy.set_training_mode(False)
+    blocked = torch.from_numpy(fingers_blocked(depth, 0.002, 0.04, 0.02))[None]
+    region = target_region(torch.as_tensor(mask)[None])
+    expected = least_blocked(blocked, region, 0.005)[0] & region[0][None]
+    assert expected.any() and (region[0][None] & ~expected).any(), "some moves must be barred and not all"
+    obs, _ = policy.obs_to_tensor(scene)
+    with torch.inference_mode():
+        enc = policy.q_net.mpgnet.encode(obs)
+        assert torch.equal(policy.q_net.mpgnet.actable(enc, "move")[0], expected)
+        assert torch.equal(policy.q_net.mpgnet.actable(enc, "grasp")[0, 0], enc.region_of("grasp")[0])  # grasp keeps its region
+    decision = policy.decide(scene, "move")
+    assert expected[decision.rotation, decision.row, decision.col]
+    with pytest.raises(ValueError, match="move_fingers"):
+        make_policy(net_config={**TINY["net_config"], "move_fingers": "free"})
