@@ -37,6 +37,20 @@ def test_demo_runs_the_shipped_policy(tmp_path, capsys):
     assert (scene[:TITLE_PX].max(axis=-1) > 200).sum() > 100  # titles
 
 
+def test_demo_on_the_hard_track_moves_the_occluder_then_grasps_the_target(tmp_path, capsys):
+    # The README's hard-track demo: the strict-trained MPGNet lifts the occluder aside, then
+    # takes the target, and pictures the three Q maps before each motion.
+    from pathlib import Path
+
+    weights = Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "strict_run" / "mpgnet_s0.safetensors"
+    args = ["--policy", str(weights), "--env", "MPG-OccludedHard-v0", "--seed", "500002", "--episodes", "1", "--out", str(tmp_path)]
+    assert main(args) == 0
+    motions = [line.split(":")[1].split()[0] for line in capsys.readouterr().out.splitlines() if "episode 0 motion" in line]
+    assert motions == ["move", "grasp"]
+    for k in (1, 2):
+        assert (tmp_path / f"qmaps_{k}.png").read_bytes()[:4] == b"\x89PNG"
+
+
 def test_demo_without_opengl_says_so_and_writes_the_heightmaps(tmp_path, capsys, monkeypatch):
     # As after a failed GL context: render() raises without touching OpenGL.
     monkeypatch.setattr(render_module, "_gl_failure", "could not create an OpenGL context (test)")
