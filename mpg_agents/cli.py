@@ -63,10 +63,10 @@ def _check_env_id(env_id: str) -> None:
 
 def _add_net_setting_arguments(parser: argparse.ArgumentParser, prefix: str) -> None:
     """The options that override a checkpoint's settings without weights (read by :func:`_net_settings`)."""
-    parser.add_argument("--grasp-region", choices=("rectangle", "target"),
-                        help=prefix + "where a grasp may act (override the checkpoint's: the target's rectangle or its own pixels)")
+    parser.add_argument("--grasp-region", choices=("rectangle", "target", "visible"),
+                        help=prefix + "where a grasp may act (override the checkpoint's: the target's rectangle, its footprint, or the part of it where the target shows)")
     parser.add_argument("--target-margin", type=int,
-                        help=prefix + "grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp region 'target'")
+                        help=prefix + "grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp regions 'target' and 'visible'")
     parser.add_argument("--move-region", choices=("rectangle", "top"),
                         help=prefix + "where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
     parser.add_argument("--grasp-fingers", choices=("any", "clear"),

@@ -21,7 +21,7 @@ import torch
 
 from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_agents.acting.decision import Decision
-from mpg_agents.network.regions import footprint_top, target_pixels
+from mpg_agents.network.regions import footprint_bottom, footprint_top, target_pixels
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 
@@ -53,11 +53,15 @@ class Explorer:
         rng: the run's generator.
         heuristic_after_failed_grasps: failed grasps in a row before the heuristic grasp (0: never).
         random_primitive: explore the primitive too (the ``max_q`` coordination).
-        grasp_on_target: explore grasps on visible target pixels only (for a network whose
-            ``grasp_region`` is ``"target"``: it may only grasp there greedily either).
+        grasp_on_target: explore grasps on the target's footprint only (for a network whose
+            ``grasp_region`` is ``"target"`` or ``"visible"``: it may only grasp there greedily either).
         target_margin_px: with ``grasp_on_target``, those pixels grown or shrunk as the
             network's (:func:`mpg_agents.network.regions.target_pixels`), so exploration grasps where a
             greedy grasp may.
+        visible_band_m: with ``grasp_on_target``, explore grasps only where the footprint
+            shows the target itself (within this many metres of its lowest surface:
+            :func:`mpg_agents.network.regions.footprint_bottom`), for a network whose
+            ``grasp_region`` is ``"visible"``; ``None``: the whole footprint.
         move_band_m: explore moves on the target footprint's top (within this many metres of
             its highest point: :func:`mpg_agents.network.regions.footprint_top`), for a network whose
             ``move_region`` is ``"top"``; ``None``: anywhere in the rectangle.
@@ -75,6 +79,7 @@ class Explorer:
         usable: Sequence[str] | None = None,
         target_margin_px: int = 0,
         move_band_m: float | None = None,
+        visible_band_m: float | None = None,
     ) -> None:
         self.primitives = tuple(primitives)
         self.usable = tuple(usable) if usable is not None else self.primitives
@@ -86,6 +91,7 @@ class Explorer:
         self.grasp_on_target = grasp_on_target
         self.target_margin_px = int(target_margin_px)
         self.move_band_m = move_band_m
+        self.visible_band_m = visible_band_m
 
     def choose(self, obs: Mapping[str, np.ndarray], decision: Decision, epsilon: float, failed_grasps_in_a_row: int) -> Choice:
         """The action for ``obs`` given the policy's greedy ``decision`` (its primitive is kept
@@ -106,15 +112,20 @@ class Explorer:
         """A random ``(rotation, row, col)`` where ``primitive`` can matter.
 
         Move and grasp: inside the target's bounding rectangle (the rough mask); grasp on a
-        visible target pixel with :attr:`grasp_on_target` (grown or shrunk by
-        :attr:`target_margin_px`); move on the footprint's top with :attr:`move_band_m`.
+        target footprint pixel with :attr:`grasp_on_target` (only where the target shows with
+        :attr:`visible_band_m`; grown or shrunk by :attr:`target_margin_px`); move on the
+        footprint's top with :attr:`move_band_m`.
         Push: within :data:`PUSH_REACH_PX` of the rectangle. An empty mask falls back to any
         occupied pixel, then to any pixel.
         """
         mask = obs["mask"] > 0
         size = mask.shape[0]
         if primitive == "grasp" and self.grasp_on_target and mask.any():
-            region = target_pixels(torch.from_numpy(mask[None]), self.target_margin_px)[0].numpy() if self.target_margin_px else mask
+            region = torch.from_numpy(mask[None])
+            if self.visible_band_m is not None:
+                depth = torch.as_tensor(np.asarray(obs["depth"], dtype=np.float32))[None]
+                region = footprint_bottom(region, depth, self.visible_band_m)
+            region = (target_pixels(region, self.target_margin_px) if self.target_margin_px else region)[0].numpy()
             on_target = np.argwhere(region)
             row, col = (int(v) for v in on_target[self.rng.integers(len(on_target))])
         elif primitive == "move" and self.move_band_m is not None and mask.any():

@@ -136,12 +136,12 @@ class Learner:
             config.replay_capacity, env.observation_space, env.action_space, device="cpu", alpha=config.priority_alpha, seed=config.seed
         )
         self.rng = np.random.default_rng(config.seed)
+        net_cfg = self.policy.net_config
         self.explorer = Explorer(
             self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q",
-            grasp_on_target=self.policy.net_config.grasp_region == "target", usable=self.policy.usable_primitives,
-            target_margin_px=self.policy.net_config.target_margin_px,
-            move_band_m=self.policy.net_config.move_band_m if self.policy.net_config.move_region == "top" else None,
-        )
+            grasp_on_target=net_cfg.grasp_region in ("target", "visible"), usable=self.policy.usable_primitives,
+            target_margin_px=net_cfg.target_margin_px, move_band_m=net_cfg.move_band_m if net_cfg.move_region == "top" else None,
+            visible_band_m=net_cfg.visible_band_m if net_cfg.grasp_region == "visible" else None)
         self.counters = Counters()
         self._calibration_env: gym.Env | None = None
         self._stop = False

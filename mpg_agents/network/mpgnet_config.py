@@ -16,8 +16,9 @@ IMAGENET_STD: tuple[float, float, float] = (0.229, 0.224, 0.225)
 # Primitives whose Q maps the rough target mask restricts (paper, Training Details).
 ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
 
-# Where a grasp may act: the paper's bounding rectangle, or the target's own pixels (dilated).
-GRASP_REGIONS: tuple[str, ...] = ("rectangle", "target")
+# Where a grasp may act: the paper's bounding rectangle, the target's footprint (grown or
+# shrunk), or the part of it where the target itself shows (its lowest surface).
+GRASP_REGIONS: tuple[str, ...] = ("rectangle", "target", "visible")
 MOVE_REGIONS: tuple[str, ...] = ("rectangle", "top")
 HEAD_INITS: tuple[str, ...] = ("kaiming", "zero")
 # Which grasps may act: any (the paper), or only those whose open fingers land least blocked.
@@ -72,6 +73,12 @@ class MPGNetConfig:
             ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object).
         target_margin_px: growth (> 0) or shrinking (< 0) of the target pixels for
             ``grasp_region="target"``, in 2 mm pixels (see :func:`mpg_agents.network.regions.target_pixels`).
+            ``"visible"``: as ``"target"``, on only the footprint's pixels within
+            ``visible_band_m`` of its lowest surface, the target's own visible top
+            (:func:`mpg_agents.network.regions.footprint_bottom`): a grasp there closes on the
+            target, not on an object lying on it, so it may be taken while the target is
+            still partly covered.
+        visible_band_m: height band of ``grasp_region="visible"``, metres.
         move_region: where move Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
             (the paper's rough mask) or ``"top"`` (the target footprint's pixels within
             ``move_band_m`` of its highest point: the occluder's top; see
@@ -124,6 +131,7 @@ class MPGNetConfig:
     target_margin_px: int = 2
     move_region: str = "rectangle"
     move_band_m: float = 0.015
+    visible_band_m: float = 0.01
     grasp_fingers: str = "any"
     move_fingers: str = "any"
     finger_tolerance_m: float = 0.005
@@ -156,6 +164,8 @@ class MPGNetConfig:
             raise ValueError(f"grasp_region must be one of {GRASP_REGIONS}, got {self.grasp_region!r}")
         if self.move_region not in MOVE_REGIONS:
             raise ValueError(f"move_region must be one of {MOVE_REGIONS}, got {self.move_region!r}")
+        if not self.visible_band_m >= 0:
+            raise ValueError(f"visible_band_m must be >= 0 metres, got {self.visible_band_m}")
         if not self.move_band_m >= 0:
             raise ValueError(f"move_band_m must be >= 0 metres, got {self.move_band_m}")
         if self.grasp_fingers not in GRASP_FINGERS:

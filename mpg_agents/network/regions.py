@@ -4,7 +4,9 @@ Move and grasp Q maps are restricted to the axis-aligned bounding rectangle of t
 (:func:`target_region`). A grasp may further be kept on the target itself
 (:func:`target_pixels`: the visible target pixels, dilated by a margin): inside the rectangle
 of an L-shaped or partly covered target lie other objects, and a grasp there lifts the wrong
-one. A move may be kept on what lies highest over the target (:func:`footprint_top`): the
+one. A grasp may instead be kept where the target itself shows, the lowest surface over its
+footprint (:func:`footprint_bottom`), so it closes on the target and not on what lies on it. A
+move may be kept on what lies highest over the target (:func:`footprint_top`): the
 occluder's top, which is what a move must grasp to carry it away. A grasp may be kept to the
 (pixel, angle) pairs whose open fingers land least blocked (:func:`least_blocked`).
 :func:`region_max` is the best Q inside a region (the grasp score compared with Q*_g).
@@ -90,16 +92,39 @@ def footprint_top(mask: Tensor, depth: Tensor, band: float) -> Tensor:
     any unit of height (``band`` in the same unit), ``(B, H, W)`` or ``(B, 1, H, W)``. An empty
     mask gives an all-true region, as :func:`target_region` does.
     """
+    return _footprint_band(mask, depth, band, highest=True)
+
+
+def footprint_bottom(mask: Tensor, depth: Tensor, band: float) -> Tensor:
+    """The pixels of the target's footprint ``mask`` that lie within ``band`` of the lowest
+    point of ``depth`` over it, ``(B, H, W)`` bool.
+
+    The target lies under what occludes it, so the lowest surface over its footprint is its
+    own visible top: where a grasp closes on the target and not on an object lying on it
+    (which rises by its own thickness, above ``band``). On an uncovered target these are its
+    whole top; on a target covered entirely, the lowest occluder's top. Units, shapes and the
+    empty mask as :func:`footprint_top`.
+    """
+    return _footprint_band(mask, depth, band, highest=False)
+
+
+def _footprint_band(mask: Tensor, depth: Tensor, band: float, highest: bool) -> Tensor:
+    """The footprint's pixels within ``band`` of the highest (or lowest) ``depth`` over it."""
     if band < 0:
-        raise ValueError(f"band must be >= 0 (a height below the footprint's top), got {band}")
+        raise ValueError(f"band must be >= 0 (a height range from the footprint's extreme), got {band}")
     mask = _binary(mask)
     if depth.dim() == 4:
         depth = depth[:, 0]
     if depth.shape != mask.shape:
         raise ValueError(f"depth {tuple(depth.shape)} and mask {tuple(mask.shape)} must have the same shape")
     empty = ~mask.flatten(1).any(dim=1)
-    top = depth.masked_fill(~mask, float("-inf")).flatten(1).amax(dim=1)
-    return (mask & (depth >= (top - band)[:, None, None])) | empty[:, None, None]
+    if highest:
+        top = depth.masked_fill(~mask, float("-inf")).flatten(1).amax(dim=1)
+        near = depth >= (top - band)[:, None, None]
+    else:
+        bottom = depth.masked_fill(~mask, float("inf")).flatten(1).amin(dim=1)
+        near = depth <= (bottom + band)[:, None, None]
+    return (mask & near) | empty[:, None, None]
 
 
 def least_blocked(blocked: Tensor, region: Tensor, tolerance: float) -> Tensor:

@@ -90,3 +90,15 @@ def test_exploratory_moves_keep_to_the_footprints_top_like_the_network():
     for _ in range(100):
         a = decode_action(PRIMS, explorer.choose(obs, _decision("move"), epsilon=1.0, failed_grasps_in_a_row=0).action)
         assert 130 <= a.row < 140 and 110 <= a.col < 130
+
+
+def test_exploratory_grasps_keep_to_where_the_target_shows_like_the_network():
+    obs = _obs()
+    obs["depth"][130:140, 110:130] = 0.07  # an occluder over the L's foot, 4 cm above it
+    explorer = Explorer(PRIMS, np.random.default_rng(0), grasp_on_target=True, visible_band_m=0.01)
+    seen = set()
+    for _ in range(200):
+        a = decode_action(PRIMS, explorer.choose(obs, _decision("grasp"), epsilon=1.0, failed_grasps_in_a_row=0).action)
+        assert obs["mask"][a.row, a.col] == 1 and not (130 <= a.row < 140 and 110 <= a.col < 130)
+        seen.add((a.row, a.col))
+    assert len(seen) > 50

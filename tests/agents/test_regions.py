@@ -8,7 +8,7 @@ import torch
 
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.network.mpgnet_config import MPGNetConfig
-from mpg_agents.network.regions import footprint_top, least_blocked, region_max, target_pixels, target_region
+from mpg_agents.network.regions import footprint_bottom, footprint_top, least_blocked, region_max, target_pixels, target_region
 
 from .conftest import calibrate_bn
 
@@ -91,6 +91,37 @@ def test_footprint_top_is_what_lies_highest_over_the_target():
     assert footprint_top(torch.zeros_like(mask), depth, 0.015).all()
 
 
+def test_footprint_bottom_is_where_the_target_itself_shows():
+    mask = _mask(*[(r, c) for r in range(1, 4) for c in range(1, 4)], size=5)
+    depth = torch.zeros((1, 5, 5))
+    depth[0, 1:4, 1:4] = 0.03  # the target's top
+    depth[0, 2, 2:4] = 0.06  # an occluder over two of its pixels
+    depth[0, 0, 0] = 0.0  # lower, but outside the footprint (table)
+    expected = mask[0].bool().clone()
+    expected[2, 2:4] = False
+    assert torch.equal(footprint_bottom(mask, depth, 0.01)[0], expected)
+    # A band reaching up to the occluder takes the whole footprint; nothing on top: all of it.
+    assert torch.equal(footprint_bottom(mask, depth, 0.03)[0], mask[0].bool())
+    assert torch.equal(footprint_bottom(mask, torch.where(mask > 0, 0.03, 0.0), 0.0)[0], mask[0].bool())
+    # Covered entirely: the lowest thing over the footprint is the lower occluder.
+    covered = torch.where(mask > 0, 0.06, 0.0)
+    covered[0, 1, 1:4] = 0.09
+    expected = mask[0].bool().clone()
+    expected[1, 1:4] = False
+    assert torch.equal(footprint_bottom(mask, covered, 0.01)[0], expected)
+    assert torch.equal(footprint_bottom(mask[:, None], depth[:, None], 0.01)[0], footprint_bottom(mask, depth, 0.01)[0])
+    assert footprint_bottom(torch.zeros_like(mask), depth, 0.01).all()
+
+
+@pytest.mark.parametrize("band_region", [footprint_top, footprint_bottom])
+def test_footprint_bands_bad_input_is_named(band_region):
+    mask = _mask((1, 1))
+    with pytest.raises(ValueError, match="band"):
+        band_region(mask, torch.zeros((1, 8, 8)), -0.01)
+    with pytest.raises(ValueError, match="same shape"):
+        band_region(mask, torch.zeros((1, 4, 4)), 0.01)
+
+
 def test_footprint_top_bad_input_is_named():
     mask = _mask((1, 1))
     with pytest.raises(ValueError, match="band"):
@@ -163,17 +194,21 @@ def test_grasp_region_target_zeroes_grasp_off_the_target(scene):
         MPGNetConfig.small(grasp_region="disc")
 
 
-def test_move_region_top_zeroes_move_off_the_occluder(scene):
+def _covered_target(scene: dict, net: MPGNet) -> tuple[dict, dict]:
+    """``scene`` with a 8 x 8 cm target, an occluder lying on part of it, and ``net``'s Q maps there."""
     mask = np.zeros((224, 224), np.uint8)
     mask[100:140, 90:130] = 1
     depth = np.where(mask > 0, 0.03, 0.0).astype(np.float32)
     depth[110:125, 100:120] = 0.07  # an occluder on the target
     scene = dict(scene, mask=mask, depth=depth)
-    torch.manual_seed(0)
-    net = MPGNet(MPGNetConfig.small(move_region="top", move_band_m=0.015))
     calibrate_bn(net, scene)
     with torch.inference_mode():
-        maps = net(scene)
+        return scene, net(scene)
+
+
+def test_move_region_top_zeroes_move_off_the_occluder(scene):
+    torch.manual_seed(0)
+    _, maps = _covered_target(scene, MPGNet(MPGNetConfig.small(move_region="top", move_band_m=0.015)))
     occluder = np.zeros((224, 224), bool)
     occluder[110:125, 100:120] = True
     move = maps["move"][0].numpy()
@@ -182,3 +217,16 @@ def test_move_region_top_zeroes_move_off_the_occluder(scene):
         MPGNetConfig.small(move_region="disc")
     with pytest.raises(ValueError, match="move_band_m"):
         MPGNetConfig.small(move_band_m=-0.01)
+
+
+def test_grasp_region_visible_zeroes_grasp_on_what_lies_on_the_target(scene):
+    torch.manual_seed(0)
+    net = MPGNet(MPGNetConfig.small(grasp_region="visible", target_margin_px=-2, visible_band_m=0.01))
+    scene, maps = _covered_target(scene, net)
+    shows = torch.as_tensor(scene["mask"] > 0) & torch.as_tensor(scene["depth"] < 0.05)
+    allowed = target_pixels(shows[None], -2)[0].numpy()
+    assert not allowed[110:125, 100:120].any() and allowed[104, 94] and not allowed[100, 90]  # off the occluder and the rim
+    grasp = maps["grasp"][0].numpy()
+    assert np.all(grasp[:, ~allowed] == 0) and np.count_nonzero(grasp[:, allowed]) > 0.9 * grasp[:, allowed].size
+    with pytest.raises(ValueError, match="visible_band_m"):
+        MPGNetConfig.small(visible_band_m=-0.01)
