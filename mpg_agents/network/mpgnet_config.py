@@ -69,15 +69,16 @@ class MPGNetConfig:
         color_mean, color_std: ImageNet statistics applied to colour / 255.
         rough_mask: zero move and grasp Q outside the target's bounding rectangle.
         grasp_region: where grasp Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
-            (the paper's rough mask) or ``"target"`` (the visible target pixels grown by
-            ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object).
-        target_margin_px: growth (> 0) or shrinking (< 0) of the target pixels for
-            ``grasp_region="target"``, in 2 mm pixels (see :func:`mpg_agents.network.regions.target_pixels`).
-            ``"visible"``: as ``"target"``, on only the footprint's pixels within
-            ``visible_band_m`` of its lowest surface, the target's own visible top
-            (:func:`mpg_agents.network.regions.footprint_bottom`): a grasp there closes on the
+            (the paper's rough mask), ``"target"`` (the target's footprint grown by
+            ``target_margin_px``; a grasp elsewhere in the rectangle lifts another object) or
+            ``"visible"`` (as ``"target"``, on only the footprint's pixels within
+            ``visible_band_m`` of its lowest surface, the target's own visible top,
+            :func:`mpg_agents.network.regions.footprint_bottom`: a grasp there closes on the
             target, not on an object lying on it, so it may be taken while the target is
-            still partly covered.
+            still partly covered).
+        target_margin_px: growth (> 0) or shrinking (< 0) of the target pixels for
+            ``grasp_region="target"`` or ``"visible"``, in 2 mm pixels (see
+            :func:`mpg_agents.network.regions.target_pixels`).
         visible_band_m: height band of ``grasp_region="visible"``, metres.
         move_region: where move Q may be non-zero when ``rough_mask`` is on: ``"rectangle"``
             (the paper's rough mask) or ``"top"`` (the target footprint's pixels within
