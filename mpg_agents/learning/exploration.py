@@ -21,7 +21,7 @@ import torch
 
 from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_agents.acting.decision import Decision
-from mpg_agents.network.regions import footprint_bottom, footprint_top, target_pixels
+from mpg_agents.network.regions import footprint_top, grasp_pixels
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 
@@ -121,11 +121,8 @@ class Explorer:
         mask = obs["mask"] > 0
         size = mask.shape[0]
         if primitive == "grasp" and self.grasp_on_target and mask.any():
-            region = torch.from_numpy(mask[None])
-            if self.visible_band_m is not None:
-                depth = torch.as_tensor(np.asarray(obs["depth"], dtype=np.float32))[None]
-                region = footprint_bottom(region, depth, self.visible_band_m)
-            region = (target_pixels(region, self.target_margin_px) if self.target_margin_px else region)[0].numpy()
+            depth = torch.as_tensor(np.asarray(obs["depth"], dtype=np.float32))[None]
+            region = grasp_pixels(torch.from_numpy(mask[None]), depth, self.target_margin_px, self.visible_band_m)[0].numpy()
             on_target = np.argwhere(region)
             row, col = (int(v) for v in on_target[self.rng.integers(len(on_target))])
         elif primitive == "move" and self.move_band_m is not None and mask.any():

@@ -40,7 +40,7 @@ from mpg_agents.network.inputs import normalize_inputs
 from mpg_agents.network.mobilenet import MobileNetV3Features, load_torchvision_features
 from mpg_agents.network.mpgnet_config import ROUGH_MASKED, MPGNetConfig
 from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches
-from mpg_agents.network.regions import footprint_bottom, footprint_top, least_blocked, region_max, target_pixels, target_region
+from mpg_agents.network.regions import footprint_top, grasp_pixels, least_blocked, region_max, target_region
 from mpg_agents.network.rotations import rotation_grids
 from mpg_envs.grid.grasp_geometry import fingers_blocked
 from mpg_envs.simulation.primitives import PrimitiveConfig
@@ -185,10 +185,9 @@ class MPGNet(nn.Module):
         cfg = self.config
         # Depth is normalised here: the bands are scaled by the same std (the clip at depth_max is far above).
         grasp_region = None
-        if cfg.grasp_region == "target":
-            grasp_region = target_pixels(binary, cfg.target_margin_px)
-        elif cfg.grasp_region == "visible":
-            grasp_region = target_pixels(footprint_bottom(binary, depth, cfg.visible_band_m / cfg.depth_std), cfg.target_margin_px)
+        if cfg.grasp_region in ("target", "visible"):
+            band = cfg.visible_band_m / cfg.depth_std if cfg.grasp_region == "visible" else None
+            grasp_region = grasp_pixels(binary, depth, cfg.target_margin_px, band)
         move_region = footprint_top(binary, depth, cfg.move_band_m / cfg.depth_std) if cfg.move_region == "top" else None
         region = target_region(binary)
         blocked = self._finger_blocking(depth) if "clear" in (cfg.grasp_fingers, cfg.move_fingers) else None

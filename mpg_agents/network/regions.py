@@ -82,6 +82,15 @@ def _interior(mask: np.ndarray, depth: int) -> np.ndarray:
     return mask & (distance >= np.minimum(depth + 1, deepest[labels]))
 
 
+def grasp_pixels(mask: Tensor, depth: Tensor, margin: int, visible_band: float | None = None) -> Tensor:
+    """Where a grasp kept on the target may act, ``(B, H, W)`` bool: the footprint ``mask``, or
+    with ``visible_band`` only its part within that height of its lowest surface
+    (:func:`footprint_bottom`, in ``depth``'s unit), grown or shrunk by ``margin`` pixels
+    (:func:`target_pixels`). The network's grasp region and exploration's grasps both use it."""
+    region = mask if visible_band is None else footprint_bottom(mask, depth, visible_band)
+    return target_pixels(region, margin)
+
+
 def footprint_top(mask: Tensor, depth: Tensor, band: float) -> Tensor:
     """The pixels of the target's footprint ``mask`` that lie within ``band`` of the highest
     point of ``depth`` over it, ``(B, H, W)`` bool.

@@ -8,7 +8,7 @@ import torch
 
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.network.mpgnet_config import MPGNetConfig
-from mpg_agents.network.regions import footprint_bottom, footprint_top, least_blocked, region_max, target_pixels, target_region
+from mpg_agents.network.regions import footprint_bottom, footprint_top, grasp_pixels, least_blocked, region_max, target_pixels, target_region
 
 from .conftest import calibrate_bn
 
@@ -111,6 +111,20 @@ def test_footprint_bottom_is_where_the_target_itself_shows():
     assert torch.equal(footprint_bottom(mask, covered, 0.01)[0], expected)
     assert torch.equal(footprint_bottom(mask[:, None], depth[:, None], 0.01)[0], footprint_bottom(mask, depth, 0.01)[0])
     assert footprint_bottom(torch.zeros_like(mask), depth, 0.01).all()
+
+
+def test_grasp_pixels_is_the_footprint_or_where_the_target_shows_then_the_margin():
+    mask = _mask(*[(r, c) for r in range(1, 6) for c in range(1, 6)], size=7)
+    depth = torch.where(mask > 0, 0.03, 0.0)
+    depth[0, 1:3, 1:6] = 0.07  # an occluder over the footprint's first two rows
+    assert torch.equal(grasp_pixels(mask, depth, 0), target_pixels(mask, 0))
+    assert torch.equal(grasp_pixels(mask, depth, -1), target_pixels(mask, -1))
+    shows = torch.zeros((7, 7), dtype=torch.bool)
+    shows[3:6, 1:6] = True
+    assert torch.equal(grasp_pixels(mask, depth, 0, 0.01)[0], shows)
+    core = torch.zeros((7, 7), dtype=torch.bool)
+    core[4, 2:5] = True  # the visible 3 x 5 part, one pixel off its rim
+    assert torch.equal(grasp_pixels(mask, depth, -1, 0.01)[0], core)
 
 
 @pytest.mark.parametrize("band_region", [footprint_top, footprint_bottom])
