@@ -157,11 +157,12 @@ class MPGEnv(gym.Env):
         primitive, rotation, row, col = self.action_space.decode(action)
         before = self._obs
         score_before = self._grasp_score(before) if primitive != "grasp" else None
+        visible_before = self._visible
         result = self._primitives.execute(primitive, rotation, row, col, before["depth"], self.target)
         self.num_motions += 1
         sim_warnings = self._check_physics()
         self._obs = self._observe()
-        evaluation = self.evaluate(primitive, before, result, score_before)
+        evaluation = self.evaluate(primitive, before, result, score_before, visible_before)
         reward = self.step_reward(evaluation)
         terminated, truncated, end_reason = episode_end(
             self.stage,
@@ -193,14 +194,14 @@ class MPGEnv(gym.Env):
         else:
             draw_scene(self)
 
-    def evaluate(self, primitive: str, before: dict[str, np.ndarray], result: PrimitiveResult, score_before: float | None) -> StepEvaluation:
+    def evaluate(
+        self, primitive: str, before: dict[str, np.ndarray], result: PrimitiveResult, score_before: float | None, visible_before: float | None = None
+    ) -> StepEvaluation:
         """What the step did, judged on the new state (success, mis-pick, move success,
-        occlusion, visibility, change); the reward and the episode's end are read off it."""
+        occlusion, visibility and its gain over ``visible_before``, change); the reward and
+        the episode's end are read off it."""
         obs, world, target = self._obs, self.world, self.target
-        if self.stage.mask_all_objects:
-            target_grasped = bool(result.grasp_success)
-        else:
-            target_grasped = bool(result.grasp_success and result.grasped_object == target)
+        target_grasped = bool(result.grasp_success and (self.stage.mask_all_objects or result.grasped_object == target))
         target_out = target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
         occluded_before = bool(before["occluded"][0])
         occluded = bool(obs["occluded"][0])
@@ -208,12 +209,10 @@ class MPGEnv(gym.Env):
         move_success = primitive == "move" and occluded_before and not occluded and not target_grasped and not target_out
         gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
         wrong = bool(primitive == "grasp" and result.grasp_success and not target_grasped)
-        if self.stage.mask_all_objects:
-            is_success = self.world.objects_left() == 0
-        else:
-            is_success = bool(target_grasped and primitive == "grasp")
+        is_success = self.world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
+        seen = None if self._visible is None or visible_before is None else self._visible - visible_before
         return StepEvaluation(
-            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain),
+            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen or 0.0),
             wrong_grasp=wrong,
             ends_wrong_object=wrong and self.wrong_grasp == "fail",
             is_success=is_success,

@@ -15,6 +15,7 @@ class StepOutcome:
     move_success: bool = False  # occlusion removed, target not picked up by the move
     change_detected: bool = False
     grasp_q_gain: float = 0.0  # grasp-net score after minus before (0 without a scorer)
+    visible_gain: float = 0.0  # the target's visible fraction after minus before (0 without a target in view)
 
 
 @dataclass(frozen=True)
@@ -30,9 +31,19 @@ class RewardConfig:
     # as "no change". Without it, fingers that close beside the occluder and nudge it off the
     # target earn the full move reward, and the move net learns to nudge rather than to carry.
     move_needs_lift: bool = False
+    # Not the paper's (default off): a move that raises the target's visible fraction by at
+    # least this much earns ``improved``, as a grasp-Q gain does. R_m pays its success only
+    # when the last occluder leaves; a target under several earns nothing for the moves that
+    # uncover it one by one.
+    move_visible_gain: float | None = None
     # Strict retrieval (the env's wrong_grasp="fail"): a grasp that lifts a non-target object
     # ends the episode with this reward instead of its primitive's.
     wrong_object: float = -1.0
+
+    def __post_init__(self) -> None:
+        gain = self.move_visible_gain
+        if gain is not None and (isinstance(gain, bool) or not isinstance(gain, (int, float)) or not 0.0 < gain <= 1.0):
+            raise ValueError(f"move_visible_gain must be None (off) or a visible-fraction gain in (0, 1], got {gain!r}")
 
 
 def reward_grasp_any(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
@@ -46,7 +57,8 @@ def reward_grasp_target(o: StepOutcome, c: RewardConfig = RewardConfig()) -> flo
 
 
 def reward_move(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
-    """R_m (Stage III): 1 move success; 0.5 grasp-Q gain > 0.5 with change; -0.5 target
+    """R_m (Stage III): 1 move success; 0.5 grasp-Q gain > 0.5 with change (with
+    ``c.move_visible_gain``, also a visible-fraction gain of at least that); -0.5 target
     picked up by the move or no change (with ``c.move_needs_lift``, also a move that lifted
     nothing); 0 otherwise."""
     if o.target_grasped or not o.change_detected or (c.move_needs_lift and not o.grasp_success):
@@ -54,6 +66,8 @@ def reward_move(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
     if o.move_success:
         return c.success
     if o.grasp_q_gain > c.move_q_gain:
+        return c.improved
+    if c.move_visible_gain is not None and o.visible_gain >= c.move_visible_gain:
         return c.improved
     return 0.0
 

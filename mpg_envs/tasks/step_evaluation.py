@@ -67,4 +67,5 @@ class StepEvaluation:
             "objects_left": int(self.objects_left),
             "target_out_of_workspace": bool(self.target_out),
             "grasp_q_gain": float(o.grasp_q_gain),
+            "visible_gain": float(o.visible_gain),
         }

@@ -215,9 +215,38 @@ def test_reward_equations_on_constructed_cases():
     assert reward_move(o("move", change_detected=True, grasp_q_gain=0.6), lift) == -0.5
     assert reward_move(o("move", grasp_success=True, move_success=True, change_detected=True), lift) == 1.0
     assert reward_move(o("move", grasp_success=True, change_detected=True, grasp_q_gain=0.6), lift) == 0.5
+    # With move_visible_gain, a move that uncovers part of the target pays as a grasp-Q gain does.
+    seen = RewardConfig(move_visible_gain=0.1)
+    assert reward_move(o("move", change_detected=True, visible_gain=0.1), seen) == 0.5
+    assert reward_move(o("move", change_detected=True, visible_gain=0.09), seen) == 0.0
+    assert reward_move(o("move", change_detected=True, visible_gain=0.5)) == 0.0  # off by default
+    assert reward_move(o("move", change_detected=False, visible_gain=0.5), seen) == -0.5
+    assert reward_move(o("move", move_success=True, change_detected=True, visible_gain=0.5), seen) == 1.0
     assert reward_push(o("push", change_detected=True, grasp_q_gain=0.2)) == 0.5
     assert reward_push(o("push", change_detected=True, grasp_q_gain=0.05)) == 0.0
     assert reward_push(o("push", change_detected=False, grasp_q_gain=0.9)) == -0.5
+
+
+def test_reward_config_rejects_a_visible_gain_outside_0_1():
+    for bad in (0.0, -0.1, 1.5, True, "0.1"):
+        with pytest.raises(ValueError, match="move_visible_gain"):
+            RewardConfig(move_visible_gain=bad)
+    assert RewardConfig(move_visible_gain=1).move_visible_gain == 1
+
+
+def test_step_reports_the_visible_fraction_gained(make_env):
+    env = make_env("MPG-Stage3-v0")
+    _, info = env.reset(seed=0)
+    oracle = OraclePolicy(env)
+    for _ in range(5):
+        before = info["visible_fraction"]
+        *_, term, trunc, info = env.step(oracle.act())
+        if info["visible_fraction"] is not None and before is not None:
+            assert info["visible_gain"] == pytest.approx(info["visible_fraction"] - before)
+        if info["move_success"]:
+            assert info["visible_gain"] > 0  # the last occluder left
+            return
+    pytest.fail("the oracle's moves never uncovered the target")
 
 
 def test_move_that_uncovers_the_target_earns_1_in_stage3(make_env):
