@@ -210,9 +210,9 @@ class MPGEnv(gym.Env):
         gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
         wrong = bool(primitive == "grasp" and result.grasp_success and not target_grasped)
         is_success = self.world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
-        seen = None if self._visible is None or visible_before is None else self._visible - visible_before
+        seen = 0.0 if self._visible is None or visible_before is None else self._visible - visible_before
         return StepEvaluation(
-            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen or 0.0),
+            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen),
             wrong_grasp=wrong,
             ends_wrong_object=wrong and self.wrong_grasp == "fail",
             is_success=is_success,
