@@ -23,7 +23,7 @@ from gymnasium import spaces
 from torch import Tensor, nn
 
 from mpg_agents.acting.coordination import check_coordination, usable_primitives
-from mpg_agents.acting.decision import Decision, decide
+from mpg_agents.acting.decision import Decision, alternatives, decide
 from mpg_agents.acting.discriminator import Discriminator
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, GraspThreshold, from_header
 from mpg_agents.network.mpgnet_config import MPGNetConfig
@@ -161,6 +161,19 @@ class AgentMethods:
     ) -> list[Decision]:
         """Coordinated decisions for a batch of observation tensors (see :func:`~mpg_agents.acting.decision.decide`)."""
         return decide(self.q_net, obs, self.coordination, self.q_star, primitive, forbidden)
+
+    def alternatives(
+        self, observation: Mapping[str, Any], primitive: str, k: int, spacing_px: float, taken: tuple[int, int]
+    ) -> list[int]:
+        """Up to ``k`` flat ``primitive`` actions other than one taken at pixel ``taken``: the
+        best of its Q maps at places ``spacing_px`` apart (:func:`~mpg_agents.acting.decision.spaced_best`),
+        for one raw env observation. A trainer tries them in the simulation to label them."""
+        self.q_net.set_training_mode(False)
+        obs, batch = batch_observation(observation, self.device)
+        if batch != 1:
+            raise ValueError("alternatives() takes one observation")
+        with torch.inference_mode():
+            return alternatives(self.q_net, obs, primitive, k, spacing_px, taken)
 
     def discriminator(self) -> Discriminator:
         """A ``callable(obs) -> float`` for the envs' ``grasp_scorer`` (uses the grasp net)."""

@@ -111,3 +111,62 @@ def _decide_one(
 def batch_size(obs: Mapping[str, Tensor]) -> int:
     """The leading axis of a batch of observation tensors."""
     return int(next(iter(obs.values())).shape[0])
+
+
+def spaced_best(q_map: Tensor, k: int, spacing_px: float, taken: tuple[int, int] | None = None) -> list[tuple[int, int, int]]:
+    """The ``k`` best ``(rotation, row, col)`` of a ``(R, H, W)`` Q map at pixels at least
+    ``spacing_px`` apart (and that far from the ``taken`` ``(row, col)``), each at its best
+    rotation; ``-inf`` entries are never chosen, so fewer than ``k`` may come back.
+
+    Greedy suppression: the best pixel, then the best outside a disc of radius ``spacing_px``
+    around every pixel chosen so far. Alternatives spread over the scene label places the
+    taken action did not try, where the next-best entries of a Q map sit beside the best.
+
+    Raises:
+        ValueError: ``q_map`` not three-dimensional, ``k`` negative or ``spacing_px`` negative.
+    """
+    if q_map.dim() != 3:
+        raise ValueError(f"q_map must be (R, H, W), got shape {tuple(q_map.shape)}")
+    if k < 0 or spacing_px < 0:
+        raise ValueError(f"k and spacing_px must be >= 0, got k={k}, spacing_px={spacing_px}")
+    best, rotation = q_map.max(dim=0)
+    best = best.clone()
+    rows = torch.arange(best.shape[0], device=best.device)[:, None]
+    cols = torch.arange(best.shape[1], device=best.device)[None, :]
+
+    def suppress(row: int, col: int) -> None:
+        near = (rows - row) ** 2 + (cols - col) ** 2 < spacing_px**2
+        best.masked_fill_(near, float("-inf"))
+
+    if taken is not None:
+        suppress(*taken)
+    chosen: list[tuple[int, int, int]] = []
+    while len(chosen) < k:
+        flat = int(best.flatten().argmax())
+        row, col = divmod(flat, best.shape[1])
+        if not bool(torch.isfinite(best[row, col])):
+            break
+        chosen.append((int(rotation[row, col]), row, col))
+        suppress(row, col)
+        best[row, col] = float("-inf")  # spacing 0 still never repeats a pixel
+    return chosen
+
+
+def alternatives(
+    q: MPGQFunction, obs: Mapping[str, Tensor], primitive: str, k: int, spacing_px: float, taken: tuple[int, int]
+) -> list[int]:
+    """The flat actions of :func:`spaced_best` over ``primitive``'s Q maps where it may act, for
+    one observation tensor batch of one, away from the ``taken`` ``(row, col)``.
+
+    Raises:
+        ValueError: a batch of several observations.
+    """
+    if batch_size(obs) != 1:
+        raise ValueError(f"alternatives are for one observation, got a batch of {batch_size(obs)}")
+    net = q.mpgnet
+    enc = net.encode(obs)
+    allowed = net.actable(enc, primitive)
+    maps = mask_outside(net.maps_from(enc, (primitive,))[primitive][0], None if allowed is None else allowed[0])
+    size = q.net_config.heightmap_size
+    spots = spaced_best(maps, k, spacing_px, taken=taken)
+    return [encode_action(q.action_primitives, primitive, r, row, col, size=size) for r, row, col in spots]

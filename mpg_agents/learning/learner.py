@@ -21,8 +21,9 @@ the same scene). The log (:mod:`mpg_agents.learning.train_log`) goes to TensorBo
 Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
 fresh run first fills the replay with the oracle's transitions
 (:mod:`mpg_agents.learning.demonstrations`); they are no iterations or episodes of the run. With
-``TrainingStage.grasp_trials`` (off by default) each grasp is also tried at other gripper
-orientations in the simulation and undone, those transitions stored too (privileged, labelled).
+``TrainingStage.grasp_trials`` or ``move_trials`` (off by default) each grasp is also tried at
+other gripper orientations, each move at the move net's next-best places, in the simulation
+and undone, those transitions stored too (:mod:`mpg_agents.learning.trials`; privileged).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ import json
 import math
 import signal
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Callable
 
@@ -47,36 +48,16 @@ from mpg_agents.learning.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
 from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
-from mpg_agents.learning.run_state import load_run_state, save_run_state, state_folder
+from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
+from mpg_agents.learning.trials import grasp_trial_actions, move_trial_actions, run_trials
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.tasks.config import EnvConfig
-from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
-
-
-@dataclass
-class Counters:
-    """Progress of a run (saved with the state)."""
-
-    iteration: int = 0
-    episode: int = 0
-    episode_motions: int = 0
-    failed_grasps_in_a_row: int = 0
-    pushes_in_episode: int = 0
-    gradient_steps: int = 0
-    window_grasps: int = 0
-    window_target_grasps: int = 0
-    # The Q of the last 200 greedy grasps that took the target (a calibrates_q_star stage's estimate).
-    successful_grasp_q: list[float] = field(default_factory=list)
-    calibrated_at: int = -1  # iteration of the last in-scene Q*_g calibration (-1: none)
-    grasp_trials: int = 0  # grasps tried in the simulation and undone (TrainingStage.grasp_trials)
-    grasp_trial_targets: int = 0  # of those, the ones that took the target
-    skipped_scenes: int = 0  # training episodes whose seed gave no valid scene (logged, see seeds.reset_first_valid)
 
 
 class StopRequested(Exception):
@@ -227,8 +208,11 @@ class Learner:
         if self.stage.calibrates_q_star:
             self.calibrate_from_own_grasps()
         summary = {"iteration": self.counters.iteration, "episodes": self.counters.episode}
+        c = self.counters
         if self.stage.grasp_trials:
-            summary.update(grasp_trials=self.counters.grasp_trials, grasp_trial_targets=self.counters.grasp_trial_targets)
+            summary.update(grasp_trials=c.grasp_trials, grasp_trial_targets=c.grasp_trial_targets)
+        if self.stage.move_trials:
+            summary.update(move_trials=c.move_trials, move_trial_successes=c.move_trial_successes)
         return summary
 
     def calibrate_in_scenes(self, episodes: int) -> float:
@@ -317,15 +301,13 @@ class Learner:
         start = time.perf_counter()
         choice = self.act(obs)
         t_decide = time.perf_counter() - start
-        trials = self.stage.grasp_trials if choice.primitive == "grasp" else 0
-        if trials:
-            self.store_grasp_trials(obs, choice.action, trials)
+        trials = self.try_alternatives(obs, choice)
         next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
         t_act = time.perf_counter() - start - t_decide
         self.store(obs, next_obs, choice.action, float(reward), bool(terminated))
         loss = self.learn()
         if trials:
-            self.learn()  # the replay grew by 1 + trials transitions
+            self.learn()  # the replay grew by 1 + len(trials) transitions
         c.iteration += 1
         c.episode_motions += 1
         if choice.primitive == "grasp":
@@ -365,18 +347,24 @@ class Learner:
             [{}],
         )
 
-    def store_grasp_trials(self, obs: dict[str, np.ndarray], action: int, trials: int) -> None:
-        """Try the grasp ``action`` at ``trials`` other gripper orientations at its pixel, in
-        the simulation and undone, and store each as a transition from ``obs``."""
-        env = self.env.unwrapped
-        primitive, rotation, row, col = env.action_space.decode(action)
-        for k in self.rng.choice(other_grasp_angles(rotation), size=trials, replace=False):
-            other = int(k) + GRASP_ROTATIONS * int(self.rng.integers(2))  # either of the angle's two rotations
-            trial = env.action_space.encode(primitive, other, row, col)
-            next_obs, reward, terminated, _, info = env.try_step(trial)
-            self.store(obs, next_obs, trial, float(reward), bool(terminated))
-            self.counters.grasp_trials += 1
-            self.counters.grasp_trial_targets += int(info["target_grasped"])
+    def try_alternatives(self, obs: dict[str, np.ndarray], choice: Choice) -> list[int]:
+        """The stage's counterfactual trials of this step (:mod:`mpg_agents.learning.trials`),
+        tried, stored and counted; returns their actions (none when the stage has none)."""
+        env, c = self.env.unwrapped, self.counters
+        if choice.primitive == "grasp" and self.stage.grasp_trials:
+            actions = grasp_trial_actions(env, choice.action, self.stage.grasp_trials, self.rng)
+        elif choice.primitive == "move" and self.stage.move_trials:
+            actions = move_trial_actions(env, self.policy, obs, choice.action, self.stage.move_trials)
+        else:
+            return []
+        infos = run_trials(env, obs, actions, self.store)
+        if choice.primitive == "grasp":
+            c.grasp_trials += len(infos)
+            c.grasp_trial_targets += sum(int(i["target_grasped"]) for i in infos)
+        else:
+            c.move_trials += len(infos)
+            c.move_trial_successes += sum(int(i["move_success"]) for i in infos)
+        return actions
 
     def act(self, obs: dict[str, np.ndarray]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""

@@ -5,7 +5,7 @@ A run directory holds ``weights.safetensors`` (the online MPGNet, usable on its 
 ``state/`` folder: the target network (safetensors), the optimiser (tensors in safetensors,
 its scalar settings in JSON), the replay buffer (``replay.npz``: each distinct compressed
 observation once, transitions as indices into them), the random generators and the
-counters (JSON). Everything is written to a temporary folder first and swapped in whole,
+counters (:class:`Counters`, JSON). Everything is written to a temporary folder first and swapped in whole,
 so a run killed while saving still has its previous state.
 """
 
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +28,28 @@ from mpg_agents.acting.weights import chmod_by_umask
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
 
 STATE_FORMAT = "mpg-train-state-v1"
+
+
+@dataclass
+class Counters:
+    """Progress of a run (saved with the state)."""
+
+    iteration: int = 0
+    episode: int = 0
+    episode_motions: int = 0
+    failed_grasps_in_a_row: int = 0
+    pushes_in_episode: int = 0
+    gradient_steps: int = 0
+    window_grasps: int = 0
+    window_target_grasps: int = 0
+    # The Q of the last 200 greedy grasps that took the target (a calibrates_q_star stage's estimate).
+    successful_grasp_q: list[float] = field(default_factory=list)
+    calibrated_at: int = -1  # iteration of the last in-scene Q*_g calibration (-1: none)
+    grasp_trials: int = 0  # grasps tried in the simulation and undone (TrainingStage.grasp_trials)
+    grasp_trial_targets: int = 0  # of those, the ones that took the target
+    move_trials: int = 0  # moves tried in the simulation and undone (TrainingStage.move_trials)
+    move_trial_successes: int = 0  # of those, the ones that uncovered the target
+    skipped_scenes: int = 0  # training episodes whose seed gave no valid scene (logged, see seeds.reset_first_valid)
 
 
 def save_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:

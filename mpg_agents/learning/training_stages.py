@@ -21,6 +21,10 @@ from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
 
 
+MAX_MOVE_TRIALS = 8
+"""The most move trials per move (each costs about a move's simulation)."""
+
+
 @dataclass(frozen=True)
 class TrainingStage:
     """How one training stage trains.
@@ -74,6 +78,9 @@ class TrainingStage:
             one more gradient step per grasp. A grasp in clutter is decided by its angle, and
             one executed grasp labels one angle. Privileged (a simulator's counterfactual, like
             demonstrations, not the paper's pure RL); 0: off.
+        move_trials: each move the stage takes is also tried at the move net's this many next-best
+            places (:mod:`mpg_agents.learning.trials`), in the simulation and undone, and stored,
+            with one more gradient step per move. Privileged like ``grasp_trials``; 0: off.
     """
 
     name: str
@@ -96,10 +103,13 @@ class TrainingStage:
     branches: tuple[str, ...] | None = None
     reward: tuple[tuple[str, Any], ...] = ()
     grasp_trials: int = 0
+    move_trials: int = 0
 
     def __post_init__(self) -> None:
         if isinstance(self.grasp_trials, bool) or not isinstance(self.grasp_trials, int) or not 0 <= self.grasp_trials < GRASP_ROTATIONS:
             raise ValueError(f"stage {self.name}: grasp_trials must be an integer in 0..{GRASP_ROTATIONS - 1}, got {self.grasp_trials!r}")
+        if isinstance(self.move_trials, bool) or not isinstance(self.move_trials, int) or not 0 <= self.move_trials <= MAX_MOVE_TRIALS:
+            raise ValueError(f"stage {self.name}: move_trials must be an integer in 0..{MAX_MOVE_TRIALS}, got {self.move_trials!r}")
         pairs = tuple(self.reward.items()) if isinstance(self.reward, Mapping) else tuple(tuple(p) for p in self.reward)
         known = {f.name for f in fields(RewardConfig)}
         for pair in pairs:

@@ -1,6 +1,7 @@
 """The learner, the pipeline and the command lines, on tiny settings."""
 
 import json
+import math
 import os
 import signal
 from pathlib import Path
@@ -81,6 +82,30 @@ def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monk
     for k in range(2):  # each iteration: its two trials, then the grasp taken
         (_, r1, *p1), (_, r2, *p2), (_, taken, *pixel) = actions[3 * k : 3 * k + 3]
         assert p1 == p2 == pixel and len({r1 % 8, r2 % 8, taken % 8}) == 3
+    learner.env.close()
+
+
+def test_move_trials_store_the_move_nets_next_places(tmp_path, monkeypatch):
+    import mpg_agents.learning.learner as learner_module
+    from mpg_agents.learning.trials import MOVE_TRIAL_SPACING_PX
+
+    stage = with_overrides(TRAINING_STAGES, {"Stage5": {
+        "env_id": "MPG-OccludedHard-v0", "objects": [6, 6], "move_trials": 2, "alternate_every": 1,
+    }})[-1]
+    steps = []
+    real = learner_module.td_step
+    monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
+    learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
+    summary = learner.run()  # the hard track's target starts covered: the workflow moves
+    env = learner.env.unwrapped
+    assert summary["move_trials"] == learner.counters.move_trials == 2 and len(steps) == 2
+    assert 0 <= summary["move_trial_successes"] <= 2
+    actions = [env.action_space.decode(int(a)) for a in learner.replay.actions[:3, 0, 0]]
+    assert [a[0] for a in actions] == ["move"] * 3  # its two trials, then the move taken
+    pixels = [a[2:] for a in actions]
+    for i in range(3):
+        for j in range(i):
+            assert math.dist(pixels[i], pixels[j]) >= MOVE_TRIAL_SPACING_PX
     learner.env.close()
 
 

@@ -137,10 +137,10 @@ def test_a_stage_sets_reward_fields():
     assert TrainingStage("s", "MPG-Stage3-v0").reward_config() == RewardConfig()
 
 
-def test_grasp_trials_round_trip_and_default_off():
-    stage = with_overrides((TrainingStage("s", "MPG-Occluded-v0"),), {"s": {"grasp_trials": 3}})[0]
-    assert stage.grasp_trials == 3 and TrainingStage.from_dict(stage.to_dict()) == stage
-    assert all(s.grasp_trials == 0 for s in TRAINING_STAGES)  # the paper's pipeline is pure RL
+def test_trials_round_trip_and_default_off():
+    stage = with_overrides((TrainingStage("s", "MPG-Occluded-v0"),), {"s": {"grasp_trials": 3, "move_trials": 2}})[0]
+    assert (stage.grasp_trials, stage.move_trials) == (3, 2) and TrainingStage.from_dict(stage.to_dict()) == stage
+    assert all(s.grasp_trials == s.move_trials == 0 for s in TRAINING_STAGES)  # the paper's pipeline is pure RL
 
 
 @pytest.mark.parametrize(
@@ -150,6 +150,8 @@ def test_grasp_trials_round_trip_and_default_off():
         ({"grasp_trials": 8}, r"grasp_trials must be an integer in 0\.\.7"),
         ({"grasp_trials": -1}, "grasp_trials"),
         ({"grasp_trials": 2.0}, "grasp_trials"),
+        ({"move_trials": 9}, r"move_trials must be an integer in 0\.\.8"),
+        ({"move_trials": True}, "move_trials"),
         ({"alternate_shares": [["grasp", 0]]}, "turns; need >= 1"),
         ({"alternate_shares": [["lift", 2]]}, "lift"),
         ({"finish_iterations": 600}, "go together"),

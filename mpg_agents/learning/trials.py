@@ -1,0 +1,56 @@
+"""Counterfactual trials: actions the learner did not take, tried in the simulation and undone.
+
+Each trial is :meth:`~mpg_envs.tasks.env.MPGEnv.try_step` (the world, motion count and
+generators are put back afterwards) and goes into the replay as a labelled transition from the
+same observation, so one executed step labels several actions. Privileged, like oracle
+demonstrations: a simulator's counterfactual, not the paper's pure RL; off by default.
+
+- Grasp trials (``TrainingStage.grasp_trials``): the grasp's pixel at other gripper
+  orientations. In clutter a grasp is decided by its angle, and one grasp labels one angle.
+- Move trials (``TrainingStage.move_trials``): the move net's best moves at other places
+  (:func:`~mpg_agents.acting.decision.spaced_best`, :data:`MOVE_TRIAL_SPACING_PX` apart and
+  from the move taken). The workflow moves whenever the target is covered, so what a move
+  buys rests on the move map's ranking; a move that frees nothing labels only its own place,
+  and the places the net ranks next stay unlabelled and over-valued.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from mpg_agents.acting.agent import MPGAgent
+from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
+
+MOVE_TRIAL_SPACING_PX = 10.0
+"""How far apart (heightmap pixels, 2 mm each) the places of a move's trials are, from each
+other and from the move taken: about a block's short side, so each trial lifts at another
+object or another part of one."""
+
+Store = Callable[[dict[str, np.ndarray], dict[str, np.ndarray], int, float, bool], None]
+
+
+def grasp_trial_actions(env: Any, action: int, trials: int, rng: np.random.Generator) -> list[int]:
+    """``trials`` grasps at the pixel of grasp ``action`` at other orientations, drawn without
+    repeats from the other ``GRASP_ROTATIONS - 1`` angles, each in either of its two rotations."""
+    primitive, rotation, row, col = env.action_space.decode(action)
+    chosen = rng.choice(other_grasp_angles(rotation), size=trials, replace=False)
+    return [env.action_space.encode(primitive, int(k) + GRASP_ROTATIONS * int(rng.integers(2)), row, col) for k in chosen]
+
+
+def move_trial_actions(env: Any, policy: MPGAgent, obs: dict[str, np.ndarray], action: int, trials: int) -> list[int]:
+    """Up to ``trials`` moves at the move net's best places away from move ``action``'s."""
+    _, _, row, col = env.action_space.decode(action)
+    return policy.alternatives(obs, "move", trials, MOVE_TRIAL_SPACING_PX, taken=(row, col))
+
+
+def run_trials(env: Any, obs: dict[str, np.ndarray], actions: list[int], store: Store) -> list[dict[str, Any]]:
+    """Try each action from the current state (undone after each) and ``store`` its transition
+    from ``obs``; returns the trials' ``info`` dicts."""
+    infos = []
+    for action in actions:
+        next_obs, reward, terminated, _, info = env.try_step(action)
+        store(obs, next_obs, action, float(reward), bool(terminated))
+        infos.append(info)
+    return infos
