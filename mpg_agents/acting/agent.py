@@ -169,10 +169,8 @@ class AgentMethods:
         best of its Q maps at places ``spacing_px`` apart (:func:`~mpg_agents.acting.decision.spaced_best`),
         for one raw env observation. A trainer tries them in the simulation to label them."""
         self.q_net.set_training_mode(False)
-        obs, batch = batch_observation(observation, self.device)
-        if batch != 1:
-            raise ValueError("alternatives() takes one observation")
-        with torch.inference_mode():
+        obs, _ = batch_observation(observation, self.device)
+        with torch.inference_mode():  # alternatives() refuses a batch of several
             return alternatives(self.q_net, obs, primitive, k, spacing_px, taken)
 
     def discriminator(self) -> Discriminator:

@@ -14,7 +14,7 @@ import torch
 from torch import Tensor
 
 from mpg_agents.acting.coordination import choose_primitive
-from mpg_agents.network.mpgnet import EncodedObs
+from mpg_agents.network.mpgnet import EncodedObs, MPGNet
 from mpg_agents.acting.q_function import MPGQFunction, mask_outside
 from mpg_agents.network.regions import region_max
 from mpg_envs.grid.actions import encode_action
@@ -81,9 +81,7 @@ def _decide_one(
     def run(p: str) -> Tensor:
         """``p``'s ``(R, H, W)`` Q maps, -inf where it may not act (each branch run once)."""
         if p not in maps:
-            maps[p] = net.maps_from(enc, (p,))[p][0]
-            allowed = net.actable(enc, p)
-            actable[p] = mask_outside(maps[p], None if allowed is None else allowed[0])
+            maps[p], actable[p] = _maps_and_actable(net, enc, p)
             if forbidden is not None and p in forbidden:
                 barred = torch.as_tensor(forbidden[p], dtype=torch.bool, device=actable[p].device)
                 kept = actable[p].masked_fill(barred, float("-inf"))
@@ -108,6 +106,14 @@ def _decide_one(
     return Decision(action, primitive, rot, row, col, value, grasp_score, maps)
 
 
+def _maps_and_actable(net: MPGNet, enc: EncodedObs, primitive: str) -> tuple[Tensor, Tensor]:
+    """``primitive``'s ``(R, H, W)`` Q maps of the first observation in ``enc``, and the same maps
+    with -inf where it may not act (:meth:`~mpg_agents.network.mpgnet.MPGNet.actable`)."""
+    maps = net.maps_from(enc, (primitive,))[primitive][0]
+    allowed = net.actable(enc, primitive)
+    return maps, mask_outside(maps, None if allowed is None else allowed[0])
+
+
 def batch_size(obs: Mapping[str, Tensor]) -> int:
     """The leading axis of a batch of observation tensors."""
     return int(next(iter(obs.values())).shape[0])
@@ -129,8 +135,7 @@ def spaced_best(q_map: Tensor, k: int, spacing_px: float, taken: tuple[int, int]
         raise ValueError(f"q_map must be (R, H, W), got shape {tuple(q_map.shape)}")
     if k < 0 or spacing_px < 0:
         raise ValueError(f"k and spacing_px must be >= 0, got k={k}, spacing_px={spacing_px}")
-    best, rotation = q_map.max(dim=0)
-    best = best.clone()
+    best, rotation = q_map.max(dim=0)  # a new tensor: suppression writes into it, not into q_map
     rows = torch.arange(best.shape[0], device=best.device)[:, None]
     cols = torch.arange(best.shape[1], device=best.device)[None, :]
 
@@ -163,10 +168,7 @@ def alternatives(
     """
     if batch_size(obs) != 1:
         raise ValueError(f"alternatives are for one observation, got a batch of {batch_size(obs)}")
-    net = q.mpgnet
-    enc = net.encode(obs)
-    allowed = net.actable(enc, primitive)
-    maps = mask_outside(net.maps_from(enc, (primitive,))[primitive][0], None if allowed is None else allowed[0])
+    _, actable = _maps_and_actable(q.mpgnet, q.mpgnet.encode(obs), primitive)
     size = q.net_config.heightmap_size
-    spots = spaced_best(maps, k, spacing_px, taken=taken)
+    spots = spaced_best(actable, k, spacing_px, taken=taken)
     return [encode_action(q.action_primitives, primitive, r, row, col, size=size) for r, row, col in spots]

@@ -207,8 +207,8 @@ class Learner:
             self.calibrate_in_scenes(self.stage.calibration_episodes)  # the weights ship with it
         if self.stage.calibrates_q_star:
             self.calibrate_from_own_grasps()
-        summary = {"iteration": self.counters.iteration, "episodes": self.counters.episode}
         c = self.counters
+        summary = {"iteration": c.iteration, "episodes": c.episode}
         if self.stage.grasp_trials:
             summary.update(grasp_trials=c.grasp_trials, grasp_trial_targets=c.grasp_trial_targets)
         if self.stage.move_trials:

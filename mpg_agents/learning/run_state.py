@@ -5,8 +5,8 @@ A run directory holds ``weights.safetensors`` (the online MPGNet, usable on its 
 ``state/`` folder: the target network (safetensors), the optimiser (tensors in safetensors,
 its scalar settings in JSON), the replay buffer (``replay.npz``: each distinct compressed
 observation once, transitions as indices into them), the random generators and the
-counters (:class:`Counters`, JSON). Everything is written to a temporary folder first and swapped in whole,
-so a run killed while saving still has its previous state.
+counters (:class:`Counters`, JSON). Everything is written to a temporary folder first and
+swapped in whole, so a run killed while saving still has its previous state.
 """
 
 from __future__ import annotations

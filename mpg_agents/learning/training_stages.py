@@ -106,10 +106,10 @@ class TrainingStage:
     move_trials: int = 0
 
     def __post_init__(self) -> None:
-        if isinstance(self.grasp_trials, bool) or not isinstance(self.grasp_trials, int) or not 0 <= self.grasp_trials < GRASP_ROTATIONS:
-            raise ValueError(f"stage {self.name}: grasp_trials must be an integer in 0..{GRASP_ROTATIONS - 1}, got {self.grasp_trials!r}")
-        if isinstance(self.move_trials, bool) or not isinstance(self.move_trials, int) or not 0 <= self.move_trials <= MAX_MOVE_TRIALS:
-            raise ValueError(f"stage {self.name}: move_trials must be an integer in 0..{MAX_MOVE_TRIALS}, got {self.move_trials!r}")
+        for name, most in (("grasp_trials", GRASP_ROTATIONS - 1), ("move_trials", MAX_MOVE_TRIALS)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= most:
+                raise ValueError(f"stage {self.name}: {name} must be an integer in 0..{most}, got {value!r}")
         pairs = tuple(self.reward.items()) if isinstance(self.reward, Mapping) else tuple(tuple(p) for p in self.reward)
         known = {f.name for f in fields(RewardConfig)}
         for pair in pairs:
