@@ -337,7 +337,8 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         header = read_checkpoint_header(dst)
     except (UsageError, FileNotFoundError, ValueError) as exc:
         return _fail(exc)
-    print(f"{dst}: {dst.stat().st_size / 1000:.0f} kB, branches {header['primitives']}, Q*_g {header['q_star']:.4f}, "
+    q_star = "none (never calibrated)" if header["q_star"] is None else f"{header['q_star']:.4f}"
+    print(f"{dst}: {dst.stat().st_size / 1000:.0f} kB, branches {header['primitives']}, Q*_g {q_star}, "
           f"coordination {header['extra'].get('coordination', 'workflow')}, settings after training "
           f"{header['extra'].get('settings_after_training', {})}")
     return 0
