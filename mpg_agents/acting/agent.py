@@ -163,9 +163,9 @@ class AgentMethods:
         return decide(self.q_net, obs, self.coordination, self.q_star, primitive, forbidden)
 
     def alternatives(
-        self, observation: Mapping[str, Any], primitive: str, k: int, spacing_px: float, taken: tuple[int, int]
+        self, observation: Mapping[str, Any], primitive: str, k: int, spacing_px: float, taken: tuple[int, int] | None = None
     ) -> list[int]:
-        """Up to ``k`` flat ``primitive`` actions other than one taken at pixel ``taken``: the
+        """Up to ``k`` flat ``primitive`` actions away from one taken at pixel ``taken`` (if any): the
         best of its Q maps at places ``spacing_px`` apart (:func:`~mpg_agents.acting.decision.spaced_best`),
         for one raw env observation. A trainer tries them in the simulation to label them."""
         self.q_net.set_training_mode(False)
@@ -201,7 +201,7 @@ class MPGAgent(AgentMethods):
 
     Args:
         q_net: the network on the env's action space.
-        coordination: ``"workflow"`` (paper), ``"grasp_first"`` or ``"max_q"`` (ablation); see
+        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS` (``"workflow"``: the paper's; ``"max_q"``: its ablation); see
             :mod:`mpg_agents.acting.coordination`.
         threshold: the Q*_g it decides with (default: a new, uncalibrated one).
 

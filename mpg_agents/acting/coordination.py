@@ -14,6 +14,10 @@ Rules (:data:`COORDINATIONS`):
   least Q*_g is taken even when the target is occluded (a partly covered target the grasp
   net already scores graspable needs no move); otherwise occluded -> move, else push. Not
   the paper's rule; measured against it on the Experiments page of the documentation. Until Q*_g is calibrated it is the workflow.
+- ``"uncover_max_q"``: the workflow, but while the target is occluded the larger of the best
+  move Q and the best push Q (either may uncover it). Not the paper's rule; meant for nets
+  whose push is paid for uncovering as the move is (``RewardConfig.push_uncovers``), so the
+  two values share a scale.
 - ``"max_q"``: the primitive with the largest best Q (the paper's "w/o alternating training"
   ablation).
 
@@ -29,9 +33,9 @@ from typing import Callable, Sequence
 
 from mpg_envs.grid.actions import check_primitives
 
-COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "max_q")
-"""Ways to pick the primitive: the paper's workflow, the workflow asking the grasp first, or
-the plain max over the Q maps."""
+COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "uncover_max_q", "max_q")
+"""Ways to pick the primitive: the paper's workflow, the workflow asking the grasp first, the
+workflow uncovering by the larger of move and push Q, or the plain max over the Q maps."""
 
 
 def check_coordination(rule: str) -> str:
@@ -79,6 +83,8 @@ def choose_primitive(
         if best_q("grasp") >= q_star:
             return "grasp"
     if "move" in available and occluded:
+        if rule == "uncover_max_q" and "push" in available:
+            return _largest(("move", "push"), best_q)
         return "move"
     if "grasp" in available and "push" in available:
         if math.isnan(q_star):

@@ -158,10 +158,10 @@ def spaced_best(q_map: Tensor, k: int, spacing_px: float, taken: tuple[int, int]
 
 
 def alternatives(
-    q: MPGQFunction, obs: Mapping[str, Tensor], primitive: str, k: int, spacing_px: float, taken: tuple[int, int]
+    q: MPGQFunction, obs: Mapping[str, Tensor], primitive: str, k: int, spacing_px: float, taken: tuple[int, int] | None = None
 ) -> list[int]:
     """The flat actions of :func:`spaced_best` over ``primitive``'s Q maps where it may act, for
-    one observation tensor batch of one, away from the ``taken`` ``(row, col)``.
+    one observation tensor batch of one, away from the ``taken`` ``(row, col)`` (if any).
 
     Raises:
         ValueError: a batch of several observations.

@@ -21,9 +21,10 @@ the same scene). The log (:mod:`mpg_agents.learning.train_log`) goes to TensorBo
 Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
 fresh run first fills the replay with the oracle's transitions
 (:mod:`mpg_agents.learning.demonstrations`); they are no iterations or episodes of the run. With
-``TrainingStage.grasp_trials`` or ``move_trials`` (off by default) each grasp is also tried at
-other gripper orientations, each move at the move net's next-best places, in the simulation
-and undone, those transitions stored too (:mod:`mpg_agents.learning.trials`; privileged).
+``TrainingStage.grasp_trials``, ``move_trials`` or ``rival_trials`` (off by default) each grasp
+is also tried at other gripper orientations, each move at the move net's next-best places, a
+covered target's move or push as the other's best action, in the simulation and undone, those
+transitions stored too (:mod:`mpg_agents.learning.trials`; privileged).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
-from mpg_agents.learning.trials import grasp_trial_actions, move_trial_actions, run_trials
+from mpg_agents.learning.trials import grasp_trial_actions, move_trial_actions, rival_trial_actions, run_trials
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_envs.grid.actions import PRIMITIVES
@@ -213,6 +214,8 @@ class Learner:
             summary.update(grasp_trials=c.grasp_trials, grasp_trial_targets=c.grasp_trial_targets)
         if self.stage.move_trials:
             summary.update(move_trials=c.move_trials, move_trial_successes=c.move_trial_successes)
+        if self.stage.rival_trials:
+            summary.update(rival_trials=c.rival_trials, rival_trial_clears=c.rival_trial_clears)
         return summary
 
     def calibrate_in_scenes(self, episodes: int) -> float:
@@ -350,21 +353,24 @@ class Learner:
     def try_alternatives(self, obs: dict[str, np.ndarray], choice: Choice) -> list[int]:
         """The stage's counterfactual trials of this step (:mod:`mpg_agents.learning.trials`),
         tried, stored and counted; returns their actions (none when the stage has none)."""
-        env, c = self.env.unwrapped, self.counters
-        if choice.primitive == "grasp" and self.stage.grasp_trials:
-            actions = grasp_trial_actions(env, choice.action, self.stage.grasp_trials, self.rng)
-        elif choice.primitive == "move" and self.stage.move_trials:
-            actions = move_trial_actions(env, self.policy, obs, choice.action, self.stage.move_trials)
-        else:
-            return []
-        infos = run_trials(env, obs, actions, self.store)
-        if choice.primitive == "grasp":
+        env, c, stage = self.env.unwrapped, self.counters, self.stage
+        tried: list[int] = []
+        if choice.primitive == "grasp" and stage.grasp_trials:
+            infos = run_trials(env, obs, actions := grasp_trial_actions(env, choice.action, stage.grasp_trials, self.rng), self.store)
             c.grasp_trials += len(infos)
             c.grasp_trial_targets += sum(int(i["target_grasped"]) for i in infos)
-        else:
+            tried += actions
+        if choice.primitive == "move" and stage.move_trials:
+            infos = run_trials(env, obs, actions := move_trial_actions(env, self.policy, obs, choice.action, stage.move_trials), self.store)
             c.move_trials += len(infos)
             c.move_trial_successes += sum(int(i["move_success"]) for i in infos)
-        return actions
+            tried += actions
+        if stage.rival_trials:
+            infos = run_trials(env, obs, actions := rival_trial_actions(self.policy, obs, choice.primitive), self.store)
+            c.rival_trials += len(infos)
+            c.rival_trial_clears += sum(int(not i["occluded"] and not i["target_grasped"]) for i in infos)
+            tried += actions
+        return tried
 
     def act(self, obs: dict[str, np.ndarray]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""

@@ -49,6 +49,8 @@ class Counters:
     grasp_trial_targets: int = 0  # of those, the ones that took the target
     move_trials: int = 0  # moves tried in the simulation and undone (TrainingStage.move_trials)
     move_trial_successes: int = 0  # of those, the ones that uncovered the target
+    rival_trials: int = 0  # covered-target moves and pushes tried as the other (TrainingStage.rival_trials)
+    rival_trial_clears: int = 0  # of those, the ones that uncovered the target
     skipped_scenes: int = 0  # training episodes whose seed gave no valid scene (logged, see seeds.reset_first_valid)
 
 

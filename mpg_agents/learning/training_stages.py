@@ -81,6 +81,12 @@ class TrainingStage:
         move_trials: each move the stage takes is also tried at the move net's this many next-best
             places (:mod:`mpg_agents.learning.trials`), in the simulation and undone, and stored,
             with one more gradient step per move. Privileged like ``grasp_trials``; 0: off.
+        rival_trials: while the target is covered, each move the stage takes is also tried as the
+            push net's best push, and each push as the move net's best move, in the simulation
+            and undone, and stored (one more gradient step): every uncovering step labels the
+            primitive it did not take, so a rule weighing the two
+            (``coordination = "uncover_max_q"``, with ``reward = {push_uncovers = true}``)
+            learns where a push does the move's work. Privileged like ``grasp_trials``; off by default.
     """
 
     name: str
@@ -104,8 +110,11 @@ class TrainingStage:
     reward: tuple[tuple[str, Any], ...] = ()
     grasp_trials: int = 0
     move_trials: int = 0
+    rival_trials: bool = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.rival_trials, bool):
+            raise ValueError(f"stage {self.name}: rival_trials must be true or false, got {self.rival_trials!r}")
         for name, most in (("grasp_trials", GRASP_ROTATIONS - 1), ("move_trials", MAX_MOVE_TRIALS)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= most:

@@ -12,6 +12,9 @@ demonstrations: a simulator's counterfactual, not the paper's pure RL; off by de
   from the move taken). The workflow moves whenever the target is covered, so what a move
   buys rests on the move map's ranking; a move that frees nothing labels only its own place,
   and the places the net ranks next stay unlabelled and over-valued.
+- Rival trials (``TrainingStage.rival_trials``): while the target is covered, a move is also
+  tried as the push net's best push and a push as the move net's best move, so the value of
+  each uncovering step is learnt beside the one it would replace.
 """
 
 from __future__ import annotations
@@ -43,6 +46,19 @@ def move_trial_actions(env: Any, policy: MPGAgent, obs: dict[str, np.ndarray], a
     """Up to ``trials`` moves at the move net's best places away from move ``action``'s."""
     _, _, row, col = env.action_space.decode(action)
     return policy.alternatives(obs, "move", trials, MOVE_TRIAL_SPACING_PX, taken=(row, col))
+
+
+RIVALS = {"move": "push", "push": "move"}
+"""The primitive each uncovering primitive is weighed against by a rival trial."""
+
+
+def rival_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], primitive: str) -> list[int]:
+    """The best action of ``primitive``'s rival (:data:`RIVALS`) when the target is covered in
+    ``obs`` and the policy has that branch; else none."""
+    rival = RIVALS.get(primitive)
+    if rival is None or rival not in policy.usable_primitives or not bool(np.asarray(obs["occluded"]).reshape(-1)[0]):
+        return []
+    return policy.alternatives(obs, rival, 1, 0.0)
 
 
 def run_trials(env: Any, obs: dict[str, np.ndarray], actions: list[int], store: Store) -> list[dict[str, Any]]:

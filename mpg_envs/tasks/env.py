@@ -206,13 +206,14 @@ class MPGEnv(gym.Env):
         occluded_before = bool(before["occluded"][0])
         occluded = bool(obs["occluded"][0])
         changed = change_detected(before["depth"], obs["depth"], before["mask"], result.grasp_success, self.config.change)
-        move_success = primitive == "move" and occluded_before and not occluded and not target_grasped and not target_out
+        cleared = occluded_before and not occluded and not target_grasped and not target_out
+        move_success = primitive == "move" and cleared
         gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
         wrong = bool(primitive == "grasp" and result.grasp_success and not target_grasped)
         is_success = self.world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
         seen = 0.0 if self._visible is None or visible_before is None else self._visible - visible_before
         return StepEvaluation(
-            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen),
+            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen, occluded_before, cleared),
             wrong_grasp=wrong,
             ends_wrong_object=wrong and self.wrong_grasp == "fail",
             is_success=is_success,

@@ -16,6 +16,8 @@ class StepOutcome:
     change_detected: bool = False
     grasp_q_gain: float = 0.0  # grasp-net score after minus before (0 without a scorer)
     visible_gain: float = 0.0  # the target's visible fraction after minus before (0 without a target in view)
+    covered_before: bool = False  # the target was occluded before the step
+    cleared: bool = False  # ... and not after it, neither picked up nor out (any primitive)
 
 
 @dataclass(frozen=True)
@@ -36,6 +38,11 @@ class RewardConfig:
     # when the last occluder leaves; a target under several earns nothing for the moves that
     # uncover it one by one.
     move_visible_gain: float | None = None
+    # Not the paper's (default off): a push while the target is covered earns R_m, the move's
+    # reward, instead of R_p, so that the push and move nets value uncovering on one scale and
+    # a rule comparing their Q (coordination "uncover_max_q") weighs the move against the push
+    # it would replace.
+    push_uncovers: bool = False
     # Strict retrieval (the env's wrong_grasp="fail"): a grasp that lifts a non-target object
     # ends the episode with this reward instead of its primitive's.
     wrong_object: float = -1.0
@@ -63,7 +70,14 @@ def reward_move(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
     nothing); 0 otherwise."""
     if o.target_grasped or not o.change_detected or (c.move_needs_lift and not o.grasp_success):
         return c.penalty
-    if o.move_success:
+    return _uncovering(o, o.move_success, c)
+
+
+def _uncovering(o: StepOutcome, uncovered: bool, c: RewardConfig) -> float:
+    """R_m's payment for a step that changed the scene: success when it ``uncovered`` the
+    target, ``improved`` for a grasp-Q gain above ``c.move_q_gain`` (or a visible gain of at
+    least ``c.move_visible_gain``), else 0."""
+    if uncovered:
         return c.success
     if o.grasp_q_gain > c.move_q_gain:
         return c.improved
@@ -73,9 +87,13 @@ def reward_move(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
 
 
 def reward_push(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
-    """R_p (Stage IV): 0.5 grasp-Q gain > 0.1 with change; -0.5 no change; 0 otherwise."""
+    """R_p (Stage IV): 0.5 grasp-Q gain > 0.1 with change; -0.5 no change; 0 otherwise. With
+    ``c.push_uncovers``, a push while the target is covered earns R_m instead (1 when it
+    uncovered the target)."""
     if not o.change_detected:
         return c.penalty
+    if c.push_uncovers and o.covered_before:
+        return _uncovering(o, o.cleared, c)
     if o.grasp_q_gain > c.push_q_gain:
         return c.improved
     return 0.0

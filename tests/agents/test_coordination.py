@@ -86,3 +86,25 @@ def test_grasp_first_is_the_workflow_until_q_star_is_calibrated_or_without_a_gra
     assert choose_primitive("grasp_first", ALL, True, math.nan, best_q) == "move"
     assert calls == []
     assert choose_primitive("grasp_first", ("move", "push"), True, 0.75, asked({})[0]) == "move"
+
+
+@pytest.mark.parametrize(
+    "occluded, values, expected, needed",
+    [
+        (True, {"move": 0.6, "push": 0.9, "grasp": 5.0}, "push", ["move", "push"]),  # a push may uncover it too
+        (True, {"move": 0.9, "push": 0.6, "grasp": 5.0}, "move", ["move", "push"]),
+        (True, {"move": 0.7, "push": 0.7, "grasp": 5.0}, "move", ["move", "push"]),  # a tie keeps the move
+        (False, {"move": 9.0, "push": 0.1, "grasp": 0.8}, "grasp", ["grasp"]),  # uncovered: the workflow
+        (False, {"move": 9.0, "push": 0.1, "grasp": 0.7}, "push", ["grasp"]),
+    ],
+)
+def test_uncover_max_q_weighs_move_against_push_only_while_covered(occluded, values, expected, needed):
+    best_q, calls = asked(values)
+    assert choose_primitive("uncover_max_q", ALL, occluded, 0.75, best_q) == expected
+    assert calls == needed
+
+
+def test_uncover_max_q_without_a_push_branch_moves_while_covered():
+    best_q, calls = asked({"move": 0.1, "grasp": 5.0})
+    assert choose_primitive("uncover_max_q", ("move", "grasp"), True, 0.75, best_q) == "move"
+    assert calls == []

@@ -225,6 +225,14 @@ def test_reward_equations_on_constructed_cases():
     assert reward_push(o("push", change_detected=True, grasp_q_gain=0.2)) == 0.5
     assert reward_push(o("push", change_detected=True, grasp_q_gain=0.05)) == 0.0
     assert reward_push(o("push", change_detected=False, grasp_q_gain=0.9)) == -0.5
+    # A push while the target is covered, paid as a move with push_uncovers (R_p otherwise).
+    cover = RewardConfig(push_uncovers=True)
+    assert reward_push(o("push", change_detected=True, covered_before=True, cleared=True), cover) == 1.0
+    assert reward_push(o("push", change_detected=True, covered_before=True, cleared=True)) == 0.0
+    assert reward_push(o("push", change_detected=True, covered_before=True, grasp_q_gain=0.2), cover) == 0.0  # R_m's 0.5 bar
+    assert reward_push(o("push", change_detected=True, covered_before=True, grasp_q_gain=0.6), cover) == 0.5
+    assert reward_push(o("push", change_detected=False, covered_before=True, cleared=True), cover) == -0.5
+    assert reward_push(o("push", change_detected=True, grasp_q_gain=0.2), cover) == 0.5  # uncovered before: R_p
 
 
 def test_reward_config_rejects_a_visible_gain_outside_0_1():

@@ -109,6 +109,32 @@ def test_move_trials_store_the_move_nets_next_places(tmp_path, monkeypatch):
     learner.env.close()
 
 
+def test_rival_trials_label_the_push_a_covered_move_replaces(tmp_path, monkeypatch):
+    import mpg_agents.learning.learner as learner_module
+
+    stage = with_overrides(TRAINING_STAGES, {"Stage5": {
+        "env_id": "MPG-OccludedHard-v0", "objects": [6, 6], "rival_trials": True, "alternate_every": 1,
+        "coordination": "uncover_max_q", "reward": {"push_uncovers": True},
+    }})[-1]
+    steps = []
+    real = learner_module.td_step
+    monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
+    learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
+    assert learner.env.unwrapped.config.reward.push_uncovers
+    summary = learner.run()  # the hard track's target starts covered: a move or a push is taken
+    env = learner.env.unwrapped
+    assert summary["rival_trials"] == learner.counters.rival_trials == 1 and len(steps) == 2
+    assert summary["rival_trial_clears"] in (0, 1)
+    tried, taken = (env.action_space.decode(int(a))[0] for a in learner.replay.actions[:2, 0, 0])
+    assert {tried, taken} == {"move", "push"}  # the trial is the primitive not taken
+    learner.env.close()
+
+
+def test_rival_trials_is_a_switch():
+    with pytest.raises(ValueError, match="rival_trials must be true or false"):
+        with_overrides(TRAINING_STAGES, {"Stage5": {"rival_trials": 1}})
+
+
 def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
     import mpg_agents.learning.learner as learner_module
 
