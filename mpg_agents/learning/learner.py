@@ -356,17 +356,20 @@ class Learner:
         env, c, stage = self.env.unwrapped, self.counters, self.stage
         tried: list[int] = []
         if choice.primitive == "grasp" and stage.grasp_trials:
-            infos = run_trials(env, obs, actions := grasp_trial_actions(env, choice.action, stage.grasp_trials, self.rng), self.store)
+            actions = grasp_trial_actions(env, choice.action, stage.grasp_trials, self.rng)
+            infos = run_trials(env, obs, actions, self.store)
             c.grasp_trials += len(infos)
             c.grasp_trial_targets += sum(int(i["target_grasped"]) for i in infos)
             tried += actions
         if choice.primitive == "move" and stage.move_trials:
-            infos = run_trials(env, obs, actions := move_trial_actions(env, self.policy, obs, choice.action, stage.move_trials), self.store)
+            actions = move_trial_actions(env, self.policy, obs, choice.action, stage.move_trials)
+            infos = run_trials(env, obs, actions, self.store)
             c.move_trials += len(infos)
             c.move_trial_successes += sum(int(i["move_success"]) for i in infos)
             tried += actions
         if stage.rival_trials:
-            infos = run_trials(env, obs, actions := rival_trial_actions(self.policy, obs, choice.primitive), self.store)
+            actions = rival_trial_actions(self.policy, obs, choice.primitive)
+            infos = run_trials(env, obs, actions, self.store)
             c.rival_trials += len(infos)
             c.rival_trial_clears += sum(int(not i["occluded"] and not i["target_grasped"]) for i in infos)
             tried += actions
