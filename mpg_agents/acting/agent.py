@@ -201,7 +201,8 @@ class MPGAgent(AgentMethods):
 
     Args:
         q_net: the network on the env's action space.
-        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS` (``"workflow"``: the paper's; ``"max_q"``: its ablation); see
+        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS`
+            (``"workflow"``: the paper's; ``"max_q"``: its ablation); see
             :mod:`mpg_agents.acting.coordination`.
         threshold: the Q*_g it decides with (default: a new, uncalibrated one).
 

@@ -78,7 +78,8 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
         primitives: the action space's primitives when it does not carry ``.primitives``.
         branches: the nets to build (default: the action primitives); a superset keeps e.g.
             the grasp net as Stage III's discriminator next to the move net.
-        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS` (``"workflow"``: the paper's; ``"max_q"``: its ablation);
+        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS`
+            (``"workflow"``: the paper's; ``"max_q"``: its ablation);
             see :mod:`mpg_agents.acting.coordination`.
         q_star: the calibrated grasp threshold Q*_g; NaN until calibrated.
         net_config: ``MPGNetConfig`` or its dict overriding the variant's defaults.

@@ -213,7 +213,8 @@ class MPGEnv(gym.Env):
         is_success = self.world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
         seen = 0.0 if self._visible is None or visible_before is None else self._visible - visible_before
         return StepEvaluation(
-            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen, occluded_before, cleared),
+            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen,
+                                covered_before=occluded_before, cleared=cleared),
             wrong_grasp=wrong,
             ends_wrong_object=wrong and self.wrong_grasp == "fail",
             is_success=is_success,
