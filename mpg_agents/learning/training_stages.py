@@ -281,11 +281,27 @@ def at_budget(stages: Sequence[TrainingStage], iterations: int) -> tuple[Trainin
     return (*stages[:-1], replace(stages[-1], iterations=iterations - before))
 
 
+MOVE_VERSUS_PUSH = ("push_uncovers",)
+"""Reward options that value a push against the move it replaces: MPGNet's, so the learned
+baselines (which have no move) train without them, under the paper's push reward (and without
+rival trials; ``uncover_max_q``, which only differs from the workflow for a net with a move,
+becomes the workflow)."""
+
+
 def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str, ...]], **last: Any) -> tuple[TrainingStage, ...]:
     """The earlier stages that train only ``keep``'s branch sets, then the last stage changed by
-    ``last`` (no branch initialisation), with the whole budget of ``stages``."""
+    ``last`` (no branch initialisation, no rival trials, no move-versus-push reward), with the
+    whole budget of ``stages``."""
     kept = tuple(s for s in stages[:-1] if s.trainable in keep)
-    final = _without_unused_calibration(replace(stages[-1], branch_init=(), **last))
+    last_stage = stages[-1]
+    changes: dict[str, Any] = {
+        "branch_init": (),
+        "rival_trials": False,
+        "reward": tuple(pair for pair in last_stage.reward if pair[0] not in MOVE_VERSUS_PUSH),
+        "coordination": "workflow" if last_stage.coordination == "uncover_max_q" else last_stage.coordination,
+        **last,
+    }
+    final = _without_unused_calibration(replace(last_stage, **changes))
     return at_budget((*kept, final), sum(s.iterations for s in stages))
 
 

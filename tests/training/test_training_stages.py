@@ -90,6 +90,16 @@ def test_learned_baselines_are_table_changes_at_the_same_budget():
     epg = BASELINES["push-grasp"](TRAINING_STAGES)
     assert [s.name for s in epg] == ["Stage1", "Stage2", "Stage4", "Stage5"]
     assert epg[-1].coordination == "workflow" and epg[-1].alternate_every > 0
+    # MPGNet's move-versus-push options stay MPGNet's: a baseline without a move trains its pushes
+    # under the paper's reward and tries no rival actions; other reward options are kept.
+    one_scale = with_overrides(
+        TRAINING_STAGES, {"Stage5": {"rival_trials": True, "coordination": "uncover_max_q", "reward": {"push_uncovers": True, "move_needs_lift": True}}}
+    )
+    for name, make in BASELINES.items():
+        last = make(one_scale)[-1]
+        assert not last.rival_trials and last.reward == (("move_needs_lift", True),), name
+        assert last.coordination == ("max_q" if name == "to-vpg" else "workflow"), name
+    assert without_multistage(one_scale)[-1].rival_trials and without_multistage(one_scale)[-1].reward == one_scale[-1].reward
     with pytest.raises(ValueError, match="budget"):
         at_budget(TRAINING_STAGES, 10)
     with pytest.raises(ValueError, match="branches"):
