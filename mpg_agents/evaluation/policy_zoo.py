@@ -9,8 +9,9 @@ start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(p
 - ``oracle``: :class:`mpg_envs.policies.oracle.OraclePolicy` (reads the simulator: upper baseline).
 - ``random``: uniform over the whole action space (seeded).
 - ``grasp-only``: the pixel-only heuristic grasp at the target mask, every step.
-- ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V) that
-  ships in ``mpg_agents/checkpoints/`` (:data:`SHIPPED_CHECKPOINT`).
+- ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V, Stage V
+  under strict retrieval) that ships in ``mpg_agents/checkpoints/`` (:data:`SHIPPED_CHECKPOINT`,
+  its model card beside it).
 - a path: an MPGNet safetensors checkpoint (``mpg-train``'s ``weights.safetensors``).
 
 A checkpoint lacking some of the env's primitives acts with those it has and says so in its

@@ -24,31 +24,22 @@ def test_shipped_checkpoint_is_small_and_loads():
     assert header["config"]["grasp_fingers"] == "clear"
 
 
-def test_demo_runs_the_shipped_policy(tmp_path, capsys):
+def test_demo_runs_the_shipped_policy_which_moves_the_occluder_then_grasps_the_target(tmp_path, capsys):
+    # The README's demo: on a held-out hard-track scene the shipped MPGNet moves the occluder
+    # aside, then takes the target, and pictures the three Q maps before each motion.
     assert main(["--episodes", "1", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "task success" in out and "mean motions" in out and "torch threads" in out
-    for name in ("scene.png", "qmaps_1.png"):
+    assert "task success 1/1" in out and "mean motions" in out and "torch threads" in out
+    assert "MPG-OccludedHard-v0" in out
+    motions = [line.split(":")[1].split()[0] for line in out.splitlines() if "episode 0 motion" in line]
+    assert motions == ["move", "grasp"]
+    for name in ("scene.png", "qmaps_1.png", "qmaps_2.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
     scene = cv2.imread(str(tmp_path / "scene.png"))
     assert scene.shape[0] == TITLE_PX + PANEL_PX
     # Two heightmap panels, and the rendered view unless this machine has no OpenGL.
     assert scene.shape[1] > 2 * PANEL_PX or "no rendered view" in out
     assert (scene[:TITLE_PX].max(axis=-1) > 200).sum() > 100  # titles
-
-
-def test_demo_on_the_hard_track_moves_the_occluder_then_grasps_the_target(tmp_path, capsys):
-    # The README's hard-track demo: the strict-trained MPGNet lifts the occluder aside, then
-    # takes the target, and pictures the three Q maps before each motion.
-    from pathlib import Path
-
-    weights = Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "strict_run" / "mpgnet_s0.safetensors"
-    args = ["--policy", str(weights), "--env", "MPG-OccludedHard-v0", "--seed", "500002", "--episodes", "1", "--out", str(tmp_path)]
-    assert main(args) == 0
-    motions = [line.split(":")[1].split()[0] for line in capsys.readouterr().out.splitlines() if "episode 0 motion" in line]
-    assert motions == ["move", "grasp"]
-    for k in (1, 2):
-        assert (tmp_path / f"qmaps_{k}.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_demo_without_opengl_says_so_and_writes_the_heightmaps(tmp_path, capsys, monkeypatch):
@@ -158,11 +149,12 @@ def test_shipped_grasps_land_where_the_fingers_are_least_blocked():
     from mpg_envs.grid.grasp_geometry import fingers_blocked
 
     env = gym.make("MPG-Occluded-v0", num_objects=15)
-    policy = make_policy("shipped", env)
+    # Grasp-first at Q*_g 0: a grasp whenever the target shows, so the first action is a grasp.
+    policy = make_policy("shipped", env, coordination="grasp_first", q_star=0.0)
     assert policy.policy.net_config.grasp_fingers == "clear"
     obs, _ = env.reset(seed=700_003)
     a = decode_action(env.unwrapped.primitives, policy.act(obs))
-    assert a.primitive == "grasp"  # Q*_g 0 with the finger mask: a grasp whenever the target shows
+    assert a.primitive == "grasp"
     blocked = torch.from_numpy(fingers_blocked(np.asarray(obs["depth"]), 0.002, 0.04, 0.02))[None]
     on_target = target_pixels(torch.from_numpy(obs["mask"][None] > 0), -8)
     kept = least_blocked(blocked, on_target, 0.005)[0] & on_target[0][None]
