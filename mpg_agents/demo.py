@@ -75,6 +75,16 @@ def scene_picture(env: gym.Env, obs: dict[str, np.ndarray]) -> np.ndarray:
     return np.concatenate(panels, axis=1)
 
 
+def step_outcome(info: dict) -> str:
+    """What a motion did, for the demo's step line: a move lifts an object by design, so only a
+    grasp's lift says which object it took."""
+    if info["target_grasped"]:
+        return "  grasped the target"
+    if info["primitive"] == "move":
+        return "  uncovered the target" if info["move_success"] else ""
+    return "  grasped another object" if info["grasp_success"] else ""
+
+
 class QMapsOfFirstEpisode:
     """A network policy that also writes ``qmaps_<k>.png`` (every branch's Q maps) before each
     motion ``k`` of the first episode; otherwise the policy itself. The evaluation resets a
@@ -125,8 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     def on_step(episode: int, reward: float, info: dict) -> None:
         print(
             f"  episode {episode} motion {info['num_motions']}: {info['primitive']:5s} rot {info['rotation']:2d} "
-            f"at {info['pixel']} reward {reward:+.1f}"
-            + ("  grasped the target" if info["target_grasped"] else "  grasped another object" if info["grasp_success"] else "")
+            f"at {info['pixel']} reward {reward:+.1f}" + step_outcome(info)
         )
 
     if hasattr(policy, "save_qmaps"):

@@ -31,8 +31,9 @@ def test_demo_runs_the_shipped_policy_which_moves_the_occluder_then_grasps_the_t
     out = capsys.readouterr().out
     assert "task success 1/1" in out and "mean motions" in out and "torch threads" in out
     assert "MPG-OccludedHard-v0" in out
-    motions = [line.split(":")[1].split()[0] for line in out.splitlines() if "episode 0 motion" in line]
-    assert motions == ["move", "grasp"]
+    steps = [line for line in out.splitlines() if "episode 0 motion" in line]
+    assert [line.split(":")[1].split()[0] for line in steps] == ["move", "grasp"]
+    assert steps[0].endswith("uncovered the target") and steps[1].endswith("grasped the target")
     for name in ("scene.png", "qmaps_1.png", "qmaps_2.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
     scene = cv2.imread(str(tmp_path / "scene.png"))
