@@ -56,7 +56,7 @@ def rival_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], primitive:
     """The best action of ``primitive``'s rival (:data:`RIVALS`) when the target is covered in
     ``obs`` and the policy has that branch; else none."""
     rival = RIVALS.get(primitive)
-    if rival is None or rival not in policy.usable_primitives or not bool(np.asarray(obs["occluded"]).reshape(-1)[0]):
+    if rival is None or rival not in policy.usable_primitives or not bool(obs["occluded"][0]):
         return []
     return policy.alternatives(obs, rival, 1, 0.0)
 
