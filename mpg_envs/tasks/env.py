@@ -39,35 +39,30 @@ GraspScorer = Callable[[dict[str, np.ndarray]], float]
 class MPGEnv(gym.Env):
     """Target-oriented grasping in clutter with pixel-wise move/push/grasp actions.
 
-    Public attributes (read-only for callers; the agents package relies on them):
-
-    Attributes:
+    Attributes (read-only for callers; the agents package relies on them):
         stage: the :class:`~mpg_envs.tasks.stages.StageSpec` this env runs (its ``name``,
             ``env_id``, ``primitives``, ``end_after_grasp``, ``mask_all_objects``, ...).
         num_objects: objects dropped at every reset (the stage's default unless given).
         primitives: the primitive names this env accepts, in action-code order.
         max_motions: the motion cap; an episode is truncated when it is reached.
         num_motions: motions taken so far in the current episode.
-        target: index of the target object in the world (``None`` in Stage 1, where every
-            object is a target).
-        world: the :class:`~mpg_envs.simulation.world.World` of the current episode (``None`` before
-            the first reset).
+        target: index of the target object in the world (``None`` in Stage 1: every object is a target).
+        world: the :class:`~mpg_envs.simulation.world.World` of the current episode (``None`` before the first reset).
 
-    Keywords beyond the stage: ``wrong_grasp`` (``"remove"``, the paper's protocol, or
-    ``"fail"``: strict retrieval, a mis-pick ends the episode), ``visible_range`` (a band of
-    the target's visible fraction at reset), ``use_test_set`` (load the shipped scenes of the
-    test seeds; ``False`` generates every scene).
+    Keywords beyond the stage: ``wrong_grasp`` (``"remove"``, the paper's protocol, or ``"fail"``: strict
+    retrieval, a mis-pick ends the episode), ``visible_range`` (a band of the target's visible fraction at
+    reset), ``use_test_set`` (True or False: load the shipped scenes of the test seeds, or generate every scene).
 
-    Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
-    workspace, and meets the start condition (the stage's occlusion or surround, the visible
-    band); else :class:`~mpg_envs.scenes.generators.InvalidSceneError`, never a lesser scene.
-    ``reset(options=...)`` takes ``scene`` (a scene file, ours or a peer's, or a
-    :class:`~mpg_envs.scenes.scene_io.SceneFile`), ``mesh_dir`` (meshes for a peer's file),
-    ``drop_outside`` (leave out, with a warning, the file's objects outside the workspace
-    instead of raising :class:`~mpg_envs.scenes.scene_io.SceneFileError`) and ``num_objects`` (this
-    episode's count). Reset's ``info`` has ``objects_left``, ``occluded``,
-    ``visible_fraction``, ``target``, ``num_motions`` and ``is_success``; a step's also
-    ``end_reason`` (``None`` until the last step, then one of :data:`END_REASONS`).
+    Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the workspace, and
+    meets the start condition (the stage's occlusion or surround, the visible band); else
+    :class:`~mpg_envs.scenes.generators.InvalidSceneError`, never a lesser scene. ``reset(options=...)``
+    takes ``scene`` (a scene file, ours or a peer's, or a :class:`~mpg_envs.scenes.scene_io.SceneFile`),
+    ``mesh_dir`` (meshes for a peer's file), ``drop_outside`` (leave out, with a warning, the file's objects
+    outside the workspace instead of raising :class:`~mpg_envs.scenes.scene_io.SceneFileError`) and
+    ``num_objects`` (this episode's count). Reset's ``info`` has ``objects_left``, ``occluded``,
+    ``visible_fraction``, ``target``, ``num_motions`` and ``is_success``; a step's also ``end_reason``
+    (``None`` until the last step, then one of :data:`END_REASONS`). ``step()`` after the episode ended,
+    before the first ``reset()`` or after ``close()`` raises ``RuntimeError`` until the next ``reset()``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -101,6 +96,8 @@ class MPGEnv(gym.Env):
         self.visible_range = check_band(stage_spec.visible_range if visible_range is None else visible_range)
         if self.visible_range is not None and stage_spec.mask_all_objects:
             raise ValueError(f"visible_range needs a target; {stage_spec.env_id} has none (every object is a target)")
+        if not isinstance(use_test_set, (bool, np.bool_)):
+            raise ValueError(f"use_test_set must be True or False, got {use_test_set!r}")
         self.use_test_set = bool(use_test_set)
         self.max_motions = stage_spec.max_motions if max_motions is None else max_motions
         if not isinstance(self.max_motions, (int, np.integer)) or self.max_motions < 1:
@@ -136,6 +133,7 @@ class MPGEnv(gym.Env):
         self._score: tuple[dict, float] | None = None  # (observation, its grasp score)
         self._visible: float | None = None  # the target's visible fraction in the last observation
         self.num_motions = 0
+        self._ended: str | None = "call reset() before step()"  # why step() may not run now (None: it may)
 
     # ------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -146,14 +144,14 @@ class MPGEnv(gym.Env):
             raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
         self.num_objects = self._checked_num_objects(options.get("num_objects", self.default_num_objects))
         self._load_scene(seed, options)
-        self.num_motions = 0
+        self.num_motions, self._ended = 0, None
         self._obs = self._observe()
         self._score = None
         return self._copy_obs(self._obs), self._reset_info()
 
     def step(self, action):
-        if self.world is None or self._obs is None:
-            raise RuntimeError("call reset() before step()")
+        if self._ended is not None:
+            raise RuntimeError(self._ended)
         primitive, rotation, row, col = self.action_space.decode(action)
         before = self._obs
         score_before = self._grasp_score(before) if primitive != "grasp" else None
@@ -176,6 +174,7 @@ class MPGEnv(gym.Env):
         )
         info = {**action_info(primitive, rotation, row, col, result), **evaluation.info()}
         info.update(num_motions=self.num_motions, sim_warnings=sim_warnings, end_reason=end_reason)
+        self._ended = None if end_reason is None else f"the episode has ended ({end_reason}); call reset() before step()"
         return self._copy_obs(self._obs), reward, bool(terminated), bool(truncated), info
 
     # ------------------------------------------------------------ task hooks
@@ -240,15 +239,15 @@ class MPGEnv(gym.Env):
         ``step(action)`` afterwards returns the same). Trainers may use it to label actions
         they did not take; a policy under evaluation must not.
         """
-        if self.world is None or self._obs is None:
-            raise RuntimeError("call reset() before try_step()")
+        if self._ended is not None:
+            raise RuntimeError(self._ended.replace("step()", "try_step()"))
         checkpoint = WorldCheckpoint(self.world)
-        saved = (self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state)
+        saved = (self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state, self._ended)
         try:
             return self.step(action)
         finally:
             checkpoint.restore()
-            self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state = saved
+            self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state, self._ended = saved
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -264,6 +263,7 @@ class MPGEnv(gym.Env):
         return self._renderer.render(self.world.data)
 
     def close(self):
+        self._ended = "the env is closed; call reset() to start a new episode before step()"
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
