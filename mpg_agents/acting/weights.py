@@ -48,14 +48,18 @@ def checkpoint_metadata(
 def save_mpgnet(
     net: MPGNet, path: str | Path, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> None:
-    """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header."""
+    """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header;
+    through a temporary file swapped in, so a process killed meanwhile leaves the old file whole."""
     from safetensors.torch import save_file
 
     state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
     check_finite(state, f"the MPGNet to be written to {path}")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    save_file(state, str(path), metadata=checkpoint_metadata(net, q_star, extra))
-    chmod_by_umask(path)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    save_file(state, str(tmp), metadata=checkpoint_metadata(net, q_star, extra))
+    chmod_by_umask(tmp)
+    os.replace(tmp, path)
 
 
 def chmod_by_umask(path: str | Path) -> None:

@@ -4,6 +4,7 @@ export never overwrites its own source."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import pytest
 import torch
@@ -73,9 +74,24 @@ def test_a_non_finite_q_star_in_the_header_is_refused(tmp_path, checkpoint, caps
     assert capsys.readouterr().err.count(message) == 2
 
 
-def test_null_q_star_stays_the_uncalibrated_record(tmp_path, checkpoint):
+def test_null_q_star_stays_the_uncalibrated_record_and_evaluating_it_warns(tmp_path, checkpoint):
+    """``null`` is how a checkpoint says it was never calibrated (the next stage reads it); a
+    policy that would compare grasp Q with it says what it does instead."""
+    import gymnasium as gym
+
+    import mpg_envs  # noqa: F401
+    from mpg_agents.evaluation.policy_zoo import make_policy
+
     path = rewritten(checkpoint, tmp_path / "null.safetensors", header={"q_star": None})
     assert read_checkpoint_header(path)["q_star"] is None
+    env = gym.make("MPG-Stage5-v0")
+    with pytest.warns(UserWarning, match=r"null\.safetensors carries no Q\*_g \(null: never calibrated\): its 'workflow' "
+                                         r"coordination compares the best grasp and push Q instead; pass --q-star"):
+        make_policy(str(path), env)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        make_policy(str(path), env, q_star=0.5)
+    env.close()
 
 
 def test_export_never_overwrites_its_source(tmp_path, checkpoint, capsys):
