@@ -107,11 +107,11 @@ def _owner(text: str) -> str:
 
 def resume_differences(saved: Mapping[str, Any], asked: Mapping[str, Any], prefix: str = "") -> list[str]:
     """``"seed: saved 0, asked 1"`` for every setting that differs between a saved run's
-    settings and the ones asked for (nested tables as ``stage.env_id``); keys only one side has
-    count as differences too."""
+    settings and the ones asked for (nested tables as ``stage.env_id``). A setting only one side
+    has is left out: a run saved before the setting existed ran without it."""
     out = []
-    for key in sorted(set(saved) | set(asked)):
-        a, b = saved.get(key, "(not set)"), asked.get(key, "(not set)")
+    for key in sorted(set(saved) & set(asked)):
+        a, b = saved[key], asked[key]
         if isinstance(a, Mapping) and isinstance(b, Mapping):
             out += resume_differences(a, b, f"{prefix}{key}.")
         elif _plain(a) != _plain(b):

@@ -135,6 +135,7 @@ def test_resume_differences_lists_every_changed_setting():
     saved = {"seed": 0, "betas": [0.9, 0.99], "stage": {"env_id": "MPG-Stage2-v0", "iterations": 10}}
     asked = {"seed": 1, "betas": (0.9, 0.99), "stage": {"env_id": "MPG-Stage2-v0", "iterations": 12}}
     assert resume_differences(saved, asked) == ["seed: saved 0, asked 1", "stage.iterations: saved 10, asked 12"]
+    assert resume_differences({"seed": 0}, {"seed": 0, "window": 200}) == []  # a run saved before `window` existed
 
 
 def test_a_resume_with_other_settings_refuses_unless_asked_to_continue(tmp_path, capsys):
@@ -214,3 +215,16 @@ def test_a_negative_eval_seed_is_named(capsys):
     assert "error: --seed must be >= 0, got -5" in capsys.readouterr().err
     assert calibrate_main(["--policy", "shipped", "--seed", "-5"]) == 2
     assert "error: --seed must be >= 0, got -5" in capsys.readouterr().err
+
+
+def test_demo_and_train_runs_refuse_an_out_that_is_a_file(tmp_path, capsys):
+    from mpg_agents.demo import main as demo_main
+    from mpg_agents.learning.train_runs import main as runs_main
+
+    out = tmp_path / "file"
+    out.write_text("x")
+    for main in (demo_main, runs_main):
+        with pytest.raises(SystemExit) as exit_info:
+            main(["--out", str(out)])
+        assert exit_info.value.code == 2
+        assert f"--out {str(out)!r} is a file; give a folder (made if missing)" in capsys.readouterr().err
