@@ -13,7 +13,7 @@ run killed at such saves retraces the unkilled one), must end with bitwise ident
 
 The last output line is one JSON object. Run it niced on a shared machine:
 
-    nice python benchmarks/kill_resume.py [--kills 20] [--steps 40] [--exact-steps 16] [--seed 0]
+    nice python benchmarks/kill_resume.py [--kills 20] [--steps 50] [--exact-steps 16] [--seed 0]
 """
 
 from __future__ import annotations
@@ -110,7 +110,7 @@ def killed_at_random(root: Path, config: Path, args: argparse.Namespace, rng: ra
     kills, states, problems = 1, [check_loadable(out)], []
     while kills < args.kills:
         proc = start(out, config, args.steps)
-        time.sleep(rng.uniform(0.3 * startup, startup + 6 * per_iteration))
+        time.sleep(rng.uniform(0.3 * startup, startup + 3 * per_iteration))
         if proc.poll() is not None:  # it finished (or failed) before the kill
             if proc.returncode != 0:
                 problems.append(f"a resume exited with status {proc.returncode} (see {out.name}.log)")
@@ -199,7 +199,7 @@ def killed_at_episode_saves(root: Path, config: Path, args: argparse.Namespace) 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--kills", type=int, default=20)
-    parser.add_argument("--steps", type=int, default=40, help="iterations of the randomly killed training")
+    parser.add_argument("--steps", type=int, default=50, help="iterations of the randomly killed training")
     parser.add_argument("--exact-steps", type=int, default=16, help="iterations of the unkilled run and the one killed at its saves")
     parser.add_argument("--checkpoint-every", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0, help="picks the kill moments")

@@ -200,7 +200,7 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
             "quat": np.asarray(obj.quat, float).tolist(),
             "active": bool(obj.active),
         }
-        if Path(obj.asset.source).is_file():  # a mesh file (the blocks are made in code)
+        if obj.asset.source != "blocks" and Path(obj.asset.source).is_file():  # a mesh file (the blocks are made in code)
             entry["sha256"] = _digest(obj.asset.source, digests)
         objects.append(entry)
     doc = {
