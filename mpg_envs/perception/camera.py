@@ -30,7 +30,7 @@ import numpy as np
 from mpg_envs.perception.appearance import Lighting, light_scene, paint_scene, perturbed_pose, place_camera
 from mpg_envs.perception.depth_noise import corrupt_depth
 from mpg_envs.perception.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
-from mpg_envs.perception.render import make_renderer
+from mpg_envs.perception.frames import SceneFrames
 from mpg_envs.perception.rgbd import fuse_heightmaps, heightmap_from_rgbd
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, randomized_geom_colors
 from mpg_envs.grid.workspace import Workspace
@@ -215,9 +215,10 @@ def add_cameras(spec: mujoco.MjSpec, config: CameraConfig | None = None) -> list
 class CameraHeightmapper:
     """Render the configured cameras and fuse their back-projected heightmaps.
 
-    Each camera is rendered in colour and depth with ``mujoco.Renderer`` (only geom groups
-    0 and 1 visible), converted to the OpenCV camera convention, optionally corrupted by
-    Gaussian depth noise, back-projected with :func:`heightmap_from_rgbd`, and all views
+    Each camera is rendered in colour under the configured light (or an episode's), and in
+    depth with segmentation from one more pass (:class:`~mpg_envs.perception.frames.SceneFrames`;
+    only geom groups 0 and 1 visible), converted to the OpenCV camera convention, optionally
+    corrupted by depth noise, back-projected with :func:`heightmap_from_rgbd`, and all views
     are fused per pixel (:func:`fuse_heightmaps`). Holds an OpenGL context: call
     :meth:`close` or use it as a context manager.
 
@@ -235,7 +236,7 @@ class CameraHeightmapper:
         self.model = model
         self.config = config if config is not None else CameraConfig()
         self.workspace = workspace if workspace is not None else Workspace()
-        self._renderer: mujoco.Renderer | None = None
+        self._renderer: SceneFrames | None = None
         self._camera_ids: list[int] = []
         self._intrinsics: list[np.ndarray] = []
         for cam in self.config.cameras:
@@ -265,7 +266,7 @@ class CameraHeightmapper:
             groups[:] = 0
 
         # One record of GL failure per process, shared with env.render(): a retry can abort.
-        self._renderer = make_renderer(
+        self._renderer = SceneFrames(
             model, self.config.height, self.config.width,
             purpose="Camera observations (the default ray-cast observations need none)",
         )
@@ -312,7 +313,7 @@ class CameraHeightmapper:
         colors = self._geom_colors(visuals)
         images = []
         for k, (cam_id, name, intrinsics) in enumerate(zip(self._camera_ids, self.camera_names, self._intrinsics, strict=True)):
-            self._renderer.update_scene(data, camera=cam_id, scene_option=self._option)
+            self._renderer.update(data, cam_id, self._option)
             scene = self._renderer.scene
             light_scene(scene, lighting)
             if visuals is not None:
@@ -320,15 +321,9 @@ class CameraHeightmapper:
                 place_camera(scene, *perturbed_pose(
                     data.cam_xpos[cam_id], data.cam_xmat[cam_id], visuals.camera_offsets[k], visuals.camera_rotations[k]
                 ))
-            self._renderer.disable_depth_rendering()
-            color = self._renderer.render()
-            self._renderer.enable_depth_rendering()
-            depth = self._renderer.render().astype(np.float64)
-            self._renderer.disable_depth_rendering()
-            self._renderer.enable_segmentation_rendering()
-            seg = self._renderer.render()
-            self._renderer.disable_segmentation_rendering()
-            geom_id = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1).astype(np.int32)
+            color = self._renderer.color()
+            depth, geom_id = self._renderer.depth_and_segmentation()
+            depth = depth.astype(np.float64)
             if std > 0:
                 depth += rng.normal(0.0, std, size=depth.shape)  # type: ignore[union-attr]
             valid = (depth >= self.config.near) & (depth <= self.config.far)

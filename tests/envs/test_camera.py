@@ -226,7 +226,7 @@ def test_gl_failure_names_the_fix(monkeypatch):
     def no_gl(*args, **kwargs):
         raise mujoco.FatalError("gladLoadGL error")
 
-    monkeypatch.setattr(mujoco, "Renderer", no_gl)
+    monkeypatch.setattr(mujoco, "GLContext", no_gl)  # the camera path's frames open their context with it
     monkeypatch.setattr(render_module, "_gl_failure", None)  # as in a fresh process
     with pytest.raises(RuntimeError) as info:
         CameraHeightmapper(model, CameraConfig())
@@ -239,6 +239,7 @@ def test_gl_failure_names_the_fix(monkeypatch):
     def must_not_run(*args, **kwargs):
         raise AssertionError("GL was retried")
 
+    monkeypatch.setattr(mujoco, "GLContext", must_not_run)
     monkeypatch.setattr(mujoco, "Renderer", must_not_run)
     with pytest.raises(RuntimeError, match="libosmesa6"):
         CameraHeightmapper(model, CameraConfig())
@@ -393,3 +394,30 @@ def test_randomized_views_are_fixed_by_the_seed(clutter):
     assert 0 < float(np.median(shift)) < 0.01
     # The sensor's holes: more pixels that no camera sees (background colour, no geom).
     assert (noisy.geom_id == -1).sum() > (a.geom_id == -1).sum() + 100
+
+
+@pytest.mark.gl
+def test_one_pass_depth_and_segmentation_match_mujocos_renderer(clutter):
+    """``SceneFrames`` reads depth and segmentation from one pass; ``mujoco.Renderer`` renders
+    them apart: the two agree exactly."""
+    from mpg_envs.perception.frames import SceneFrames
+
+    model, data, names = clutter
+    cam_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, names[0])
+    try:
+        frames = SceneFrames(model, 240, 320)
+        renderer = mujoco.Renderer(model, 240, 320)
+    except RuntimeError as exc:
+        pytest.skip(f"no OpenGL context: {exc}")
+    frames.update(data, cam_id, mujoco.MjvOption())
+    depth, geom_id = frames.depth_and_segmentation()
+    renderer.update_scene(data, camera=cam_id)
+    renderer.enable_depth_rendering()
+    expected_depth = renderer.render()
+    renderer.enable_segmentation_rendering()
+    seg = renderer.render()
+    renderer.close()
+    frames.close()
+    np.testing.assert_array_equal(depth, expected_depth)
+    np.testing.assert_array_equal(geom_id, np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1))
+    assert (geom_id >= 0).mean() > 0.9
