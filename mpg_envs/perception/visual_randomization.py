@@ -5,17 +5,17 @@ not the simulator's clean one (the env option ``visual_randomization``).
 values (:class:`EpisodeVisuals`) from an integer seed, so the same seed gives the same
 light, colours, camera errors and depth noise. What applies where:
 
-========================  ==================  =================
-randomized                camera path         ray-cast path
-========================  ==================  =================
-light direction/strength  yes                 no (flat colours)
-object and table colours  yes                 yes
-camera pose (calibration  yes                 no (no camera)
-error)
-depth noise and holes     yes (each image)    yes (as a camera straight above would see it)
-========================  ==================  =================
+- light direction, strength and shadows: the camera path only (the ray casts paint flat colours);
+- object and table colours: both paths (:func:`randomized_geom_colors`);
+- camera pose (a calibration error: the image comes from the true pose, the back-projection
+  uses the calibrated one): the camera path only;
+- depth noise and missing depth: both, each camera image on the camera path, and on the
+  ray-cast path as a camera :data:`OVERHEAD_CAMERA_Z` straight above would see the heightmap
+  (:func:`randomized_raycast`).
 
-Colour and pose maths are pure functions (:func:`jitter_colors`, :func:`randomized_geom_colors`).
+The maths are pure functions: :func:`jitter_colors` here, the pose error in
+:func:`mpg_envs.perception.appearance.perturbed_pose`, the sensor in
+:mod:`mpg_envs.perception.depth_noise`.
 """
 
 from __future__ import annotations
