@@ -131,7 +131,7 @@ class VisualRandomization:
         return data
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays inside: compare to_dict() values
 class EpisodeVisuals:
     """One episode's drawn values (:func:`draw_visuals`).
 
