@@ -150,9 +150,10 @@ class MPGEnv(gym.Env):
         if unknown:
             raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
         self.num_objects = self._checked_num_objects(options.get("num_objects", self.default_num_objects))
-        self.num_motions = 0  # before the scene: a drawn scene's observations are observation 0's
-        self.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
+        self.visuals = None  # a drawn scene's start condition is judged unrandomized: the same scenes either way
         self._load_scene(seed, options)
+        self.num_motions = 0
+        self.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
         self._obs = self._observe()
         self._score = None
         return self._copy_obs(self._obs), self._reset_info()
