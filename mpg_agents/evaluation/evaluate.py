@@ -48,11 +48,14 @@ class EpisodeRecord:
     # The actions taken, to replay or compare an episode: flat indices, or for a wrapped env
     # with a continuous action space (mpg_envs.integrations.wrappers.ContinuousAction) tuples of floats.
     actions: tuple[int | tuple[float, ...], ...] = ()
+    visuals: dict[str, Any] | None = None  # the episode's drawn visual randomization (env option visual_randomization)
     seconds: float = field(default=0.0, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         del data["seconds"]
+        if data["visuals"] is None:  # records of envs without visual randomization stay as they were
+            del data["visuals"]
         return data
 
     @property
@@ -174,6 +177,7 @@ def run_episode(
     start = time.perf_counter()
     episode_seed = seed + index
     obs, info = start_episode(policy, env, episode_seed, reset_options)
+    reset_info = info
     visible = info.get("visible_fraction")
     if on_reset is not None:
         on_reset(index, obs)
@@ -205,6 +209,7 @@ def run_episode(
         objects_left=None if info.get("objects_left") is None else int(info["objects_left"]),
         visible_fraction=None if visible is None else float(visible),
         actions=tuple(actions),
+        visuals=reset_info.get("visual_randomization"),
         seconds=time.perf_counter() - start,
     )
 

@@ -19,6 +19,7 @@ from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.tasks.config import OBS_MODES, EnvConfig, observation_space
 from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 from mpg_envs.perception.occlusion import change_detected, check_band, is_occluded, visible_fraction
+from mpg_envs.perception.visual_randomization import VisualRandomization, episode_visuals, randomized_raycast
 from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
 from mpg_envs.tasks.rewards import StepOutcome
 from mpg_envs.tasks.scene_source import draw_scene, shipped_scene
@@ -53,16 +54,19 @@ class MPGEnv(gym.Env):
     retrieval, a mis-pick ends the episode), ``visible_range`` (a band of the target's visible fraction at
     reset), ``use_test_set`` (True or False: load the shipped scenes of the test seeds, or generate every scene).
 
-    Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the workspace, and
-    meets the start condition (the stage's occlusion or surround, the visible band); else
-    :class:`~mpg_envs.scenes.generators.InvalidSceneError`, never a lesser scene. ``reset(options=...)``
-    takes ``scene`` (a scene file, ours or a peer's, or a :class:`~mpg_envs.scenes.scene_io.SceneFile`),
-    ``mesh_dir`` (meshes for a peer's file), ``drop_outside`` (leave out, with a warning, the file's objects
-    outside the workspace instead of raising :class:`~mpg_envs.scenes.scene_io.SceneFileError`) and
-    ``num_objects`` (this episode's count). Reset's ``info`` has ``objects_left``, ``occluded``,
-    ``visible_fraction``, ``target``, ``num_motions`` and ``is_success``; a step's also ``end_reason``
-    (``None`` until the last step, then one of :data:`END_REASONS`). ``step()`` after the episode ended,
-    before the first ``reset()`` or after ``close()`` raises ``RuntimeError`` until the next ``reset()``.
+    Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
+    workspace, and meets the start condition (the stage's occlusion or surround, the visible
+    band); else :class:`~mpg_envs.scenes.generators.InvalidSceneError`, never a lesser scene.
+    ``reset(options=...)`` takes ``scene`` (a scene file, ours or a peer's, or a
+    :class:`~mpg_envs.scenes.scene_io.SceneFile`), ``mesh_dir`` (meshes for a peer's file),
+    ``drop_outside`` (leave out, with a warning, the file's objects outside the workspace
+    instead of raising :class:`~mpg_envs.scenes.scene_io.SceneFileError`) and ``num_objects`` (this
+    episode's count). Reset's ``info`` has ``objects_left``, ``occluded``,
+    ``visible_fraction``, ``target``, ``num_motions``, ``is_success`` and, with
+    ``visual_randomization`` on, the episode's drawn values; a step's also
+    ``end_reason`` (``None`` until the last step, then one of :data:`END_REASONS`). ``step()`` after
+    the episode ended, before the first ``reset()`` or after ``close()`` raises ``RuntimeError``
+    until the next ``reset()``.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -81,6 +85,7 @@ class MPGEnv(gym.Env):
         wrong_grasp: str | None = None,
         visible_range: tuple[float, float] | None = None,
         use_test_set: bool = True,
+        visual_randomization: Any = None,
     ):
         self.stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
         if not isinstance(self.stage, StageSpec):
@@ -113,6 +118,8 @@ class MPGEnv(gym.Env):
         self.render_mode = render_mode
         self.grasp_scorer = grasp_scorer
         self.camera_config = camera_config
+        self.visual_randomization = VisualRandomization.from_option(visual_randomization)  # None: off
+        self.visuals = None  # this episode's drawn EpisodeVisuals
         self.object_set = (
             load_object_set(object_set, seed=config.object_set_seed) if isinstance(object_set, (str, Path)) else list(object_set)
         )
@@ -143,8 +150,10 @@ class MPGEnv(gym.Env):
         if unknown:
             raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
         self.num_objects = self._checked_num_objects(options.get("num_objects", self.default_num_objects))
+        self.visuals = None  # a drawn scene's start condition is judged unrandomized: the same scenes either way
         self._load_scene(seed, options)
         self.num_motions, self._ended = 0, None
+        self.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
         self._obs = self._observe()
         self._score = None
         return self._copy_obs(self._obs), self._reset_info()
@@ -318,12 +327,15 @@ class MPGEnv(gym.Env):
 
     def _heightmaps(self):
         """Colour and depth heightmaps of the current state (ray-cast or camera)."""
+        rng = self.np_random if self.visuals is None else self.visuals.noise_rng(self.num_motions)  # depth noise
         if self.obs_mode == "camera":
             if self._camera is None:
                 from mpg_envs.perception.camera import CameraConfig, CameraHeightmapper
 
                 self._camera = CameraHeightmapper(self.world.model, self.camera_config or CameraConfig(), self.config.workspace)
-            return self._camera.heightmaps(self.world.data, self.np_random)
+            return self._camera.heightmaps(self.world.data, rng, self.visuals)
+        if self.visuals is not None:
+            return randomized_raycast(self._raycaster, self.world.data, self.visuals, rng)
         return self._raycaster(self.world.data)
 
     def _target_view(self, depth: np.ndarray, target: int | None) -> tuple[np.ndarray, bool]:
@@ -393,6 +405,7 @@ class MPGEnv(gym.Env):
             "objects_left": self.world.objects_left(),
             "target": self.target,
             "is_success": False,
+            **({} if self.visuals is None else {"visual_randomization": self.visuals.to_dict(self.num_objects)}),
         }
 
     @staticmethod
