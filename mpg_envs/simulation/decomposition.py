@@ -110,8 +110,13 @@ def load_mesh(path: str, scale: float) -> trimesh.Trimesh:
     return drop_coincident_faces(mesh)
 
 
-def solid_from_mesh_file(path: str, scale: float, seed: int, params: CoacdParams, use_coacd: bool = True) -> Solid:
+def solid_from_mesh_file(
+    path: str, scale: float, seed: int, params: CoacdParams | dict[str, Any], use_coacd: bool = True
+) -> Solid:
     """Convex parts and volume of the mesh file at ``path`` scaled by ``scale`` (see the module text).
+
+    ``params`` may be given as the fields of :class:`CoacdParams` (a dict), so a caller in
+    another process can send it without this module being imported to read the request.
 
     With ``use_coacd=False`` only meshes that need no decomposition are accepted (a convex
     mesh, or separate convex bodies): the fallback when coacd crashed or hung.
@@ -120,6 +125,8 @@ def solid_from_mesh_file(path: str, scale: float, seed: int, params: CoacdParams
         ValueError: the file cannot be read, is empty or flat (zero volume), or needs coacd
             while ``use_coacd`` is off; the message names the file.
     """
+    if isinstance(params, dict):
+        params = CoacdParams(**params)
     mesh = load_mesh(path, scale)
     try:
         with np.errstate(divide="ignore", invalid="ignore"):  # flat input: trimesh divides by 0

@@ -2,9 +2,9 @@
 
 Convex decomposition (``coacd``) is C++ that can segfault or never return on some inputs. A
 crash there must not take the caller's interpreter (a training, an evaluation) down, so such
-calls run in a child Python process: :class:`IsolatedWorker` starts it on first use
-(``python -m mpg_envs.simulation.isolated_call``, so nothing of the caller's ``__main__`` is
-re-run and no threads are forked), sends it ``"module:function"`` and the arguments (pickled),
+calls run in a child Python process: :class:`IsolatedWorker` starts it on first use (this
+file run as a script, which imports only the standard library: nothing of the caller's
+``__main__`` is re-run and no threads are forked), sends it ``"module:function"`` and the arguments (pickled),
 and waits at most ``time_limit_s`` for the result. A crash (the worker dies, e.g. of SIGSEGV)
 raises :class:`WorkerCrashedError`; a call that runs past its limit kills the worker and
 raises :class:`WorkerTimeoutError`; an exception inside the call is re-raised as
@@ -106,7 +106,8 @@ class IsolatedWorker:
             process = self._ensure_started()
             assert process.stdin is not None and process.stdout is not None
             try:
-                _write_message(process.stdin, (list(sys.path), target, args))
+                # The call is pickled apart: the worker unpickles it after taking on the path.
+                _write_message(process.stdin, (list(sys.path), pickle.dumps((target, args), pickle.HIGHEST_PROTOCOL)))
             except (BrokenPipeError, OSError) as exc:
                 self._stop()
                 raise WorkerCrashedError(f"the worker process died before the call ({exc})") from exc
@@ -144,14 +145,10 @@ class IsolatedWorker:
     def _ensure_started(self) -> subprocess.Popen[bytes]:
         if self._process is not None and self._process.poll() is None:
             return self._process
-        env = dict(os.environ)
-        # The caller's import path, so the worker imports this very copy of mpg_envs.
-        env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+        # Each request carries the caller's sys.path, so the worker imports this very copy of
+        # mpg_envs (and whatever the caller can import).
         self._process = subprocess.Popen(
-            [sys.executable, "-m", "mpg_envs.simulation.isolated_call"],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            env=env,
+            [sys.executable, os.path.abspath(__file__)], stdin=subprocess.PIPE, stdout=subprocess.PIPE
         )
         self.starts += 1
         return self._process
@@ -186,18 +183,20 @@ def shared_worker() -> IsolatedWorker:
 
 
 def _serve() -> None:
-    """The worker's loop: read (sys.path, target, args), reply ("ok", result) or ("error", type, message)."""
+    """The worker's loop: read (sys.path, pickled (target, args)), reply ("ok", result) or
+    ("error", type, message)."""
     requests = os.fdopen(os.dup(0), "rb")
     replies = os.fdopen(os.dup(1), "wb")
     # Native libraries print to fd 1; keep the reply pipe clean by sending fd 1 to stderr.
     os.dup2(2, 1)
     while True:
         try:
-            path, target, args = _read_message(requests)
+            path, call = _read_message(requests)
         except EOFError:
             return
         try:
             sys.path[:] = path
+            target, args = pickle.loads(call)
             module_name, _, function_name = target.partition(":")
             function = getattr(importlib.import_module(module_name), function_name)
             reply: tuple[Any, ...] = ("ok", function(*args))

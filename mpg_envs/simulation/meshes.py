@@ -218,8 +218,9 @@ def load_mesh_folder(
 def _isolated_solid(path: Path, scale: float, seed: int, params: CoacdParams, time_limit_s: float) -> tuple[list, float, str]:
     """The mesh's solid from the worker: (parts, volume, note); a fallback is noted."""
     worker = shared_worker()
+    fields = dataclasses.asdict(params)  # plain data: a crashing stand-in need not import anything
     try:
-        solid: Solid = worker.call(SOLID_ENTRY, (str(path), float(scale), seed, params, True), time_limit_s)
+        solid: Solid = worker.call(SOLID_ENTRY, (str(path), float(scale), seed, fields, True), time_limit_s)
         return solid.parts, solid.volume, ""
     except WorkerCallError as exc:
         raise _as_load_error(path, exc) from exc
@@ -227,7 +228,7 @@ def _isolated_solid(path: Path, scale: float, seed: int, params: CoacdParams, ti
         failure = _failure_text(exc, time_limit_s)
     # Retry without coacd: a mesh of separate convex bodies still loads, one part per body.
     try:
-        solid = worker.call(SOLID_ENTRY, (str(path), float(scale), seed, params, False), time_limit_s)
+        solid = worker.call(SOLID_ENTRY, (str(path), float(scale), seed, fields, False), time_limit_s)
     except IsolatedCallError as exc:
         reason = _as_load_error(path, exc) if isinstance(exc, WorkerCallError) else _failure_text(exc, time_limit_s)
         raise MeshLoadError(
