@@ -99,13 +99,14 @@ class Solid:
 def load_mesh(path: str, scale: float) -> trimesh.Trimesh:
     """A mesh file as one scaled, cleaned triangle mesh; ValueError naming the file if unusable."""
     try:
-        mesh = trimesh.load(path, force="mesh")
+        mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for bad files; report them uniformly
         raise ValueError(f"mesh file {path!r}: cannot load it ({type(exc).__name__}: {exc})") from exc
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise ValueError(f"mesh file {path!r}: empty or unreadable mesh (no triangles)")
     if not np.all(np.isfinite(mesh.vertices)):
-        raise ValueError(f"mesh file {path!r}: non-finite vertex coordinates")
+        raise ValueError(f"mesh file {path!r}: non-finite vertex coordinates (NaN or inf); every vertex must be finite")
+    mesh.process()  # merge duplicate vertices, drop degenerate faces (as trimesh.load does by default)
     mesh.apply_scale(scale)
     return drop_coincident_faces(mesh)
 
@@ -127,10 +128,15 @@ def solid_from_mesh_file(
     """
     if isinstance(params, dict):
         params = CoacdParams(**params)
+    # Flat or zero-volume bodies make trimesh divide by 0; they are caught by the checks below.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return _solid(path, scale, seed, params, use_coacd)
+
+
+def _solid(path: str, scale: float, seed: int, params: CoacdParams, use_coacd: bool) -> Solid:
     mesh = load_mesh(path, scale)
     try:
-        with np.errstate(divide="ignore", invalid="ignore"):  # flat input: trimesh divides by 0
-            hull_volume = float(mesh.convex_hull.volume)
+        hull_volume = float(mesh.convex_hull.volume)
     except Exception as exc:  # qhull fails on flat or degenerate point sets
         raise ValueError(f"mesh file {path!r}: zero volume (flat or degenerate mesh); a solid object is needed") from exc
     if not hull_volume > MIN_PART_VOLUME:

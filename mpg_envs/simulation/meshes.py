@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+import trimesh
 
 from mpg_envs.simulation.assets import DEFAULT_FRICTION, TABLEAU_10, WOOD_DENSITY, ObjectAsset, check_seed, make_asset
 from mpg_envs.simulation.decomposition import CONVEX_VOLUME_RATIO, CoacdParams, Solid, decompose
@@ -128,12 +129,16 @@ def load_mesh_file(
         data = path.read_bytes()
     except OSError as exc:
         raise MeshLoadError(f"mesh file {str(path)!r}: cannot read it ({exc})") from exc
+    # Fit first on the vertices' box, so the parts are made at the size they will have (the
+    # smallest-part threshold is absolute), then again on the parts' box (hull-exact, but
+    # coacd's hulls may reach a little further).
+    first = 1.0 if extent_range is None else _fit(path, scale, _vertex_extents(path, data) * scale, extent_range)
     key_data = {
         "kind": "mesh_file",
         "pipeline": MESH_PIPELINE_VERSION,
         "suffix": path.suffix.lower(),
         "sha256": hashlib.sha256(data).hexdigest(),
-        "scale": float(scale),
+        "scale": float(scale * first),
         "seed": seed,
         "convex_ratio": CONVEX_VOLUME_RATIO,
         "coacd": dataclasses.asdict(params),
@@ -142,18 +147,14 @@ def load_mesh_file(
         resolve_cache_dir(cache_dir),
         f"mesh-{path.stem}",
         key_data,
-        lambda: _isolated_solid(path, scale, seed, params, time_limit_s),
+        lambda: _isolated_solid(path, scale * first, seed, params, time_limit_s),
     )
     if solid.note:
         warnings.warn(f"mesh file {str(path)!r}: {solid.note}", RuntimeWarning, stacklevel=2)
-    factor = 1.0
+    second = 1.0
     if extent_range is not None:
-        extents = np.ptp(np.concatenate([v for v, _ in solid.parts]), axis=0)
-        try:
-            factor = fit_scale(extents, extent_range)
-        except FitError as exc:
-            raise MeshLoadError(f"mesh file {str(path)!r} (scale {scale:g}): {exc}") from exc
-        solid = _scaled(solid, factor)
+        second = _fit(path, scale, np.ptp(np.concatenate([v for v, _ in solid.parts]), axis=0), extent_range)
+        solid = _scaled(solid, second)
     return make_asset(
         name if name is not None else path.stem,
         solid.parts,
@@ -164,7 +165,7 @@ def load_mesh_file(
         str(path),
         solid.com,
         volume=solid.volume,
-        scale=float(scale) * factor,
+        scale=float(scale) * first * second,
         licence=licence,
     )
 
@@ -251,6 +252,26 @@ def _as_load_error(path: Path, exc: WorkerCallError) -> MeshLoadError:
     if exc.exc_type == "ValueError":
         return MeshLoadError(exc.exc_message)
     return MeshLoadError(f"mesh file {str(path)!r}: could not be made into convex parts ({exc.exc_type}: {exc.exc_message})")
+
+
+def _vertex_extents(path: Path, data: bytes) -> np.ndarray:
+    """Bounding-box size of the file's finite vertices (trimesh's parser: Python, no native code)."""
+    try:
+        mesh = trimesh.load(trimesh.util.wrap_as_stream(data), file_type=path.suffix.lower()[1:], force="mesh", process=False)
+        vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    except Exception as exc:  # trimesh raises many types for bad files; report them uniformly
+        raise MeshLoadError(f"mesh file {str(path)!r}: cannot load it ({type(exc).__name__}: {exc})") from exc
+    vertices = vertices[np.all(np.isfinite(vertices), axis=1)] if vertices.ndim == 2 else vertices[:0]
+    if len(vertices) < 4:
+        raise MeshLoadError(f"mesh file {str(path)!r}: empty or unreadable mesh (fewer than 4 finite vertices)")
+    return np.ptp(vertices, axis=0)
+
+
+def _fit(path: Path, scale: float, extents: np.ndarray, extent_range: ExtentRange) -> float:
+    try:
+        return fit_scale(extents, extent_range)
+    except (FitError, ValueError) as exc:  # ValueError: a zero extent (flat)
+        raise MeshLoadError(f"mesh file {str(path)!r} (scale {scale:g}): {exc}") from exc
 
 
 def _scaled(solid: CachedSolid, factor: float) -> CachedSolid:

@@ -223,6 +223,12 @@ def test_fit_to_gripper_tiny_huge_and_unfittable(tmp_path: Path) -> None:
     small = load_mesh_file(tiny, cache_dir=tmp_path / "c", scale=0.001, fit="gripper")
     np.testing.assert_allclose(small.extents, 0.025, rtol=1e-9)
     assert small.scale == pytest.approx(0.001 * 12.5)
+    # Under the smallest-part volume at its own size (0.8 mm cube: 5e-10 m^3), but fitted first.
+    speck = _write(folder, "speck.obj", _boxes_obj([((0, 0, 0), (0.8, 0.8, 0.8))]))
+    with pytest.raises(MeshLoadError, match=r"speck\.obj.*zero volume"):
+        load_mesh_file(speck, cache_dir=tmp_path / "c", scale=0.001)
+    grown = load_mesh_file(speck, cache_dir=tmp_path / "c", scale=0.001, fit="gripper")
+    np.testing.assert_allclose(grown.extents, 0.025, rtol=1e-9)
     huge = _write(folder, "huge.obj", _boxes_obj([((0, 0, 0), (5, 3, 2))]))  # 5 x 3 x 2 m
     big = load_mesh_file(huge, cache_dir=tmp_path / "c", fit="gripper")
     np.testing.assert_allclose(big.extents, (0.10, 0.06, 0.04), rtol=1e-9)
