@@ -89,6 +89,7 @@ class IsolatedWorker:
 
     def __init__(self) -> None:
         self._process: subprocess.Popen[bytes] | None = None
+        self._owner = os.getpid()
         self._lock = threading.Lock()
         self.starts = 0
         """How many worker processes this object has started (a warm cache starts none)."""
@@ -143,6 +144,9 @@ class IsolatedWorker:
             self._stop()
 
     def _ensure_started(self) -> subprocess.Popen[bytes]:
+        if self._owner != os.getpid():
+            # A forked child (a vector env's worker) must not share the parent's pipes.
+            self._process, self._owner = None, os.getpid()
         if self._process is not None and self._process.poll() is None:
             return self._process
         # Each request carries the caller's sys.path, so the worker imports this very copy of
@@ -155,7 +159,7 @@ class IsolatedWorker:
 
     def _stop(self) -> None:
         process, self._process = self._process, None
-        if process is None:
+        if process is None or self._owner != os.getpid():
             return
         if process.poll() is None:
             process.kill()
