@@ -28,6 +28,7 @@ KINDS = (
     ("cannot be scaled into the range", "does not fit the extent range"),
     ("zero volume", "zero volume (flat or degenerate)"),
     ("no triangles", "empty or unreadable"),
+    ("empty or unreadable", "empty or unreadable"),
     ("cannot load it", "empty or unreadable"),
     ("non-finite", "non-finite vertices"),
     ("time limit", "decomposition past the time limit"),

@@ -261,9 +261,13 @@ def _vertex_extents(path: Path, data: bytes) -> np.ndarray:
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
     except Exception as exc:  # trimesh raises many types for bad files; report them uniformly
         raise MeshLoadError(f"mesh file {str(path)!r}: cannot load it ({type(exc).__name__}: {exc})") from exc
-    vertices = vertices[np.all(np.isfinite(vertices), axis=1)] if vertices.ndim == 2 else vertices[:0]
-    if len(vertices) < 4:
-        raise MeshLoadError(f"mesh file {str(path)!r}: empty or unreadable mesh (fewer than 4 finite vertices)")
+    finite = vertices[np.all(np.isfinite(vertices), axis=1)] if vertices.ndim == 2 else vertices[:0]
+    if len(finite) < 4:
+        raise MeshLoadError(
+            f"mesh file {str(path)!r}: empty or unreadable mesh ({len(vertices)} vertices, {len(finite)} of them "
+            "finite); a solid needs at least 4 finite vertices"
+        )
+    vertices = finite
     return np.ptp(vertices, axis=0)
 
 
