@@ -7,11 +7,16 @@ start state exactly. Seeds run on a local process pool, one scene per task.
 
     python benchmarks/make_test_sets.py --envs MPG-Occluded-v0 MPG-OccludedHard-v0 \\
         --objects 15 30 --count 500 --workers 16 [--out mpg_envs/test_scenes]
+
+A track on another object set (``MPG-OccludedHardNovel-v0``: ``object_set="random_urdfs_test"``)
+gets its own files (``occluded_hard_novel_<objects>.npz``), recording the digest of the object
+pack its scenes were made with.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -25,7 +30,8 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401
-from mpg_envs.scenes.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet  # noqa: E402
+from mpg_envs.scenes.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet, test_set_name  # noqa: E402
+from mpg_envs.simulation.random_urdfs import TEST_SET_NAME, test_pack_path  # noqa: E402
 
 _ENVS: dict[tuple[str, int, bool], gym.Env] = {}
 
@@ -60,6 +66,13 @@ def make_scene(task: tuple[str, int, int]) -> dict:
     }
 
 
+def _object_pack_meta(object_set: str) -> dict[str, str]:
+    """The digest of the packed objects a set's scenes were made with (tests check it against the shipped pack)."""
+    if object_set != TEST_SET_NAME:
+        return {}
+    return {"object_pack": test_pack_path().name, "object_pack_sha256": hashlib.sha256(test_pack_path().read_bytes()).hexdigest()}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", nargs="+", default=["MPG-Occluded-v0", "MPG-OccludedHard-v0"])
@@ -74,10 +87,15 @@ def main(argv: list[str] | None = None) -> int:
     tasks = [(e, n, args.seed + i) for e in args.envs for n in args.objects for i in range(args.count)]
     start = time.perf_counter()
     with ProcessPoolExecutor(args.workers) as pool:
-        scenes = list(pool.map(make_scene, tasks, chunksize=1))
+        scenes = []
+        for scene in pool.map(make_scene, tasks, chunksize=1):
+            scenes.append(scene)
+            if len(scenes) % 50 == 0:  # progress of long runs, in task order
+                print(f"{len(scenes)}/{len(tasks)} scenes, {time.perf_counter() - start:.0f} s", flush=True)
     for env_id in args.envs:
-        stage = gym.spec(env_id).kwargs["stage"]
-        name = mpg_envs.STAGES[stage].test_set
+        kwargs = gym.spec(env_id).kwargs
+        object_set = kwargs.get("object_set", "blocks")
+        name = test_set_name(mpg_envs.STAGES[kwargs["stage"]].test_set, object_set)
         for n in args.objects:
             rows = [s for (e, m, _), s in zip(tasks, scenes) if e == env_id and m == n]
             test_set = TestSet(
@@ -91,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
                 visible_fraction=np.array([r["visible_fraction"] for r in rows], np.float32),
                 meta={
                     "env_id": env_id,
+                    "object_set": object_set,
+                    **_object_pack_meta(object_set),
                     "generator_version": str(GENERATOR_VERSION),
                     "package_version": getattr(mpg_envs, "__version__", "unknown"),
                     "mujoco_version": mujoco.__version__,

@@ -59,6 +59,7 @@ from mpg_agents.learning.trials import grasp_trial_actions, move_trial_actions, 
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.simulation.objects import check_not_held_out
 from mpg_envs.tasks.config import EnvConfig
 
 
@@ -92,6 +93,8 @@ class Learner:
         self.config = config
         self.stage = stage_for_env(stage) if isinstance(stage, str) else stage
         self.steps = config.steps if config.steps is not None else self.stage.iterations
+        # Before the run folder exists: a held-out object set is refused with nothing written.
+        check_not_held_out(gym.spec(self.stage.env_id).kwargs.get("object_set", "blocks"), what=f"training on {self.stage.env_id}")
         self.out = prepare_run_folder(out)
         self.lock = RunLock(self.out)  # before anything in the folder is read or written
         self.resume_anyway, self.log = resume_anyway, log
@@ -137,12 +140,15 @@ class Learner:
         self._resume()
 
     def _make_env(self, num_objects: int | None) -> gym.Env:
+        """The training env; refuses objects held out for testing (:func:`~mpg_envs.simulation.objects.check_not_held_out`)."""
         kwargs: dict[str, Any] = {} if num_objects is None else {"num_objects": num_objects}
         if self.config.discriminator is not None:
             kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator)
         if self.stage.reward:
             kwargs["config"] = EnvConfig(reward=self.stage.reward_config())
-        return gym.make(self.stage.env_id, **kwargs)
+        env = gym.make(self.stage.env_id, **kwargs)
+        check_not_held_out("custom", env.unwrapped.object_set, f"training on {self.stage.env_id}")  # however they got there
+        return env
 
     def _objects_now(self, iteration: int) -> int | None:
         """The scene's object count at ``iteration``: the fixed count, else the curriculum's."""

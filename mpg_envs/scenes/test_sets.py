@@ -39,6 +39,20 @@ TEST_SET_WORKSPACE = Workspace()
 
 FORMAT = "mpg-test-set"
 
+OBJECT_SET_SUFFIXES: dict[str, str] = {"blocks": "", "random_urdfs_test": "_novel"}
+"""Object sets that have shipped test sets, and the suffix of their sets' names
+(``occluded_hard`` on blocks, ``occluded_hard_novel`` on the ``random_urdfs`` test split)."""
+
+
+def test_set_name(stage_test_set: str, object_set: str) -> str | None:
+    """The name of the shipped sets of a stage's test seeds (its ``StageSpec.test_set``) on
+    ``object_set``, or ``None`` when that object set has none."""
+    suffix = OBJECT_SET_SUFFIXES.get(object_set)
+    return None if suffix is None else f"{stage_test_set}{suffix}"
+
+
+test_set_name.__test__ = False  # type: ignore[attr-defined]  # not a pytest test
+
 
 @dataclass(frozen=True)
 class TestSet:

@@ -32,6 +32,16 @@ RANDOM_URDFS_SOURCE = "pybullet_data/random_urdfs (Bullet Physics SDK, https://g
 RANDOM_URDFS_COUNT = 1000
 """Objects in the full set."""
 
+TEST_SET_NAME = "random_urdfs_test"
+"""The ``object_set`` name of the test split as shipped (fitted, packed convex parts beside the
+test scenes: :func:`test_pack_path`); held out from training."""
+
+TEST_PACK_FILE = "random_urdfs_test_objects.npz"
+"""File name of the shipped test split's object pack in ``mpg_envs/test_scenes``."""
+
+_NAME = re.compile(r"random_urdf_(\d{3})")
+_SOURCE = re.compile(r"random_urdfs[/\\](\d{3})[/\\]\1\.obj")
+
 Split = Literal["test", "train", "all"]
 SPLITS = ("test", "train", "all")
 
@@ -54,6 +64,20 @@ class RandomUrdf:
     def is_test(self) -> bool:
         """pybullet's convention: numbers ending in 0 are test objects."""
         return self.number % 10 == 0
+
+
+def test_pack_path() -> Path:
+    """Where the shipped test split's object pack lives (:mod:`~mpg_envs.simulation.object_packs`)."""
+    return Path(__file__).resolve().parent.parent / "test_scenes" / TEST_PACK_FILE
+
+
+def is_test_object(name: str, source: str = "") -> bool:
+    """Whether an object named ``name`` (made from ``source``) is one of the set's test objects:
+    named ``random_urdf_NNN`` or made from ``random_urdfs/NNN/NNN.obj`` with ``NNN`` ending in 0."""
+    for match in (_NAME.fullmatch(name), _SOURCE.search(source)):
+        if match is not None and int(match.group(1)) % 10 == 0:
+            return True
+    return False
 
 
 def random_urdfs_folder() -> Path:

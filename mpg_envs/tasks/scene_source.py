@@ -94,15 +94,16 @@ def shipped_scene(env: MPGEnv, seed: int | None) -> SceneFile | None:
     those the set was generated with (its scenes would not be the env's)."""
     if seed is None or not env.use_test_set or env.stage.test_set is None:
         return None
-    if env._object_set_name != "blocks" or env.config.scene != SceneConfig() or env.config.object_set_seed != 0:
+    if env.config.scene != SceneConfig() or env.config.object_set_seed != 0:
         return None
     if env.visible_range != env.stage.visible_range:
         return None
-    from mpg_envs.scenes.test_sets import TEST_SET_WORKSPACE, find_test_set
+    from mpg_envs.scenes.test_sets import TEST_SET_WORKSPACE, find_test_set, test_set_name
 
-    if env.config.workspace != TEST_SET_WORKSPACE:
+    name = test_set_name(env.stage.test_set, env._object_set_name)  # the object set's own sets
+    if env.config.workspace != TEST_SET_WORKSPACE or name is None:
         return None
-    test_set = find_test_set(env.stage.test_set, env.num_objects)
+    test_set = find_test_set(name, env.num_objects)
     if test_set is None or not test_set.has_seed(seed):
         return None
     return test_set.scene(seed, env.object_set)

@@ -41,6 +41,14 @@ TRACKS: dict[str, TrackSpec] = {
             "randomization (light, colours, a 1 cm / 1 degree camera calibration error, RealSense "
             "depth noise and holes), drawn from each episode's seed; needs OpenGL",
         ),
+        TrackSpec(
+            "MPG-OccludedHardNovel-v0",
+            "OccludedHard",
+            {"object_set": "random_urdfs_test"},
+            "the hard track on objects no training uses: pybullet's random_urdfs test split (numbers "
+            "ending in 0) fitted to the gripper, shipped as convex parts with the test scenes "
+            "(no pybullet needed)",
+        ),
     )
 }
 """Track id -> spec; registered by ``import mpg_envs`` beside the stages' ids."""
