@@ -31,7 +31,7 @@ from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS  # noqa: E402
 from mpg_envs.simulation.meshes import MeshLoadError, load_mesh_file  # noqa: E402
 from mpg_envs.simulation.object_packs import save_object_pack  # noqa: E402
 from mpg_envs.simulation.random_urdfs import (  # noqa: E402
-    RANDOM_URDFS_LICENCE, RANDOM_URDFS_SOURCE, TEST_PACK_FILE, random_urdf_entries,
+    PACKED_SOURCE_PREFIX, RANDOM_URDFS_LICENCE, RANDOM_URDFS_SOURCE, TEST_PACK_FILE, random_urdf_entries,
 )  # fmt: skip
 
 LICENCE_FILE = "random_urdfs_test_LICENSE.txt"
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
             left_out[entry.number] = f"{asset.num_parts} convex parts, more than {MAX_PARTS}"
             continue
         # The source recorded is the set's, not this machine's path.
-        assets.append(_with_source(asset, f"pybullet_data/random_urdfs/{entry.number:03d}/{entry.number:03d}.obj"))
+        assets.append(_with_source(asset, f"{PACKED_SOURCE_PREFIX}{entry.number:03d}/{entry.number:03d}.obj"))
     version = _pybullet_version()
     meta = {
         "source": RANDOM_URDFS_SOURCE,

@@ -36,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mpg_envs.simulation.objects import ObjectAsset, blocks_object_set, load_mesh_folder
+from mpg_envs.simulation.objects import ObjectAsset, blocks_object_set, load_mesh_folder, load_object_set
+from mpg_envs.simulation.random_urdfs import PACKED_SOURCE_PREFIX, TEST_SET_NAME
 from mpg_envs.grid.workspace import Workspace
 
 SCENE_FORMAT = "mpg-scene"
@@ -90,6 +91,10 @@ class SceneFile:
             slightly interpenetrating; our own files were saved at rest).
         target_is_first_kept: the target is "the first object listed" (VPG's convention),
             so when outside objects are dropped it is the first object that stays.
+        simulated: the poses are a state this package's physics reached and left at rest (an
+            env's ``current_scene()``, a shipped test scene), placed as they are without the
+            interpenetration check meant for poses made elsewhere (objects of many convex
+            parts can rest a few millimetres into each other). Files read from disk are not.
     """
 
     objects: tuple[SceneObject, ...]
@@ -99,6 +104,7 @@ class SceneFile:
     object_set_seed: int = 0
     settle: bool = False
     target_is_first_kept: bool = False
+    simulated: bool = False
 
 
 # ------------------------------------------------------------------------------ checks
@@ -244,7 +250,7 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
     if not isinstance(doc, dict) or doc.get("format") != SCENE_FORMAT or doc.get("version") != SCENE_VERSION:
         raise SceneFileError(f"scene file {str(path)!r}: not an {SCENE_FORMAT} v{SCENE_VERSION} file")
     seed = int(doc.get("object_set_seed", 0))
-    blocks = None
+    blocks = packed = None
     folders: dict[str, dict[str, ObjectAsset]] = {}
     objects = []
     listed = doc.get("objects") or []
@@ -267,6 +273,9 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
         if source == "blocks":
             blocks = blocks or {a.name: a for a in blocks_object_set(seed=seed)}
             asset = blocks.get(name)
+        elif source.startswith(PACKED_SOURCE_PREFIX):  # the shipped random_urdfs test objects
+            packed = packed or {a.name: a for a in load_object_set(TEST_SET_NAME)}
+            asset = packed.get(name)
         else:
             folder = str(Path(mesh_dir) if mesh_dir is not None else Path(source).parent)
             if folder not in folders:

@@ -14,7 +14,8 @@ cylinder leaning across two others), stacks stand, and nothing leaves the table.
 Before anything is placed the scene's poses and count are checked
 (:func:`~mpg_envs.scenes.scene_io.check_scene`); once placed, objects interpenetrating deeper than
 :data:`~mpg_envs.scenes.scene_io.PENETRATION_TOLERANCE_M` raise naming the two and the depth
-(:func:`interpenetrations`).
+(:func:`interpenetrations`), unless the scene is a state the physics itself reached
+(``SceneFile.simulated``).
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ def apply_scene(
         if obj.active and i not in dropped:
             world.set_object_pose(i, obj.position, obj.quat)
     world.forward()
-    deep = interpenetrations(world, PENETRATION_TOLERANCE_M)
+    deep = [] if scene.simulated else interpenetrations(world, PENETRATION_TOLERANCE_M)
     if deep:
         names = [f"{scene.objects[a].label or f'object {a}'} and {scene.objects[b].label or f'object {b}'} by {1000 * d:.1f} mm"
                  for a, b, d in deep]
@@ -128,4 +129,4 @@ def scene_of(world: World, target: int | None, stage: str | None = None, object_
         SceneObject(asset, *world.object_pose(i), active=bool(world.active[i]), label=f"object {i} ({asset.name!r})")
         for i, asset in enumerate(world.assets)
     )
-    return SceneFile(objects, target, "", stage, object_set_seed)
+    return SceneFile(objects, target, "", stage, object_set_seed, simulated=True)

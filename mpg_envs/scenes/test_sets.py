@@ -108,7 +108,7 @@ class TestSet:
             if name not in by_name:
                 raise KeyError(f"test set {self.name!r}: asset {name!r} is not in the object set ({sorted(by_name)})")
             objects.append(SceneObject(by_name[name], self.positions[k, i], self.quats[k, i], True, f"object {i} ({name!r})"))
-        return SceneFile(tuple(objects), int(self.targets[k]), f"{self.name}_{self.num_objects}:{seed}")
+        return SceneFile(tuple(objects), int(self.targets[k]), f"{self.name}_{self.num_objects}:{seed}", simulated=True)
 
     def save(self, path: str | Path) -> Path:
         """Write the set as a compressed ``.npz``."""

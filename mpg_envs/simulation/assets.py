@@ -8,6 +8,7 @@ friction. The object sets (:mod:`mpg_envs.simulation.blocks`, :mod:`mpg_envs.sim
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -125,10 +126,12 @@ class ObjectAsset:
         b = self.bounds
         return b[1] - b[0]
 
-    @property
+    @functools.cached_property
     def part_volumes(self) -> np.ndarray:
-        """Volume (m^3) of each convex part."""
-        return np.array([mesh_volume(v, f) for v, f in self.parts])
+        """Volume (m^3) of each convex part (read-only; computed once, as every scene build reads it)."""
+        volumes = np.array([mesh_volume(v, f) for v, f in self.parts])
+        volumes.setflags(write=False)
+        return volumes
 
     @property
     def volume(self) -> float:

@@ -36,6 +36,10 @@ TEST_SET_NAME = "random_urdfs_test"
 """The ``object_set`` name of the test split as shipped (fitted, packed convex parts beside the
 test scenes: :func:`test_pack_path`); held out from training."""
 
+PACKED_SOURCE_PREFIX = "pybullet_data/random_urdfs/"
+"""The ``source`` of every packed object starts so (``pybullet_data/random_urdfs/NNN/NNN.obj``):
+the set's path, not a machine's, so a scene file of the track names the pack's objects."""
+
 TEST_PACK_FILE = "random_urdfs_test_objects.npz"
 """File name of the shipped test split's object pack in ``mpg_envs/test_scenes``."""
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401  (registers the ids)
+from mpg_envs.scenes.scene_io import read_scene, save_scene
 from mpg_envs.scenes.test_sets import TEST_SEED_START, find_test_set, test_set_name
 from mpg_envs.simulation import meshes, random_urdfs
 from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS
@@ -89,7 +90,7 @@ def test_the_shipped_test_set_holds_the_held_out_seeds_made_with_the_shipped_pac
         assert all(re.fullmatch(r"random_urdf_\d\d0", name) for name in test_set.assets.ravel())
 
 
-def test_it_resets_from_its_shipped_test_set_without_pybullet(monkeypatch):
+def test_it_resets_from_its_shipped_test_set_without_pybullet(monkeypatch, tmp_path):
     # No pybullet, and no mesh decomposition: the pack and the scenes are all a reset reads.
     for name in ("pybullet", "pybullet_data"):
         monkeypatch.setitem(sys.modules, name, None)  # import raises ImportError
@@ -108,6 +109,10 @@ def test_it_resets_from_its_shipped_test_set_without_pybullet(monkeypatch):
     for i in range(15):
         np.testing.assert_array_equal(env.world.object_position(i), test_set.positions[k, i])
     assert [o.asset.name for o in env.current_scene().objects] == test_set.assets[k].tolist()
+    # A saved scene of the track reads back with the packed objects (its sources are the set's paths).
+    again = read_scene(save_scene(env.current_scene(), tmp_path / "scene.json"))
+    assert [o.asset.name for o in again.objects] == test_set.assets[k].tolist() and again.target == test_set.targets[k]
+    np.testing.assert_array_equal(again.objects[0].asset.parts[0][0], env.object_set[[a.name for a in env.object_set].index(again.objects[0].asset.name)].parts[0][0])
 
 
 def test_training_refuses_the_held_out_objects(tmp_path, pack):
