@@ -7,8 +7,9 @@ mass properties to ``mpg_envs/test_scenes/random_urdfs_test_objects.npz`` with t
 beside it (``random_urdfs_test_LICENSE.txt``). The rule for leaving an object out is decided
 on the objects alone, never on test results: an object that no uniform scale fits to the
 gripper's range (too slender or too flat), that cannot be loaded, or whose decomposition has
-more than :data:`MAX_PARTS` convex parts (a mesh of many separate bodies: each such object
-makes every scene it is in several times slower to simulate and to reset) is left out, and
+more than :data:`MAX_PARTS` convex parts (a mesh of many separate bodies; the 4 such test
+objects have 44-104 parts against a median of 7, each adding as many geoms to simulate and
+ray-cast to every scene it is in as several typical objects) is left out, and
 the pack's metadata lists it with the reason. After re-packing, regenerate the track's test
 scenes (``benchmarks/make_test_sets.py --envs MPG-OccludedHardNovel-v0``).
 

@@ -6,7 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.tasks.stages import STAGES
+
+NOVEL_SCENE_TRIES = 100
+"""Scene draws the unseen-object track allows before ``InvalidSceneError``: a buried target
+stays at most 30% visible in about one draw in nine of these irregular objects (one in ten
+seeds found none in the default 20 draws, on tuning seeds). More draws only extend each
+seed's sequence, so a seed valid within 20 draws keeps its scene."""
 
 
 @dataclass(frozen=True)
@@ -44,7 +51,7 @@ TRACKS: dict[str, TrackSpec] = {
         TrackSpec(
             "MPG-OccludedHardNovel-v0",
             "OccludedHard",
-            {"object_set": "random_urdfs_test"},
+            {"object_set": "random_urdfs_test", "config": EnvConfig(scene_tries=NOVEL_SCENE_TRIES)},
             "the hard track on objects no training uses: pybullet's random_urdfs test split (numbers "
             "ending in 0) fitted to the gripper, shipped as convex parts with the test scenes "
             "(no pybullet needed)",
