@@ -154,7 +154,10 @@ def _solid(path: str, scale: float, seed: int, params: CoacdParams, use_coacd: b
     # Closed bodies (touching bodies can make the whole mesh look open: an edge of four faces).
     bodies = _closed_bodies(pieces)
     if not bodies:
-        raise ValueError(f"mesh file {path!r}: zero volume (every closed body is under {MIN_PART_VOLUME:g} m^3)")
+        raise ValueError(
+            f"mesh file {path!r}: zero volume at scale {scale:g} (every closed body is under {MIN_PART_VOLUME:g} m^3); "
+            "a solid with a body of at least that volume is needed (a larger scale, or fit='gripper')"
+        )
     volumes = [float(b.volume) for b in bodies]
     convex = [v >= CONVEX_VOLUME_RATIO * float(b.convex_hull.volume) for b, v in zip(bodies, volumes)]
     union = bodies[0] if len(bodies) == 1 else _union(path, bodies)
