@@ -293,10 +293,19 @@ def env_options_of(env: gym.Env) -> dict[str, Any]:
     """The keywords ``env`` was made with besides its registered ones (from its spec),
     JSON-ready (other values by ``repr``)."""
     spec = env.unwrapped.spec
-    if spec is None:
-        return {}
+    return {} if spec is None else _json_options(spec.kwargs)
+
+
+def registered_options(env_id: str) -> dict[str, Any]:
+    """The keywords ``env_id`` is registered with besides its stage (a track's fixed ones,
+    such as ``MPG-OccludedHardCamera-v0``'s ``obs_mode``), JSON-ready; ``{}`` for an id
+    Gymnasium does not know."""
+    return _json_options(gym.registry[env_id].kwargs) if env_id in gym.registry else {}
+
+
+def _json_options(kwargs: dict[str, Any]) -> dict[str, Any]:
     options = {}
-    for key, value in spec.kwargs.items():
+    for key, value in kwargs.items():
         if key in ("stage", "num_objects"):  # the env and the object count are recorded apart
             continue
         options[key] = value if isinstance(value, (bool, int, float, str, type(None), list, tuple)) else repr(value)
