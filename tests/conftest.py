@@ -2,6 +2,7 @@
 
 import os
 import sys
+from pathlib import Path
 
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -36,15 +37,30 @@ def blocks():
     return {asset.name: asset for asset in blocks_object_set()}
 
 
-@pytest.fixture(scope="session")
-def vpg_dir():
-    """The VPG peer files (meshes and test cases), outside the repo; skip if absent."""
-    from pathlib import Path
+PEERS_DIR = Path(os.environ.get("MPG_PEERS_DIR") or Path(__file__).resolve().parents[1].parent / "shared" / "peers")
+"""The peers' published files, beside the repository (``<repo>/../shared/peers``) and never
+copied into it; ``MPG_PEERS_DIR`` names another folder."""
 
-    path = Path(__file__).resolve().parents[2] / "shared" / "peers" / "vpg"
-    if not path.is_dir():
-        pytest.skip(f"VPG peer files not found at {path}")
-    return path
+PEER_FOLDERS = ("vpg/test-cases", "vpg/blocks", "gti")
+
+
+@pytest.fixture(scope="session")
+def peers_dir() -> Path:
+    """The one lookup of the peers' folder. Absent, its tests skip on a user's machine and fail
+    under CI (``CI=true``), where a skip would hide that they never ran."""
+    missing = [sub for sub in PEER_FOLDERS if not (PEERS_DIR / sub).is_dir()]
+    if missing:
+        message = f"the peers' files ({', '.join(missing)}) are not in {PEERS_DIR}; set MPG_PEERS_DIR to their folder"
+        if os.environ.get("CI", "").lower() == "true":
+            pytest.fail(message)
+        pytest.skip(message)
+    return PEERS_DIR
+
+
+@pytest.fixture(scope="session")
+def vpg_dir(peers_dir: Path) -> Path:
+    """The VPG peer files (meshes and test cases)."""
+    return peers_dir / "vpg"
 
 
 @pytest.fixture

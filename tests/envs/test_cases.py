@@ -30,17 +30,6 @@ from mpg_envs.scenes.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, 
 from mpg_envs.scenes.vpg_scenes import GTI_COLOURS
 from mpg_envs.grid.workspace import Workspace
 
-PEERS = Path(__file__).resolve().parents[2] / ".." / "shared" / "peers"
-
-
-@pytest.fixture(scope="module")
-def peers_dir() -> Path:
-    """The peers' published files (beside the repository, never copied into it)."""
-    if not (PEERS / "vpg" / "test-cases").is_dir() or not (PEERS / "gti").is_dir():
-        pytest.skip(f"the peers' files (vpg/test-cases, vpg/blocks, gti) are not at {PEERS.resolve()}")
-    return PEERS
-
-
 @pytest.fixture(scope="module")
 def env():
     import gymnasium as gym
