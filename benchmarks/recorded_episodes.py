@@ -126,9 +126,9 @@ def differences(before: dict[str, Any], after: dict[str, Any]) -> list[str]:
         for k, (sa, sb) in enumerate(zip(a["steps"], b["steps"])):
             for field in sorted(set(sa) | set(sb)):
                 va, vb = sa.get(field), sb.get(field)
-                if field == "info":  # timings are not behaviour
+                if field == "info":  # timings are not behaviour; keys added since are not a change
                     va = {x: y for x, y in (va or {}).items() if "seconds" not in x}
-                    vb = {x: y for x, y in (vb or {}).items() if "seconds" not in x}
+                    vb = {x: y for x, y in (vb or {}).items() if x in va}
                 if va != vb:
                     diffs.append(f"{key} step {k}: {field} {va!r} != {vb!r}")
         if len(a["steps"]) != len(b["steps"]):

@@ -44,17 +44,22 @@ copied into it; ``MPG_PEERS_DIR`` names another folder."""
 PEER_FOLDERS = ("vpg/test-cases", "vpg/blocks", "gti")
 
 
-@pytest.fixture(scope="session")
-def peers_dir() -> Path:
-    """The one lookup of the peers' folder. Absent, its tests skip on a user's machine and fail
-    under CI (``CI=true``), where a skip would hide that they never ran."""
-    missing = [sub for sub in PEER_FOLDERS if not (PEERS_DIR / sub).is_dir()]
+def peers_or_stop(folder: Path, ci: bool) -> Path:
+    """``folder`` if it holds the peers' files; else the test skips on a user's machine and
+    fails under CI, where a skip would hide that the test never ran."""
+    missing = [sub for sub in PEER_FOLDERS if not (folder / sub).is_dir()]
     if missing:
-        message = f"the peers' files ({', '.join(missing)}) are not in {PEERS_DIR}; set MPG_PEERS_DIR to their folder"
-        if os.environ.get("CI", "").lower() == "true":
+        message = f"the peers' files ({', '.join(missing)}) are not in {folder}; set MPG_PEERS_DIR to their folder"
+        if ci:
             pytest.fail(message)
         pytest.skip(message)
-    return PEERS_DIR
+    return folder
+
+
+@pytest.fixture(scope="session")
+def peers_dir() -> Path:
+    """The one lookup of the peers' folder (:data:`PEERS_DIR`; fails when absent under ``CI=true``)."""
+    return peers_or_stop(PEERS_DIR, os.environ.get("CI", "").lower() == "true")
 
 
 @pytest.fixture(scope="session")
