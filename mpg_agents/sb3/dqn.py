@@ -19,6 +19,7 @@ import numpy as np
 from stable_baselines3.dqn.dqn import DQN
 
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.sb3.replay import SB3HeightmapReplayBuffer
 from mpg_agents.sb3.policy import MPGNetPolicy
 from mpg_agents.learning.td_step import TDStepConfig, td_step
 from mpg_agents.learning.train_config import TrainConfig
@@ -90,7 +91,7 @@ class MPGDQN(DQN):
     ) -> None:
         settings = sb3_settings(config if config is not None else TrainConfig())
         settings["policy_kwargs"] = {**settings["policy_kwargs"], **(kwargs.pop("policy_kwargs", None) or {})}
-        settings.update(learning_starts=LEARNING_STARTS, replay_buffer_class=PrioritizedHeightmapReplayBuffer)
+        settings.update(learning_starts=LEARNING_STARTS, replay_buffer_class=SB3HeightmapReplayBuffer)
         settings.update(kwargs)
         buffer_class = settings["replay_buffer_class"]
         if not (isinstance(buffer_class, type) and issubclass(buffer_class, PrioritizedHeightmapReplayBuffer)):
