@@ -277,7 +277,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     try:
         import gymnasium as gym
 
-        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict
+        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict, format_q_star
         from mpg_agents.evaluation.policy_zoo import make_policy
 
         _check_env_id(args.env)
@@ -289,7 +289,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
             raise UsageError(f"--quantile must be in [0, 1], got {args.quantile}")
         env = gym.make(args.env, **({"num_objects": args.num_objects} if args.num_objects is not None else {}))
         net = make_policy(args.policy, env, **({"grasp_fingers": args.grasp_fingers} if args.grasp_fingers else {})).policy
-        print(f"Q*_g in the checkpoint: {net.q_star:.4f}")
+        print(f"Q*_g in the checkpoint: {format_q_star(net.q_star)}")
 
         def progress(k: int, grasps: int, taken: int) -> None:
             print(f"  episode {k + 1}/{args.episodes}: {taken} of {grasps} grasps took the target", flush=True)

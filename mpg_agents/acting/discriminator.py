@@ -11,6 +11,7 @@ from typing import Any, Mapping
 
 import torch
 
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.acting.weights import load_mpgnet
 
@@ -27,9 +28,10 @@ class Discriminator:
         self.net = net
 
     @classmethod
-    def from_weights(cls, path: str | Path) -> "Discriminator":
-        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net)."""
-        net, _ = load_mpgnet(path, primitives=("grasp",))
+    def from_weights(cls, path: str | Path, geometry: FingerGeometry | None = None) -> "Discriminator":
+        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net); ``geometry``: the
+        grasp geometry of the envs it scores for (default: the default env's)."""
+        net, _ = load_mpgnet(path, primitives=("grasp",), geometry=geometry)
         return cls(net)
 
     def __call__(self, obs: Mapping[str, Any]) -> float:

@@ -105,6 +105,7 @@ class NetworkPolicy:
 
         from mpg_agents.acting.agent import MPGAgent
         from mpg_agents.acting.grasp_threshold import check_override
+        from mpg_agents.acting.spaces import finger_geometry
 
         torch.set_flush_denormal(True)  # see mpg_agents.learning.learner: denormals slow CPUs down
         path = Path(path)
@@ -119,7 +120,9 @@ class NetworkPolicy:
             overrides["grasp_fingers"] = grasp_fingers
         if move_fingers is not None:
             overrides["move_fingers"] = move_fingers
-        self.policy = MPGAgent.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
+        self.policy = MPGAgent.from_weights(
+            path, env.observation_space, env.action_space, net_overrides=overrides, geometry=finger_geometry(env)
+        )
         if coordination is not None:
             self.policy.set_coordination(coordination)
         if q_star is not None:

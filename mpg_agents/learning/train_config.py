@@ -43,9 +43,9 @@ class TrainConfig:
     q_bounds: tuple[float, float] | None = None  # clamp TD targets to the feasible returns (see td_step.TDStepConfig)
     # Training aids (paper, Simulation Experiments).
     heuristic_after_failed_grasps: int = 2
-    # The run's starting Q*_g, overriding the starting checkpoint's; NaN: the checkpoint's
+    # The run's starting Q*_g, overriding the starting checkpoint's; None: the checkpoint's
     # (mpg_agents.acting.grasp_threshold.starting_q_star).
-    q_star: float = UNCALIBRATED
+    q_star: float | None = UNCALIBRATED
     # Not the paper's (pure RL): oracle episodes whose transitions seed the replay of a fresh run (0: none).
     demonstration_episodes: int = 0
     # The discriminator: the fixed Stage II grasp net that scores states for the move/push rewards.

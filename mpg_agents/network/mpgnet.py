@@ -31,20 +31,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.inputs import normalize_inputs
 from mpg_agents.network.mobilenet import MobileNetV3Features, load_torchvision_features
 from mpg_agents.network.mpgnet_config import ROUGH_MASKED, MPGNetConfig
 from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches
 from mpg_agents.network.regions import footprint_top, grasp_pixels, least_blocked, region_max, target_region
 from mpg_agents.network.rotations import rotation_grids
-from mpg_envs.grid.grasp_geometry import fingers_blocked
-from mpg_envs.simulation.primitives import PrimitiveConfig
-from mpg_envs.grid.workspace import Workspace
 
 
 @dataclass
@@ -95,12 +92,28 @@ class MPGNet(nn.Module):
     ``depth`` metres ``(B, 224, 224)``, ``mask`` 0/1 ``(B, 224, 224)``), as numpy arrays or
     tensors, batched or not. The output of :meth:`forward` is one ``(B, 16, 224, 224)`` Q
     tensor per primitive.
+
+    Args:
+        config: the architecture and its settings (default: the paper's).
+        geometry: the env's grasp geometry; needed (and only read) when ``config`` asks for
+            finger masks (``grasp_fingers`` or ``move_fingers`` ``"clear"``).
+
+    Raises:
+        ValueError: finger masks without a ``geometry``, or one of another heightmap size.
     """
 
-    def __init__(self, config: MPGNetConfig | None = None) -> None:
+    def __init__(self, config: MPGNetConfig | None = None, geometry: FingerGeometry | None = None) -> None:
         super().__init__()
         self.config = config if config is not None else MPGNetConfig()
         cfg = self.config
+        if geometry is None and self.needs_geometry:
+            raise ValueError(
+                "this MPGNet masks grasps or moves by where the fingers land (grasp_fingers/move_fingers 'clear'), "
+                "which needs the env's FingerGeometry (mpg_agents.acting.spaces.finger_geometry(env))"
+            )
+        if geometry is not None:
+            geometry.check_size(cfg.heightmap_size)
+        self.geometry = geometry
         self.mask_trunk = MobileNetV3Features(cfg.variant, 1, cfg.trunk_depth, cfg.bn_momentum)
         self.branches = nn.ModuleDict({p: PrimitiveNet(cfg, self.mask_trunk.out_channels) for p in cfg.primitives})
         self.output_stride = self.mask_trunk.output_stride
@@ -118,6 +131,11 @@ class MPGNet(nn.Module):
     def primitives(self) -> tuple[str, ...]:
         """The branches this network has, in canonical order."""
         return self.config.primitives
+
+    @property
+    def needs_geometry(self) -> bool:
+        """Whether the configuration asks for finger masks (made with a :class:`FingerGeometry`)."""
+        return self.config.uses_finger_masks
 
     # ------------------------------------------------------------------ inputs
     def normalize(self, obs: Mapping[str, Any]) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor | None]:
@@ -190,7 +208,7 @@ class MPGNet(nn.Module):
             grasp_region = grasp_pixels(binary, depth, cfg.target_margin_px, band)
         move_region = footprint_top(binary, depth, cfg.move_band_m / cfg.depth_std) if cfg.move_region == "top" else None
         region = target_region(binary)
-        blocked = self._finger_blocking(depth) if "clear" in (cfg.grasp_fingers, cfg.move_fingers) else None
+        blocked = self._finger_blocking(depth) if self.needs_geometry else None
         grasp_fingers = move_fingers = None
         if cfg.grasp_fingers == "clear":
             grasp_fingers = least_blocked(blocked, region if grasp_region is None else grasp_region, cfg.finger_tolerance_m)
@@ -205,11 +223,9 @@ class MPGNet(nn.Module):
         pixel and rotation land blocked, ``(B, R, H, W)`` metres, from the normalised depth
         planes ``(B, 1, H, W)`` (the clip at ``depth_max`` lies far above any finger)."""
         cfg = self.config
+        assert self.geometry is not None  # checked when built
         metres = (depth[:, 0].float() * cfg.depth_std + cfg.depth_mean).cpu().numpy()
-        grasp, resolution = PrimitiveConfig(), Workspace().resolution
-        return torch.from_numpy(
-            np.stack([fingers_blocked(m, resolution, grasp.grasp_depth, grasp.grasp_min_height, cfg.num_rotations) for m in metres])
-        ).to(depth.device)
+        return torch.from_numpy(self.geometry.blocked(metres, cfg.num_rotations)).to(depth.device)
 
     def encode(self, obs: Mapping[str, Any] | PreparedObs, rotations: Tensor | None = None) -> EncodedObs:
         """Pad and rotate a batch and run the shared mask trunk once.

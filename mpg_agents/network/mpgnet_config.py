@@ -199,6 +199,12 @@ class MPGNetConfig:
         raise ValueError(f"variant must be 'large' or 'small', got {variant!r}")
 
     @property
+    def uses_finger_masks(self) -> bool:
+        """Whether grasps or moves are masked by where the fingers land (``"clear"``), which
+        needs the env's grasp geometry (:class:`~mpg_agents.network.finger_geometry.FingerGeometry`)."""
+        return "clear" in (self.grasp_fingers, self.move_fingers)
+
+    @property
     def padded_size(self) -> int:
         """Side of the padded heightmap: ``ceil(size * sqrt 2)`` rounded up to a multiple of 32."""
         return padded_side(self.heightmap_size)

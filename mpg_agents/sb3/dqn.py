@@ -18,6 +18,7 @@ from typing import Any, Sequence
 import numpy as np
 from stable_baselines3.dqn.dqn import DQN
 
+from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.sb3.replay import SB3HeightmapReplayBuffer
 from mpg_agents.sb3.policy import MPGNetPolicy
@@ -91,6 +92,8 @@ class MPGDQN(DQN):
     ) -> None:
         settings = sb3_settings(config if config is not None else TrainConfig())
         settings["policy_kwargs"] = {**settings["policy_kwargs"], **(kwargs.pop("policy_kwargs", None) or {})}
+        if env is not None and not isinstance(env, str) and hasattr(env.unwrapped, "config"):
+            settings["policy_kwargs"].setdefault("geometry", finger_geometry(env))  # the finger masks of this env
         settings.update(learning_starts=LEARNING_STARTS, replay_buffer_class=SB3HeightmapReplayBuffer)
         settings.update(kwargs)
         buffer_class = settings["replay_buffer_class"]
