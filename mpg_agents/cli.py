@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from mpg_agents.acting.coordination import COORDINATIONS
+from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.evaluation.env_options import parse_env_options
 
 
@@ -114,6 +115,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--variant", choices=("small", "large"), help="MobileNetV3 trunks (default small)")
     parser.add_argument("--num-objects", type=int, help="a fixed object count (default: the stage's)")
     parser.add_argument("--q-star", type=float, help="the grasp threshold Q*_g (default: from --init or calibrated)")
+    parser.add_argument("--device", choices=DEVICES, help="networks and batches: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument("--discriminator", help="the discriminator: a fixed grasp-net checkpoint scoring states (Stages III-V)")
     parser.add_argument("--stages", help="pipeline: which stages, by name or position, e.g. 1,2")
     parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: only Stage V, from scratch")
@@ -187,6 +189,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                         help="network policies: grasp threshold Q*_g (override the checkpoint's calibrated one)")
     parser.add_argument("--avoid-repeats", action="store_true",
                         help="network policies: never repeat an action on an unchanged scene (take the best other one)")
+    parser.add_argument("--device", choices=DEVICES, help="network policies: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
     parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="with --workers > 1: Ray (default) or a local process pool (no Ray start-up)")
@@ -203,6 +206,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel
 
         _check_env_id(args.env)
+        if args.device is not None:
+            resolve_device(args.device)  # CUDA asked for where there is none: say so before any episode
         if args.policy not in BUILTIN:
             _check_checkpoint(args.policy)
         if args.episodes < 1:
@@ -216,6 +221,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             extra += (("avoid_repeats", True),)
         if args.q_star is not None:
             extra += (("q_star", args.q_star),)
+        if args.device is not None:
+            extra += (("device", args.device),)
         env_options = parse_env_options(args.env_option)
         if args.cases is not None:
             return _eval_cases(args, dict(extra), env_options)
@@ -273,6 +280,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--grasp-fingers", choices=("any", "clear"),
                         help="which grasps may act (override the checkpoint's; calibrate with the setting you evaluate with)")
     parser.add_argument("--json", help="also write the measurement (every successful grasp's Q) to this JSON file")
+    parser.add_argument("--device", choices=DEVICES, help="the network: auto (default: CUDA when available), cpu or cuda")
     args = parser.parse_args(argv)
     try:
         import gymnasium as gym
@@ -288,7 +296,8 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         if not 0.0 <= args.quantile <= 1.0:
             raise UsageError(f"--quantile must be in [0, 1], got {args.quantile}")
         env = gym.make(args.env, **({"num_objects": args.num_objects} if args.num_objects is not None else {}))
-        net = make_policy(args.policy, env, **({"grasp_fingers": args.grasp_fingers} if args.grasp_fingers else {})).policy
+        options = {"grasp_fingers": args.grasp_fingers} if args.grasp_fingers else {}
+        net = make_policy(args.policy, env, **options, **({"device": args.device} if args.device else {})).policy
         print(f"Q*_g in the checkpoint: {format_q_star(net.q_star)}")
 
         def progress(k: int, grasps: int, taken: int) -> None:

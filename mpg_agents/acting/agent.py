@@ -244,6 +244,12 @@ class MPGAgent(AgentMethods):
         """Where the network's tensors are."""
         return next(self.parameters()).device
 
+    def to(self, device: torch.device | str) -> "MPGAgent":
+        """Move the network (and Q*_g's buffer) to ``device``; returns the agent."""
+        self.q_net.to(device)
+        self.threshold.to(device)
+        return self
+
     def parameters(self) -> Iterator[nn.Parameter]:
         """The network's parameters (what an optimiser trains)."""
         return self.q_net.parameters()

@@ -28,11 +28,13 @@ class Discriminator:
         self.net = net
 
     @classmethod
-    def from_weights(cls, path: str | Path, geometry: FingerGeometry | None = None) -> "Discriminator":
-        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net); ``geometry``: the
-        grasp geometry of the envs it scores for (default: the default env's)."""
+    def from_weights(
+        cls, path: str | Path, geometry: FingerGeometry | None = None, device: torch.device | str = "cpu"
+    ) -> "Discriminator":
+        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net) on ``device``;
+        ``geometry``: the grasp geometry of the envs it scores for (default: the default env's)."""
         net, _ = load_mpgnet(path, primitives=("grasp",), geometry=geometry)
-        return cls(net)
+        return cls(net.to(device))
 
     def __call__(self, obs: Mapping[str, Any]) -> float:
         was_training = self.net.training

@@ -39,6 +39,7 @@ import torch
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.acting.agent import MPGAgent
 from mpg_agents.learning.demonstrations import collect_demonstrations
+from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.discriminator import Discriminator
 from mpg_agents.acting.episode_loop import Step, episode_steps
 from mpg_agents.learning.exploration import Choice, Explorer, linear_epsilon
@@ -91,6 +92,7 @@ class Learner:
         torch.set_num_threads(config.torch_threads)
         # A young network's eval-mode activations go denormal and slow the CPU down 10x.
         torch.set_flush_denormal(True)
+        self.device = resolve_device(config.device)  # networks and batches; the replay and the env stay on the host
         torch.manual_seed(config.seed)  # before the networks are built: the seed fixes their initial weights
         self.env = self._make_env(self._objects_now(0))
         env = self.env.unwrapped
@@ -99,8 +101,9 @@ class Learner:
         self.policy = MPGAgent.build(
             env.observation_space, env.action_space, variant=config.variant, branches=self.stage.branches or PRIMITIVES,
             coordination=self.stage.coordination, net_config=config.net_config, geometry=finger_geometry(self.env),
-        )
+        ).to(self.device)
         self.target_q = MPGQFunction(self.policy.net_config, self.policy.action_primitives, self.policy.q_net.mpgnet.geometry)
+        self.target_q.to(self.device)
         self.target_q.set_training_mode(False)
         # What the agent acts with: the env's primitives it has a branch for.
         self.trainable = self.stage.trainable if self.stage.trainable is not None else self.policy.usable_primitives
@@ -113,7 +116,7 @@ class Learner:
             self.net.branches[to].load_state_dict(self.net.branches[source].state_dict())
         self.target.load_state_dict(self.net.state_dict())
         self.replay = PrioritizedHeightmapReplayBuffer(
-            config.replay_capacity, env.observation_space, env.action_space, device="cpu", alpha=config.priority_alpha, seed=config.seed
+            config.replay_capacity, env.observation_space, env.action_space, device=self.device, alpha=config.priority_alpha, seed=config.seed
         )
         self.rng = np.random.default_rng(config.seed)
         net_cfg = self.policy.net_config
@@ -135,7 +138,7 @@ class Learner:
             kwargs["num_objects"] = num_objects
         env_config = EnvConfig(reward=self.stage.reward_config()) if self.stage.reward else EnvConfig()
         if self.config.discriminator is not None:
-            kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator, geometry_of_config(env_config))
+            kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator, geometry_of_config(env_config), self.device)
         if self.stage.reward:
             kwargs["config"] = env_config
         return gym.make(self.stage.env_id, **kwargs)

@@ -54,6 +54,7 @@ class TrainConfig:
     checkpoint_every: int = 100
     window: int = 200  # grasp success rate per this many iterations (paper)
     torch_threads: int = 2
+    device: str = "auto"  # networks and batches: auto (CUDA when available) | cpu | cuda; replay and envs stay on the host
     net_config: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:

@@ -39,7 +39,7 @@ from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.inputs import normalize_inputs
 from mpg_agents.network.mobilenet import MobileNetV3Features, load_torchvision_features
 from mpg_agents.network.mpgnet_config import ROUGH_MASKED, MPGNetConfig
-from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches
+from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches, trunk_chunk
 from mpg_agents.network.regions import footprint_top, grasp_pixels, least_blocked, region_max, target_region
 from mpg_agents.network.rotations import rotation_grids
 
@@ -175,7 +175,8 @@ class MPGNet(nn.Module):
         Rotation ``k + R/4`` is rotation ``k`` turned by exactly 90 degrees about the padded
         frame's centre, which maps pixel centres onto pixel centres; so only the first quarter
         is interpolated and the rest are exact ``rot90`` copies (4x less resampling, identical
-        values).
+        values). The whole batch is resampled in one call: the quarter's grids are stacked
+        along the output rows, so each sample is read once and no loop runs per sample.
         """
         r, s = self.config.num_rotations, self.config.padded_size
         b, c = x.shape[:2]
@@ -183,12 +184,11 @@ class MPGNet(nn.Module):
         quarter = r // 4 if r % 4 == 0 else r
         out = torch.empty((b * r, c, s, s), device=x.device, dtype=x.dtype, memory_format=self._memory_format())
         blocks = out.view(b, r // quarter, quarter, c, s, s)
-        padded = self._padded(x)
-        for i in range(b):
-            source = padded[i : i + 1].expand(quarter, -1, -1, -1)
-            base = F.grid_sample(source, grids[:quarter], mode="bilinear", padding_mode="zeros", align_corners=True)
-            for turns in range(r // quarter):
-                blocks[i, turns].copy_(torch.rot90(base, turns, dims=(2, 3)) if turns else base)
+        stacked = grids[:quarter].reshape(1, quarter * s, s, 2).expand(b, -1, -1, -1)
+        base = F.grid_sample(self._padded(x), stacked, mode="bilinear", padding_mode="zeros", align_corners=True)
+        base = base.view(b, c, quarter, s, s).transpose(1, 2)  # (B, quarter, C, S, S)
+        for turns in range(r // quarter):
+            blocks[:, turns].copy_(torch.rot90(base, turns, dims=(3, 4)) if turns else base)
         return out
 
     def _unrotate(self, coarse: Tensor, rotations: Tensor) -> Tensor:
@@ -248,7 +248,7 @@ class MPGNet(nn.Module):
             if rot.numel() != b or (rot < 0).any() or (rot >= r).any():
                 raise ValueError(f"rotations must be {b} indices in 0..{r - 1}, got {rotations}")
             planes = self._rotate(prep.planes, rot)
-        size = None if self.training else self.config.trunk_batch
+        size = trunk_chunk(self.config, self.training, planes)
         return EncodedObs(
             planes=planes,
             mask_features=run_in_batches(self.mask_trunk, planes, size, first_channel=PLANES["mask"]),

@@ -9,7 +9,7 @@ network, coordination and Q*_g); the target network is SB3's.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Sequence
 
 import torch
 from gymnasium import spaces
