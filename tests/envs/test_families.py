@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mpg_envs.scenes.scene_io import SceneFile, SceneObject, read_scene, save_scene
-from mpg_envs.simulation.assets import MASS_RANGE, TABLEAU_10, WOOD_DENSITY, mesh_volume
+from mpg_envs.simulation.assets import MASS_RANGE, TABLEAU_10, WOOD_DENSITY, mesh_centroid, mesh_volume
 from mpg_envs.simulation.families import (
     FAMILY_SEED_RANGES,
     FAMILY_SET_SIZE,
@@ -137,8 +137,8 @@ def test_family_set_assets(cache_dir: Path) -> None:
         assert asset.source == "hollow" and asset.rgba == TABLEAU_10[i]
         assert asset.mass == pytest.approx(float(np.clip(WOOD_DENSITY * asset.volume, *MASS_RANGE)))
         # The object frame's origin is the centre of mass of the parts.
-        centroids = [np.mean(v, axis=0) for v, _ in asset.parts]
-        assert np.all(np.abs(asset.bounds).max(axis=0) < 0.1) and len(centroids) == asset.num_parts
+        centroids = np.array([mesh_centroid(v, f) for v, f in asset.parts])
+        np.testing.assert_allclose(asset.part_volumes @ centroids / asset.volume, 0.0, atol=1e-12)
     mix = family_object_set("procedural", 3, cache_dir, size=7)
     assert [a.name for a in mix] == ["superquadric-00", "compound-00", "extrusion-00", "bent-00", "hollow-00", "superquadric-01", "compound-01"]
     assert [a.source for a in mix][:5] == list(FAMILY_NAMES)
@@ -191,3 +191,11 @@ def test_scene_file_with_procedural_objects_reads_back(tmp_path: Path) -> None:
     for written, loaded in zip(assets, (o.asset for o in read.objects)):
         assert loaded.name == written.name and loaded.rgba == written.rgba and loaded.mass == written.mass
         assert np.array_equal(loaded.vertices, written.vertices)
+
+
+def test_env_takes_a_family_by_name(make_env) -> None:
+    env = make_env("MPG-Stage1-v0", object_set="bent")
+    assert [a.name for a in env.object_set] == [f"bent-{i:02d}" for i in range(FAMILY_SET_SIZE)]
+    _, info = env.reset(seed=0)
+    assert info["objects_left"] == 5
+    assert all(asset.source == "bent" for asset in env.world.assets)
