@@ -10,7 +10,8 @@ reference):
 * the scripted oracle (:class:`~mpg_envs.policies.oracle.OraclePolicy`) on ``MPG-OccludedHard-v0``'s
   rules with ``object_set=<set>``: episode ``i`` reset with seed ``--seed + i`` (``mpg-eval``'s
   episodes and metrics), its success rate with a Wilson 95% interval, mean motions, end reasons
-  and the mean reset time (dropping the objects until the hard track's start condition holds).
+  and the mean reset time (dropping the objects until the hard track's start condition holds);
+  a seed that makes no start scene (``InvalidSceneError``) is listed and not played.
 
 Defaults use the tuning splits (object-set seed 700000, env seeds 700000-), so tuning a
 family's ranges never looks at held-out seeds. Prints a Markdown table; ``--json`` writes
@@ -22,6 +23,7 @@ every number and episode record.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -38,6 +40,7 @@ import numpy as np  # noqa: E402
 import mpg_envs  # noqa: E402,F401  (registers the envs)
 from mpg_agents.evaluation.evaluate import run_episodes, summarise  # noqa: E402
 from mpg_envs.policies.oracle import OraclePolicy  # noqa: E402
+from mpg_envs.scenes.generators import InvalidSceneError  # noqa: E402
 from mpg_envs.simulation.families import PROCEDURAL_SETS  # noqa: E402
 from mpg_envs.simulation.objects import load_object_set  # noqa: E402
 from mpg_envs.simulation.world import World  # noqa: E402
@@ -77,14 +80,23 @@ def oracle_cell(name: str, set_seed: int, objects: int, episodes: int, seed: int
 
     def on_record(record) -> None:
         print(f"  {name}: {record.describe()}", flush=True)
-        reset_start[0] = time.perf_counter()
 
-    reset_start[0] = time.perf_counter()
     start = time.perf_counter()
-    records = run_episodes(oracle, env, range(episodes), seed, on_record=on_record, on_reset=on_reset)
-    result = summarise(records, policy="oracle", env_id=ENV_ID, num_objects=objects, seed=seed, wall_seconds=time.perf_counter() - start)
+    records, no_scene = [], []
+    for index in range(episodes):
+        reset_start[0] = time.perf_counter()
+        try:
+            records += run_episodes(oracle, env, [index], seed, on_record=on_record, on_reset=on_reset)
+        except InvalidSceneError as exc:  # the seed makes no start scene: counted, not played
+            print(f"  {name}: episode {index} (seed {seed + index}): no start scene ({exc})", flush=True)
+            no_scene.append(seed + index)
     env.close()
-    return {"result": result.to_dict(), "mean_reset_s": float(np.mean(resets)) if resets else None}
+    if not records:
+        return {"no_start_scene": no_scene}
+    # Numbered as played (summarise wants 0..n-1); each record keeps its own env seed.
+    records = [dataclasses.replace(r, index=k) for k, r in enumerate(records)]
+    result = summarise(records, policy="oracle", env_id=ENV_ID, num_objects=objects, seed=seed, wall_seconds=time.perf_counter() - start)
+    return {"result": result.to_dict(), "mean_reset_s": float(np.mean(resets)) if resets else None, "no_start_scene": no_scene}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -113,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
             r = row["result"]
             lo, hi = r["success_interval"]
             cells = [f"{r['task_success_rate']:.0%} [{lo:.0%}, {hi:.0%}] of {r['episodes']}", f"{r['average_motions']:.2f}", f"{row['mean_reset_s']:.1f}"]
+            if row["no_start_scene"]:
+                cells[0] += f" (no start scene: seeds {row['no_start_scene']})"
         print(f"| {name} | {row['set_size']} | {row['cold_s']:.2f} | {row['cached_s']:.3f} | {row['world_s']:.2f} | {' | '.join(cells)} |")
     return 0
 
