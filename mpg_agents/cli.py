@@ -1,13 +1,15 @@
-"""Command lines: ``mpg-train``, ``mpg-eval``, ``mpg-calibrate`` and ``mpg-plot``.
+"""Command lines: ``mpg-train``, ``mpg-eval``, ``mpg-calibrate``, ``mpg-export`` and ``mpg-plot``.
 
-Bad input (an unknown env id, a missing checkpoint, a checkpoint of another architecture, an
-unreadable config file) ends the command with exit status 2 and one clear line on stderr.
+Bad input (an unknown env id, a missing or foreign checkpoint, an unreadable config file, a bad
+setting, an output path that cannot be written, a run folder another process trains in) ends
+the command before any work with exit status 2 and one clear line on stderr.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tomllib
 from dataclasses import fields, replace
@@ -83,6 +85,19 @@ def _net_settings(args: argparse.Namespace) -> dict[str, Any]:
     return {name: value for name, value in given if value is not None}
 
 
+def _check_output(path: str | None, flag: str) -> None:
+    """An output file's path, checked before any work: a file in a folder that exists and may be written."""
+    if path is None:
+        return
+    p, parent = Path(path), Path(path).parent
+    if p.is_dir():
+        raise UsageError(f"{flag} {path!r} is a folder; give a file path")
+    if not parent.is_dir():
+        raise UsageError(f"{flag} {path!r}: the folder {str(parent)!r} does not exist; create it first")
+    if not os.access(parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise UsageError(f"{flag} {path!r} cannot be written (permission denied)")
+
+
 def _check_checkpoint(path: str | None) -> None:
     if path is None:
         return
@@ -122,6 +137,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         "--baseline", choices=("grasp-only", "to-vpg", "push-grasp"),
         help="pipeline: train a learned baseline of Table I at the same total iterations instead of MPGNet",
     )
+    parser.add_argument("--resume-anyway", action="store_true",
+                        help="resume a saved run even though settings differ from its own (they are listed; the record keeps the new ones)")
     args = parser.parse_args(argv)
     from mpg_envs.threads import set_torch_threads
 
@@ -129,6 +146,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     try:
         from mpg_agents.acting.grasp_threshold import as_record
         from mpg_agents.learning.learner import Learner
+        from mpg_agents.learning.run_folder import RunFolderBusy
         from mpg_agents.learning.train_config import TrainConfig, json_safe
         from mpg_agents.learning import training_stages as ts
 
@@ -148,17 +166,15 @@ def train_main(argv: Sequence[str] | None = None) -> int:
                 stages = ts.without_alternation(stages)
             if args.baseline:
                 stages = ts.BASELINES[args.baseline](stages)
-            summary = run_pipeline(PipelineConfig(base=base, stages=stages), args.out, init=args.init)
+            summary = run_pipeline(PipelineConfig(base=base, stages=stages), args.out, init=args.init, resume_anyway=args.resume_anyway)
             print(json.dumps(summary, indent=1))
             return 0
         _check_env_id(args.env)
-        learner = Learner(base, ts.stage_for_env(args.env, stages), args.out, init=args.init)
+        learner = Learner(base, ts.stage_for_env(args.env, stages), args.out, init=args.init, resume_anyway=args.resume_anyway)
         summary = learner.run()
         print(json.dumps({**json_safe(summary), "q_star": as_record(learner.policy.q_star)}))  # the Q*_g its weights carry
         return 0
-    except (UsageError, FileNotFoundError) as exc:
-        return _fail(exc)
-    except ValueError as exc:  # another architecture, a bad setting
+    except (UsageError, FileNotFoundError, ValueError, RunFolderBusy) as exc:  # also another architecture, a run folder in use
         return _fail(exc)
     except KeyboardInterrupt:
         print("interrupted: state saved, run the same command to resume", file=sys.stderr)
@@ -203,6 +219,9 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel
 
         _check_env_id(args.env)
+        if args.seed < 0:
+            raise UsageError(f"--seed must be >= 0, got {args.seed}")
+        _check_output(args.json, "--json")
         if args.policy not in BUILTIN:
             _check_checkpoint(args.policy)
         if args.episodes < 1:
@@ -281,6 +300,9 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.evaluation.policy_zoo import make_policy
 
         _check_env_id(args.env)
+        if args.seed < 0:
+            raise UsageError(f"--seed must be >= 0, got {args.seed}")
+        _check_output(args.json, "--json")
         if args.policy != "shipped":
             _check_checkpoint(args.policy)
         if args.episodes < 1:
@@ -330,6 +352,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
         _check_checkpoint(args.src)
+        _check_output(args.dst, "dst")
         settings = _net_settings(args)
         primitives = tuple(p.strip() for p in args.primitives.split(",")) if args.primitives else None
         dst = export_weights(args.src, args.dst, primitives=primitives, half=not args.float32, settings=settings,
@@ -357,6 +380,7 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
     try:
         from mpg_agents.learning.plotting import plot_compare, plot_run
 
+        _check_output(args.out, "--out")
         if args.stage or len(args.run) > 1:
             if not args.stage or not args.out:
                 raise ValueError("comparing runs needs --stage and --out")
@@ -366,7 +390,7 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
             out = plot_compare(list(zip(labels, args.run)), args.stage, args.out, args.window)
         else:
             out = plot_run(args.run[0], args.out, args.window)
-    except (FileNotFoundError, ValueError) as exc:
+    except (UsageError, FileNotFoundError, ValueError) as exc:
         return _fail(exc)
     print(f"learning curves written to {out}")
     return 0

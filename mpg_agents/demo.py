@@ -115,6 +115,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=DEMO_SEED, help=f"episode i is reset with seed + i (default {DEMO_SEED}, a held-out test seed)")
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps_<k>.png (default demo_out)")
     args = parser.parse_args(argv)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        parser.error(f"--out {args.out!r} is a file; give a folder (made if missing)")
 
     from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_agents.evaluation.evaluate import evaluate

@@ -2,7 +2,8 @@
 
 Importing the package registers one Gymnasium id per stage of
 :data:`mpg_envs.tasks.stages.STAGES` (:data:`ENV_IDS`: ``MPG-Stage1-v0`` ... ``MPG-Stage5-v0``,
-``MPG-Occluded-v0``, ...); ``gymnasium.make("mpg_envs:MPG-Stage5-v0")`` imports it on demand.
+``MPG-Occluded-v0``, ...) and one per track of :data:`mpg_envs.tasks.tracks.TRACKS`
+(``MPG-OccludedHardCamera-v0``); ``gymnasium.make("mpg_envs:MPG-Stage5-v0")`` imports it on demand.
 Each id carries its stage's motion cap as ``max_episode_steps``, so ``gymnasium.make`` wraps
 the env in Gymnasium's ``TimeLimit`` at the same cap the env enforces itself.
 
@@ -20,6 +21,7 @@ import gymnasium as gym  # noqa: E402
 
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
 from mpg_envs.tasks.stages import STAGES, StageSpec
+from mpg_envs.tasks.tracks import TRACKS
 from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace
 from mpg_envs.integrations.wrappers import ContinuousAction, GridAction, ImageObservation
 
@@ -41,6 +43,10 @@ def _register() -> None:
                 kwargs={"stage": name},
                 max_episode_steps=stage.max_motions,
             )
+    for track in TRACKS.values():  # a stage with fixed keywords (mpg_envs.tasks.tracks)
+        if track.env_id not in gym.registry:
+            kwargs = {"stage": track.stage, **track.options}
+            gym.register(id=track.env_id, entry_point="mpg_envs.tasks.env:MPGEnv", kwargs=kwargs, max_episode_steps=track.max_motions)
 
 
 def make(env_id: str, **kwargs) -> gym.Env:

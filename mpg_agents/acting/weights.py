@@ -1,13 +1,15 @@
 """MPGNet's weight file: safetensors tensors with one JSON header (architecture, Q*_g, extras).
 
 Never unpickles anything. ``read_checkpoint_header`` reads the header alone (what the CLIs
-check before building a network); ``load_mpgnet_weights`` checks the architecture first and
-names any mismatch.
+check before building a network; a Q*_g that is not a finite number or ``null`` is refused);
+``load_mpgnet_weights`` checks the architecture first and names any mismatch, and refuses
+tensors with NaN or infinite values; ``save_mpgnet`` refuses to write them.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -46,13 +48,18 @@ def checkpoint_metadata(
 def save_mpgnet(
     net: MPGNet, path: str | Path, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> None:
-    """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header."""
+    """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header;
+    through a temporary file swapped in, so a process killed meanwhile leaves the old file whole."""
     from safetensors.torch import save_file
 
     state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    save_file(state, str(path), metadata=checkpoint_metadata(net, q_star, extra))
-    chmod_by_umask(path)
+    check_finite(state, f"the MPGNet to be written to {path}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    save_file(state, str(tmp), metadata=checkpoint_metadata(net, q_star, extra))
+    chmod_by_umask(tmp)
+    os.replace(tmp, path)
 
 
 def chmod_by_umask(path: str | Path) -> None:
@@ -79,12 +86,29 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
         ) from exc
     if "mpgnet" not in meta:
         raise ValueError(f"{path} has no 'mpgnet' metadata header; it was not written by save_mpgnet/save_weights")
-    header = json.loads(meta["mpgnet"])
-    if header.get("format") != CHECKPOINT_FORMAT:
+    try:
+        header = json.loads(meta["mpgnet"])
+    except ValueError as exc:
+        raise ValueError(f"{path}: its 'mpgnet' header is not JSON ({exc})") from exc
+    if not isinstance(header, dict) or header.get("format") != CHECKPOINT_FORMAT:
         raise ValueError(
-            f"{path}: unsupported checkpoint format {header.get('format')!r}, expected {CHECKPOINT_FORMAT!r}"
+            f"{path}: unsupported checkpoint format {header.get('format') if isinstance(header, dict) else header!r}, "
+            f"expected {CHECKPOINT_FORMAT!r}"
         )
+    q_star = header.get("q_star")
+    if q_star is not None and (isinstance(q_star, bool) or not isinstance(q_star, (int, float)) or not math.isfinite(q_star)):
+        raise ValueError(f"{path}: its header's Q*_g (q_star) is {q_star!r}; valid: a finite number, or null (never calibrated)")
     return header
+
+
+def check_finite(tensors: Mapping[str, Any], what: str) -> None:
+    """``ValueError`` naming ``what`` and its floating tensors that hold NaN or infinite values."""
+    import torch
+
+    bad = [k for k, t in tensors.items() if torch.is_floating_point(t) and not bool(torch.isfinite(t).all())]
+    if bad:
+        raise ValueError(f"{what} has NaN or infinite values in {len(bad)} tensor(s): {', '.join(bad[:5])}"
+                         f"{' ...' if len(bad) > 5 else ''}; weights must be finite (a diverged training?)")
 
 
 def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = True) -> dict[str, Any]:
@@ -119,6 +143,7 @@ def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = T
             f"(missing {missing_branches}); pass strict_branches=False to keep those branches' current weights"
         )
     state = load_file(str(path))
+    check_finite(state, f"checkpoint {path}")
     own = net.state_dict()
     wanted = {}
     for key, target in own.items():
@@ -176,6 +201,8 @@ def export_weights(
     ``q_star`` replaces Q*_g (e.g. one measured under the new settings); the header's ``extra``
     keeps training's as ``q_star_from_training`` (:func:`~mpg_agents.acting.grasp_threshold.exported_q_star`).
     """
+    if Path(dst).exists() and Path(dst).samefile(src):
+        raise ValueError(f"the copy {str(dst)!r} is the source checkpoint {str(src)!r}; write it to another file")
     settings = dict(settings or {})
     weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))
     if weighty:

@@ -48,11 +48,14 @@ class EpisodeRecord:
     # The actions taken, to replay or compare an episode: flat indices, or for a wrapped env
     # with a continuous action space (mpg_envs.integrations.wrappers.ContinuousAction) tuples of floats.
     actions: tuple[int | tuple[float, ...], ...] = ()
+    visuals: dict[str, Any] | None = None  # the episode's drawn visual randomization (env option visual_randomization)
     seconds: float = field(default=0.0, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         del data["seconds"]
+        if data["visuals"] is None:  # records of envs without visual randomization stay as they were
+            del data["visuals"]
         return data
 
     @property
@@ -174,6 +177,7 @@ def run_episode(
     start = time.perf_counter()
     episode_seed = seed + index
     obs, info = start_episode(policy, env, episode_seed, reset_options)
+    reset_info = info
     visible = info.get("visible_fraction")
     if on_reset is not None:
         on_reset(index, obs)
@@ -205,6 +209,7 @@ def run_episode(
         objects_left=None if info.get("objects_left") is None else int(info["objects_left"]),
         visible_fraction=None if visible is None else float(visible),
         actions=tuple(actions),
+        visuals=reset_info.get("visual_randomization"),
         seconds=time.perf_counter() - start,
     )
 
@@ -288,10 +293,19 @@ def env_options_of(env: gym.Env) -> dict[str, Any]:
     """The keywords ``env`` was made with besides its registered ones (from its spec),
     JSON-ready (other values by ``repr``)."""
     spec = env.unwrapped.spec
-    if spec is None:
-        return {}
+    return {} if spec is None else _json_options(spec.kwargs)
+
+
+def registered_options(env_id: str) -> dict[str, Any]:
+    """The keywords ``env_id`` is registered with besides its stage (a track's fixed ones,
+    such as ``MPG-OccludedHardCamera-v0``'s ``obs_mode``), JSON-ready; ``{}`` for an id
+    Gymnasium does not know."""
+    return _json_options(gym.registry[env_id].kwargs) if env_id in gym.registry else {}
+
+
+def _json_options(kwargs: dict[str, Any]) -> dict[str, Any]:
     options = {}
-    for key, value in spec.kwargs.items():
+    for key, value in kwargs.items():
         if key in ("stage", "num_objects"):  # the env and the object count are recorded apart
             continue
         options[key] = value if isinstance(value, (bool, int, float, str, type(None), list, tuple)) else repr(value)

@@ -125,6 +125,12 @@ class NetworkPolicy:
         if q_star is not None:
             self.policy.set_q_star(check_override(q_star))
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
+        if self.policy.coordination != "max_q" and {"grasp", "push"} <= set(self.primitives) and np.isnan(self.policy.q_star):
+            import warnings
+
+            warnings.warn(f"checkpoint {path} carries no Q*_g (null: never calibrated): its {self.policy.coordination!r} "
+                          "coordination compares the best grasp and push Q instead; pass --q-star (mpg-calibrate measures one)",
+                          stacklevel=2)
         self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
         if grasp_region is not None:
             self.name += f" [grasp region: {grasp_region}]"

@@ -6,7 +6,8 @@ settings (:mod:`~mpg_agents.learning.train_config`), the one gradient step
 exploration (:mod:`~mpg_agents.learning.exploration`), oracle demonstrations
 (:mod:`~mpg_agents.learning.demonstrations`), the learner of one stage
 (:mod:`~mpg_agents.learning.learner`), its resumable state and log
-(:mod:`~mpg_agents.learning.run_state`, :mod:`~mpg_agents.learning.train_log`), learning curves
+(:mod:`~mpg_agents.learning.run_state`, :mod:`~mpg_agents.learning.train_log`), its run folder's
+lock and resume check (:mod:`~mpg_agents.learning.run_folder`), learning curves
 (:mod:`~mpg_agents.learning.plotting`), the multi-stage pipeline
 (:mod:`~mpg_agents.learning.pipeline`) and independent runs as Ray tasks
 (:mod:`~mpg_agents.learning.train_runs`, on evaluation's Ray session). Builds on

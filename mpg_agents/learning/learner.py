@@ -14,9 +14,9 @@ carry it.
 
 Everything needed to continue is saved every ``checkpoint_every`` iterations and when the
 process is asked to stop (SIGINT/SIGTERM) (:mod:`mpg_agents.learning.run_state`): a killed run resumes
-with the same counters, replay, weights, optimiser and random generators. An episode
-interrupted by the kill is started afresh (its scene comes from the episode counter, so it is
-the same scene). The log (:mod:`mpg_agents.learning.train_log`) goes to TensorBoard and ``progress.csv``.
+with the same counters, replay, weights, optimiser and random generators; an interrupted
+episode starts afresh (the same scene: it comes from the episode counter). The log
+(:mod:`mpg_agents.learning.train_log`, TensorBoard and ``progress.csv``) is rewound with the state.
 
 Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
 fresh run first fills the replay with the oracle's transitions
@@ -49,6 +49,7 @@ from mpg_agents.learning.exploration import Choice, Explorer, linear_epsilon
 from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
 from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
 from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_agents.learning.td_step import td_step
@@ -74,6 +75,9 @@ class Learner:
             or :func:`~mpg_agents.learning.training_stages.stage_for_env` of an env id).
         out: the run folder.
         init: start from this MPGNet checkpoint (branches it lacks keep their initialisation).
+        resume_anyway: resume a saved run whose settings differ (:func:`~mpg_agents.learning.run_folder.check_resume`).
+
+    The run folder is locked from here to the end of ``run()`` (:class:`~mpg_agents.learning.run_folder.RunLock`).
     """
 
     def __init__(
@@ -83,13 +87,14 @@ class Learner:
         out: str | Path,
         init: str | Path | None = None,
         log: Callable[[str], None] = print,
+        resume_anyway: bool = False,
     ):
         self.config = config
         self.stage = stage_for_env(stage) if isinstance(stage, str) else stage
         self.steps = config.steps if config.steps is not None else self.stage.iterations
-        self.out = Path(out)
-        self.out.mkdir(parents=True, exist_ok=True)
-        self.log = log
+        self.out = prepare_run_folder(out)
+        self.lock = RunLock(self.out)  # before anything in the folder is read or written
+        self.resume_anyway, self.log = resume_anyway, log
         torch.set_num_threads(config.torch_threads)
         # A young network's eval-mode activations go denormal and slow the CPU down 10x.
         torch.set_flush_denormal(True)
@@ -132,9 +137,7 @@ class Learner:
         self._resume()
 
     def _make_env(self, num_objects: int | None) -> gym.Env:
-        kwargs: dict[str, Any] = {}
-        if num_objects is not None:
-            kwargs["num_objects"] = num_objects
+        kwargs: dict[str, Any] = {} if num_objects is None else {"num_objects": num_objects}
         if self.config.discriminator is not None:
             kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator)
         if self.stage.reward:
@@ -155,12 +158,7 @@ class Learner:
         if folder is None:
             return
         saved = json.loads((folder / "config.json").read_text())
-        saved_env = saved.get("stage", {}).get("env_id", saved.get("env_id"))
-        if saved_env != self.stage.env_id or saved["variant"] != self.config.variant:
-            raise ValueError(
-                f"{self.out} holds a run of {saved_env} ({saved['variant']}); "
-                f"asked for {self.stage.env_id} ({self.config.variant}): use another --out"
-            )
+        changed = check_resume(self.out, saved, self._saved_config(), self.resume_anyway)
         self.resumed = True
         counters, _, q_star = load_run_state(
             folder, online=self.net, target=self.target, optimizer=self.optimizer, replay=self.replay, rng=self.rng
@@ -168,10 +166,13 @@ class Learner:
         self.counters = Counters(**counters)
         if not math.isnan(q_star):  # the Q*_g the saved weights carry
             self.policy.set_q_star(q_star)
-        self.log(f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})")
+        self.log(f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})"
+                 + (f" with changed settings: {'; '.join(changed)}" if changed else ""))
 
     def save_state(self) -> None:
-        """Write weights and the full resumable state (atomically)."""
+        """Write weights and the full resumable state (atomically), the log's rows first."""
+        if self._log is not None:
+            self._log.sync()  # the state counts these rows: they must be on disk before it is
         save_run_state(
             self.out, online=self.net, target=self.target, q_star=self.policy.q_star, optimizer=self.optimizer,
             replay=self.replay, rng=self.rng, counters=asdict(self.counters), config=self._saved_config(),
@@ -190,7 +191,7 @@ class Learner:
         handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)
         try:
-            with TrainingLog(self.out) as self._log:
+            with TrainingLog(self.out, self.counters.iteration) as self._log:
                 obs = self._reset_episode()
                 while self.counters.iteration < self.steps:
                     obs = self.iteration(obs)
@@ -201,6 +202,7 @@ class Learner:
                         self.save_state()
                         raise StopRequested()
         finally:
+            self._log = None
             bar.close()
             for s, h in handlers.items():
                 signal.signal(s, h)
@@ -216,6 +218,7 @@ class Learner:
             summary.update(move_trials=c.move_trials, move_trial_successes=c.move_trial_successes)
         if self.stage.rival_trials:
             summary.update(rival_trials=c.rival_trials, rival_trial_clears=c.rival_trial_clears)
+        self.lock.release()
         return summary
 
     def calibrate_in_scenes(self, episodes: int) -> float:

@@ -22,6 +22,7 @@ from typing import Any, Callable
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, from_header
 from mpg_agents.learning.learner import Learner
+from mpg_agents.learning.run_folder import RunLock, prepare_run_folder
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.training_stages import TRAINING_STAGES, TrainingStage
 from mpg_agents.acting.weights import read_checkpoint_header
@@ -35,10 +36,20 @@ class PipelineConfig:
     stages: tuple[TrainingStage, ...] = TRAINING_STAGES
 
 
-def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Run the stages in order; returns ``{stage: summary}`` plus the final weights and their Q*_g."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+def run_pipeline(
+    cfg: PipelineConfig, out: str | Path, init: str | None = None, log: Callable[[str], None] = print, resume_anyway: bool = False,
+) -> dict[str, Any]:
+    """Run the stages in order; returns ``{stage: summary}`` plus the final weights and their Q*_g.
+
+    ``out`` is locked while it runs (:class:`~mpg_agents.learning.run_folder.RunLock`); a stage
+    resumed with other settings than it was saved with refuses unless ``resume_anyway``.
+    """
+    out = prepare_run_folder(out)
+    with RunLock(out):
+        return _run_stages(cfg, out, init, log, resume_anyway)
+
+
+def _run_stages(cfg: PipelineConfig, out: Path, init: str | None, log: Callable[[str], None], resume_anyway: bool) -> dict[str, Any]:
     summary: dict[str, Any] = {}
     weights = init
     discriminator: str | None = cfg.base.discriminator
@@ -52,7 +63,7 @@ def run_pipeline(cfg: PipelineConfig, out: str | Path, init: str | None = None, 
             log(f"{stage.name}: already finished, skipping")
             result = json.loads(done.read_text())
         else:
-            learner = Learner(stage_cfg, stage, stage_dir, init=weights, log=log)
+            learner = Learner(stage_cfg, stage, stage_dir, init=weights, log=log, resume_anyway=resume_anyway)
             log(f"{stage.name}: {learner.steps} iterations, training {learner.trainable}, init {weights}")
             result = json_safe(learner.run())
             done.write_text(json.dumps(result))

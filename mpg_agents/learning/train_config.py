@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from numbers import Integral, Real
+from typing import Any, Callable
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED
 from mpg_agents.learning.td_step import TDStepConfig
@@ -56,6 +57,9 @@ class TrainConfig:
     torch_threads: int = 2
     net_config: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        check_train_config(self)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data (tuples as lists); see :func:`json_safe` for writing it."""
         data = asdict(self)
@@ -86,6 +90,73 @@ class TrainConfig:
     def optimizer_kwargs(self) -> dict[str, Any]:
         """Adam's settings besides the learning rate."""
         return {"weight_decay": self.weight_decay, "betas": tuple(self.betas)}
+
+
+# ------------------------------------------------------------------------------ checks
+def _integer(name: str, value: Any, low: int, optional: bool = False) -> None:
+    if optional and value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < low:
+        none = " or None" if optional else ""
+        raise ValueError(f"training setting {name} must be an integer >= {low}{none}, got {value!r}")
+
+
+def _number(name: str, value: Any, low: float, high: float, valid: str, optional: bool = False) -> None:
+    """``value`` a finite real number in ``[low, high]`` (not a bool, not a string)."""
+    if optional and value is None:
+        return
+    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value) or not low <= value <= high:
+        raise ValueError(f"training setting {name} must be {valid}{' or None' if optional else ''}, got {value!r}")
+
+
+def _pair(name: str, value: Any, valid: str, ok: Callable[[float, float], bool]) -> None:
+    """``value`` two real numbers that pass ``ok``."""
+    numbers = (not isinstance(value, (str, bytes)) and hasattr(value, "__len__") and len(value) == 2
+               and all(isinstance(v, Real) and not isinstance(v, bool) for v in value))
+    if not numbers or not ok(float(value[0]), float(value[1])):
+        raise ValueError(f"training setting {name} must be {valid}, got {value!r}")
+
+
+def check_train_config(cfg: TrainConfig) -> None:
+    """Every setting's type and range (a ``--config`` file's values and ``mpg-train``'s flags).
+
+    Raises:
+        ValueError: naming the first bad setting, its value and what is valid.
+    """
+    inf = math.inf
+    _integer("steps", cfg.steps, 1, optional=True)
+    _integer("seed", cfg.seed, 0)
+    if cfg.variant not in ("small", "large"):
+        raise ValueError(f"training setting variant must be 'small' or 'large', got {cfg.variant!r}")
+    _integer("num_objects", cfg.num_objects, 1, optional=True)
+    _number("gamma", cfg.gamma, 0.0, 1.0, "a number in [0, 1]")
+    _number("learning_rate", cfg.learning_rate, math.ulp(0.0), inf, "a positive finite number")
+    _number("weight_decay", cfg.weight_decay, 0.0, inf, "a finite number >= 0")
+    _pair("betas", cfg.betas, "two numbers in [0, 1)", lambda a, b: 0 <= a < 1 and 0 <= b < 1)
+    _number("epsilon_start", cfg.epsilon_start, 0.0, 1.0, "a number in [0, 1]")
+    _number("epsilon_end", cfg.epsilon_end, 0.0, 1.0, "a number in [0, 1]")
+    _integer("epsilon_decay_steps", cfg.epsilon_decay_steps, 1, optional=True)
+    _integer("batch_size", cfg.batch_size, 1)
+    _integer("replay_capacity", cfg.replay_capacity, 1)
+    _number("priority_alpha", cfg.priority_alpha, 0.0, inf, "a finite number >= 0")
+    _integer("target_update_every", cfg.target_update_every, 1)
+    if not isinstance(cfg.grasp_symmetry, bool):
+        raise ValueError(f"training setting grasp_symmetry must be true or false, got {cfg.grasp_symmetry!r}")
+    _number("max_grad_norm", cfg.max_grad_norm, math.ulp(0.0), inf, "a positive finite number", optional=True)
+    if cfg.q_bounds is not None:
+        _pair("q_bounds", cfg.q_bounds, "two finite numbers [low, high] with low < high",
+              lambda a, b: math.isfinite(a) and math.isfinite(b) and a < b)
+    _integer("heuristic_after_failed_grasps", cfg.heuristic_after_failed_grasps, 0)
+    if isinstance(cfg.q_star, bool) or not isinstance(cfg.q_star, Real) or math.isinf(cfg.q_star):
+        raise ValueError(f"training setting q_star must be a finite number (NaN: the starting weights'), got {cfg.q_star!r}")
+    _integer("demonstration_episodes", cfg.demonstration_episodes, 0)
+    if cfg.discriminator is not None and not isinstance(cfg.discriminator, str):
+        raise ValueError(f"training setting discriminator must be a checkpoint path or None, got {cfg.discriminator!r}")
+    _integer("checkpoint_every", cfg.checkpoint_every, 1)
+    _integer("window", cfg.window, 1)
+    _integer("torch_threads", cfg.torch_threads, 1)
+    if not isinstance(cfg.net_config, dict):
+        raise ValueError(f"training setting net_config must be a table of MPGNetConfig fields, got {cfg.net_config!r}")
 
 
 def json_safe(data: dict[str, Any]) -> dict[str, Any]:

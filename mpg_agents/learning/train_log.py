@@ -1,13 +1,21 @@
 """The learner's log: one :class:`IterationRecord` per iteration to TensorBoard and ``progress.csv``.
 
 ``progress.csv`` (columns :data:`CSV_COLUMNS`) is what ``mpg-plot`` draws; it is appended to,
-so a resumed run continues the same file. TensorBoard gets the loss, epsilon, reward,
-iteration time, the windowed grasp success rate and, per episode, motions and task success.
+so a resumed run continues the same file. It goes with the run state: the learner makes the
+rows durable (:meth:`TrainingLog.sync`) before it saves a state, and a run that starts from a
+state of iteration ``n`` first rewrites the file to its header and rows 1..n, each once
+(:func:`rewind_progress`, through a temporary file swapped in), so after a ``kill -9`` at any
+moment and a resume the file holds every iteration exactly once. TensorBoard gets the loss,
+epsilon, reward, iteration time, the windowed grasp success rate and, per episode, motions and
+task success.
 """
 
 from __future__ import annotations
 
 import csv
+import io
+import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -45,20 +53,63 @@ class IterationRecord:
         ]
 
 
-class TrainingLog:
-    """TensorBoard writer and CSV file of one run folder; use as a context manager."""
+def rewind_progress(path: str | Path, iteration: int) -> int:
+    """Rewrite ``progress.csv`` to its header and the rows of iterations 1..``iteration``, each
+    once, in order (rows after it, a half-written last row and repeats are dropped); written to
+    a temporary file and swapped in, so a kill meanwhile leaves the old file. Returns the rows
+    kept; warns naming the iterations of 1..``iteration`` it lacks (a log written before its
+    rows were made durable with the state, or edited by hand).
+    """
+    path = Path(path)
+    rows: dict[int, list[str]] = {}
+    if path.is_file():
+        with open(path, newline="") as f:
+            for row in csv.reader(f):
+                if len(row) != len(CSV_COLUMNS) or not row[0].isdigit():
+                    continue  # the header, or a row cut short by a kill
+                it = int(row[0])
+                if 1 <= it <= iteration and it not in rows:
+                    rows[it] = row
+    missing = [it for it in range(1, iteration + 1) if it not in rows]
+    if missing:
+        warnings.warn(f"{path} lacks the rows of {len(missing)} iterations ({missing[:5]}{' ...' if len(missing) > 5 else ''}) "
+                      f"that its saved state (iteration {iteration}) has done; they cannot be written again", stacklevel=2)
+    text = io.StringIO()
+    writer = csv.writer(text)
+    writer.writerow(CSV_COLUMNS)
+    writer.writerows(rows[it] for it in sorted(rows))
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as f:
+        f.write(text.getvalue())
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    return len(rows)
 
-    def __init__(self, run_dir: str | Path) -> None:
+
+class TrainingLog:
+    """TensorBoard writer and CSV file of one run folder; use as a context manager.
+
+    Args:
+        run_dir: the run folder.
+        iteration: the iteration the run starts from (its saved state's; 0 for a fresh run):
+            ``progress.csv`` is first rewound to it (:func:`rewind_progress`).
+    """
+
+    def __init__(self, run_dir: str | Path, iteration: int = 0) -> None:
         from torch.utils.tensorboard import SummaryWriter
 
         run_dir = Path(run_dir)
-        self.writer = SummaryWriter(str(run_dir / "tb"))
         path = run_dir / "progress.csv"
-        new = not path.exists()
+        rewind_progress(path, iteration)
+        self.writer = SummaryWriter(str(run_dir / "tb"))
         self._file = open(path, "a", newline="")
         self._csv = csv.writer(self._file)
-        if new:
-            self._csv.writerow(CSV_COLUMNS)
+
+    def sync(self) -> None:
+        """Make every row written so far durable (before a run state that counts them is saved)."""
+        self._file.flush()
+        os.fsync(self._file.fileno())
 
     def record(self, rec: IterationRecord) -> None:
         w, it = self.writer, rec.iteration

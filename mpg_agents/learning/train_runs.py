@@ -139,6 +139,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--ray-address", default=None, help="join this Ray cluster instead of starting a local Ray")
     parser.add_argument("--dry-run", action="store_true", help="print the commands only")
     args = parser.parse_args(argv)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        parser.error(f"--out {args.out!r} is a file; give a folder (made if missing)")
     try:
         specs = plan_runs([r for r in args.runs.split(",") if r], args.seeds, args.config, args.out)
     except ValueError as exc:

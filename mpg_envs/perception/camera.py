@@ -27,9 +27,12 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from mpg_envs.perception.appearance import Lighting, light_scene, paint_scene, perturbed_pose, place_camera
+from mpg_envs.perception.depth_noise import corrupt_depth
 from mpg_envs.perception.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
-from mpg_envs.perception.render import make_renderer
+from mpg_envs.perception.frames import SceneFrames
 from mpg_envs.perception.rgbd import fuse_heightmaps, heightmap_from_rgbd
+from mpg_envs.perception.visual_randomization import EpisodeVisuals, randomized_geom_colors
 from mpg_envs.grid.workspace import Workspace
 
 # OpenCV camera axes (x right, y down, z forward) expressed in MuJoCo's camera frame
@@ -84,8 +87,9 @@ class CameraConfig:
             ``numpy.random.Generator`` passed to :meth:`CameraHeightmapper.heightmaps`.
         near, far: valid depth range (m) of the sensor; readings outside it are invalid.
         background_color: RGB of heightmap pixels that no camera sees.
-        shadows: render shadows in the colour images (as a real camera sees them); off
-            roughly halves the colour rendering time with software OpenGL.
+        lighting: the one light of the colour images (:class:`~mpg_envs.perception.appearance.Lighting`;
+            the default renders every upward-facing surface at its base colour, the
+            ray-cast heightmaps' colour). The model's own lights are not used.
     """
 
     cameras: tuple[FixedCamera, ...] = field(default_factory=_default_cameras)
@@ -96,7 +100,7 @@ class CameraConfig:
     near: float = 0.1
     far: float = 3.0
     background_color: tuple[int, int, int] = (0, 0, 0)
-    shadows: bool = True
+    lighting: Lighting = field(default_factory=Lighting)
 
     def __post_init__(self) -> None:
         if not self.cameras:
@@ -211,9 +215,10 @@ def add_cameras(spec: mujoco.MjSpec, config: CameraConfig | None = None) -> list
 class CameraHeightmapper:
     """Render the configured cameras and fuse their back-projected heightmaps.
 
-    Each camera is rendered in colour and depth with ``mujoco.Renderer`` (only geom groups
-    0 and 1 visible), converted to the OpenCV camera convention, optionally corrupted by
-    Gaussian depth noise, back-projected with :func:`heightmap_from_rgbd`, and all views
+    Each camera is rendered in colour under the configured light (or an episode's), and in
+    depth with segmentation from one more pass (:class:`~mpg_envs.perception.frames.SceneFrames`;
+    only geom groups 0 and 1 visible), converted to the OpenCV camera convention, optionally
+    corrupted by depth noise, back-projected with :func:`heightmap_from_rgbd`, and all views
     are fused per pixel (:func:`fuse_heightmaps`). Holds an OpenGL context: call
     :meth:`close` or use it as a context manager.
 
@@ -231,7 +236,7 @@ class CameraHeightmapper:
         self.model = model
         self.config = config if config is not None else CameraConfig()
         self.workspace = workspace if workspace is not None else Workspace()
-        self._renderer: mujoco.Renderer | None = None
+        self._renderer: SceneFrames | None = None
         self._camera_ids: list[int] = []
         self._intrinsics: list[np.ndarray] = []
         for cam in self.config.cameras:
@@ -261,74 +266,100 @@ class CameraHeightmapper:
             groups[:] = 0
 
         # One record of GL failure per process, shared with env.render(): a retry can abort.
-        self._renderer = make_renderer(
+        self._renderer = SceneFrames(
             model, self.config.height, self.config.width,
             purpose="Camera observations (the default ray-cast observations need none)",
         )
         # Mirror images of the objects in a reflective table would paint wrong colours.
         self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
-        self._renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(self.config.shadows)
+        self._colors: tuple[EpisodeVisuals | None, np.ndarray] | None = None  # (visuals, geom colours)
 
     @property
     def camera_names(self) -> list[str]:
         """Names of the cameras, in configuration order."""
         return [cam.name for cam in self.config.cameras]
 
-    def render(self, data: mujoco.MjData, rng: np.random.Generator | None = None) -> list[CameraImage]:
+    def render(
+        self, data: mujoco.MjData, rng: np.random.Generator | None = None, visuals: EpisodeVisuals | None = None
+    ) -> list[CameraImage]:
         """Render every camera (``data`` after ``mj_forward`` or a step).
 
         Depth noise (``config.depth_noise_std > 0``) is drawn from ``rng``, camera by
         camera in configuration order, so a seeded generator reproduces it exactly.
+        ``visuals`` (one episode's :class:`~mpg_envs.perception.visual_randomization.EpisodeVisuals`)
+        replaces the light, recolours table and objects, renders each camera from its true
+        pose (calibrated pose moved by the drawn error; ``pose`` stays the calibrated one,
+        as a real pipeline only knows that) and corrupts the depth as a RealSense does
+        (drawn from ``rng`` too).
 
         Raises:
-            ValueError: if noise is configured but no ``rng`` is given.
+            ValueError: if noise is configured but no ``rng`` is given, or ``visuals`` has
+                calibration errors of fewer cameras than this mode has.
             RuntimeError: after :meth:`close`.
         """
         if self._renderer is None:
             raise RuntimeError("CameraHeightmapper is closed")
         std = self.config.depth_noise_std
-        if std > 0 and rng is None:
+        noisy = std > 0 or (visuals is not None and visuals.depth_noise is not None)
+        if noisy and rng is None:
             raise ValueError(
-                "depth_noise_std > 0 needs a numpy.random.Generator: pass rng=np.random.default_rng(seed)"
+                "depth noise needs a numpy.random.Generator: pass rng=np.random.default_rng(seed)"
             )
+        if visuals is not None and len(visuals.camera_offsets) < len(self._camera_ids):
+            raise ValueError(
+                f"visuals hold calibration errors of {len(visuals.camera_offsets)} cameras, this mode has {len(self._camera_ids)}"
+            )
+        lighting = self.config.lighting if visuals is None else visuals.lighting
+        colors = self._geom_colors(visuals)
         images = []
-        for cam_id, name, intrinsics in zip(
-            self._camera_ids, self.camera_names, self._intrinsics, strict=True
-        ):
-            self._renderer.update_scene(data, camera=cam_id, scene_option=self._option)
-            self._renderer.disable_depth_rendering()
-            color = self._renderer.render()
-            self._renderer.enable_depth_rendering()
-            depth = self._renderer.render().astype(np.float64)
-            self._renderer.disable_depth_rendering()
-            self._renderer.enable_segmentation_rendering()
-            seg = self._renderer.render()
-            self._renderer.disable_segmentation_rendering()
-            geom_id = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1).astype(np.int32)
+        for k, (cam_id, name, intrinsics) in enumerate(zip(self._camera_ids, self.camera_names, self._intrinsics, strict=True)):
+            self._renderer.update(data, cam_id, self._option)
+            scene = self._renderer.scene
+            light_scene(scene, lighting)
+            if visuals is not None:
+                paint_scene(scene, colors)
+                place_camera(scene, *perturbed_pose(
+                    data.cam_xpos[cam_id], data.cam_xmat[cam_id], visuals.camera_offsets[k], visuals.camera_rotations[k]
+                ))
+            color = self._renderer.color()
+            depth, geom_id = self._renderer.depth_and_segmentation()
+            depth = depth.astype(np.float64)
             if std > 0:
                 depth += rng.normal(0.0, std, size=depth.shape)  # type: ignore[union-attr]
             valid = (depth >= self.config.near) & (depth <= self.config.far)
-            depth = np.where(valid, depth, 0.0).astype(np.float32)
+            depth = np.where(valid, depth, 0.0)
+            if visuals is not None and visuals.depth_noise is not None:
+                depth = corrupt_depth(depth, color, visuals.depth_noise, rng)  # type: ignore[arg-type]
             pose = opencv_camera_pose(data.cam_xpos[cam_id], data.cam_xmat[cam_id])
             images.append(
-                CameraImage(name=name, color=color, depth=depth, intrinsics=intrinsics.copy(), pose=pose, geom_id=geom_id)
+                CameraImage(name=name, color=color, depth=depth.astype(np.float32), intrinsics=intrinsics.copy(), pose=pose, geom_id=geom_id)
             )
         return images
 
-    def heightmaps(self, data: mujoco.MjData, rng: np.random.Generator | None = None) -> Heightmaps:
+    def _geom_colors(self, visuals: EpisodeVisuals | None) -> np.ndarray:
+        """The episode's geom colours, computed once per episode's visuals."""
+        if self._colors is None or self._colors[0] is not visuals:
+            self._colors = (visuals, randomized_geom_colors(self.model, visuals))
+        return self._colors[1]
+
+    def heightmaps(
+        self, data: mujoco.MjData, rng: np.random.Generator | None = None, visuals: EpisodeVisuals | None = None
+    ) -> Heightmaps:
         """Fused colour/depth heightmaps of all cameras, with the geom seen at each pixel from
-        the segmentation render (``geom_id``); ``rng`` as in :meth:`render`."""
+        the segmentation render (``geom_id``); ``rng`` and ``visuals`` as in :meth:`render`."""
         maps = [
             heightmap_from_rgbd(
                 img.color, img.depth, img.intrinsics, img.pose, self.workspace, self.config.background_color, img.geom_id
             )
-            for img in self.render(data, rng)
+            for img in self.render(data, rng, visuals)
         ]
         return fuse_heightmaps(maps)
 
-    def __call__(self, data: mujoco.MjData, rng: np.random.Generator | None = None) -> Heightmaps:
+    def __call__(
+        self, data: mujoco.MjData, rng: np.random.Generator | None = None, visuals: EpisodeVisuals | None = None
+    ) -> Heightmaps:
         """Same as :meth:`heightmaps`."""
-        return self.heightmaps(data, rng)
+        return self.heightmaps(data, rng, visuals)
 
     def close(self) -> None:
         """Release the renderer and its OpenGL context (idempotent)."""

@@ -293,15 +293,25 @@ class RaycastHeightmapper:
         world_z = np.where(hit, self._origin[2] + dist * self._vec_z, np.nan)
         return geom_id.reshape(self.workspace.shape), world_z.reshape(self.workspace.shape)
 
-    def heightmaps(self, data: mujoco.MjData) -> Heightmaps:
-        """Heightmaps of the current state (``data`` after ``mj_forward`` or a step)."""
+    def heightmaps(self, data: mujoco.MjData, colors: np.ndarray | None = None) -> Heightmaps:
+        """Heightmaps of the current state (``data`` after ``mj_forward`` or a step).
+
+        ``colors``: an ``(ngeom, 3)`` uint8 colour per geom to paint instead of the base
+        colours (a visual randomization's); pixels no ray hits keep ``background_color``.
+        """
         geom_id, world_z = self.cast(data)
         depth = heights_from_world_z(np.nan_to_num(world_z, nan=self.workspace.z_min), self.workspace)
-        return Heightmaps(color=self._palette[geom_id], depth=depth, geom_id=geom_id)
+        palette = self._palette
+        if colors is not None:
+            colors = np.asarray(colors)
+            if colors.shape != (self.model.ngeom, 3) or colors.dtype != np.uint8:
+                raise ValueError(f"colors must be a ({self.model.ngeom}, 3) uint8 array, got {colors.shape} {colors.dtype}")
+            palette = np.concatenate([colors, self._palette[-1:]])
+        return Heightmaps(color=palette[geom_id], depth=depth, geom_id=geom_id)
 
-    def __call__(self, data: mujoco.MjData) -> Heightmaps:
+    def __call__(self, data: mujoco.MjData, colors: np.ndarray | None = None) -> Heightmaps:
         """Same as :meth:`heightmaps`."""
-        return self.heightmaps(data)
+        return self.heightmaps(data, colors)
 
     def close(self) -> None:
         """Stop the worker threads (idempotent)."""

@@ -20,12 +20,14 @@ from __future__ import annotations
 import ctypes
 import os
 import sys
-from typing import TYPE_CHECKING, Callable, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping, TypeVar
 
 import numpy as np
 
 if TYPE_CHECKING:
     import mujoco
+
+T = TypeVar("T")
 
 GL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri (EGL) or libosmesa6 (OSMesa)"
 GL_HELP = (
@@ -94,24 +96,31 @@ def choose_gl_backend() -> str | None:
 _gl_failure: str | None = None
 
 
-def make_renderer(model: mujoco.MjModel, height: int, width: int, purpose: str = "Rendering") -> mujoco.Renderer:
-    """A ``mujoco.Renderer``, or :class:`RenderUnavailableError` explaining how to get OpenGL.
+def open_gl(create: Callable[[], T], purpose: str = "Rendering") -> T:
+    """``create()`` (something that makes an OpenGL context), or :class:`RenderUnavailableError`
+    explaining how to get OpenGL. After one failure in this process, later calls raise the
+    same error without calling ``create`` (see the module docstring).
 
     ``ValueError`` (an image larger than the model's offscreen framebuffer) passes through:
     MuJoCo's message says what to change. ``purpose`` starts the error message.
     """
     global _gl_failure
     if _gl_failure is None:
-        import mujoco
-
         try:
-            return mujoco.Renderer(model, height=height, width=width)
+            return create()
         except ValueError:
             raise
         except Exception as exc:  # the GL backends raise various types
             backend = os.environ.get("MUJOCO_GL", "<unset>")
             _gl_failure = f"could not create an OpenGL context (MUJOCO_GL={backend}: {type(exc).__name__}: {exc})"
     raise RenderUnavailableError(f"{purpose} needs OpenGL, which is unavailable in this process: {_gl_failure}. {GL_HELP}")
+
+
+def make_renderer(model: mujoco.MjModel, height: int, width: int, purpose: str = "Rendering") -> mujoco.Renderer:
+    """A ``mujoco.Renderer``, or :class:`RenderUnavailableError` (:func:`open_gl`)."""
+    import mujoco
+
+    return open_gl(lambda: mujoco.Renderer(model, height=height, width=width), purpose)
 
 
 class OverviewRenderer:

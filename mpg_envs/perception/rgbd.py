@@ -8,6 +8,7 @@ heights are those of :class:`~mpg_envs.perception.heightmap.Heightmaps`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -46,6 +47,20 @@ def _check_rgbd(color: np.ndarray, depth: np.ndarray, intrinsics: np.ndarray, ca
         rot @ rot.T, np.eye(3), atol=1e-4
     ):
         raise ValueError("cam_pose must be a rigid transform: orthonormal rotation and last row [0, 0, 0, 1]")
+
+
+@functools.lru_cache(maxsize=16)
+def _pixel_rays(intrinsics: bytes, rotation: bytes, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World-frame ray (x, y, z components, each ``(H*W,)``, row-major) of every pixel per metre
+    of depth along the optical axis: ``R K^-1 [u, v, 1]`` (handles skew too)."""
+    k_inv = np.linalg.inv(np.frombuffer(intrinsics).reshape(3, 3))
+    rot = np.frombuffer(rotation).reshape(3, 3)
+    v, u = np.indices(shape, dtype=np.float64)
+    pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)])
+    rays = rot @ (k_inv @ pix)
+    for row in rays:
+        row.setflags(write=False)
+    return rays[0], rays[1], rays[2]
 
 
 def heightmap_from_rgbd(
@@ -98,26 +113,23 @@ def heightmap_from_rgbd(
     out_label = np.full(rows * cols, -1, dtype=np.int32)
 
     with np.errstate(invalid="ignore"):
-        valid = np.isfinite(depth) & (depth > 0)
-    v, u = np.nonzero(valid)
-    z = depth[v, u].astype(np.float64)
-    # Camera-frame points: K^-1 [u, v, 1] * z (handles skew too).
-    k_inv = np.linalg.inv(intrinsics)
-    pix = np.stack([u, v, np.ones_like(u)], axis=0).astype(np.float64)
-    cam = (k_inv @ pix) * z
-    world = cam_pose[:3, :3] @ cam + cam_pose[:3, 3:4]
+        valid = (np.isfinite(depth) & (depth > 0)).reshape(-1)
+    z = np.where(valid, depth.reshape(-1), 0.0).astype(np.float64)
+    # World point = camera centre + z * (R K^-1 [u, v, 1]): the per-pixel rays are fixed for a
+    # fixed camera, so they are computed once per (K, pose, image size).
+    rays = _pixel_rays(intrinsics.tobytes(), cam_pose[:3, :3].tobytes(), depth.shape)
+    x, y, height = (cam_pose[axis, 3] + z * rays[axis] for axis in range(3))
 
     # The epsilon is world_to_pixel's: a point on a pixel edge (up to float error) goes to
     # the pixel that starts there.
-    col = np.floor((world[0] - workspace.x_min) / workspace.resolution + 1e-9).astype(np.int64)
-    row = np.floor((world[1] - workspace.y_min) / workspace.resolution + 1e-9).astype(np.int64)
-    height = world[2] - workspace.z_min
-    keep = (
-        (col >= 0) & (col < cols) & (row >= 0) & (row < rows) & (height <= workspace.z_max - workspace.z_min)
-    )
-    flat = row[keep] * cols + col[keep]
-    height = np.maximum(height[keep], 0.0)
-    src = np.flatnonzero(keep)
+    col = np.floor((x - workspace.x_min) / workspace.resolution + 1e-9)
+    row = np.floor((y - workspace.y_min) / workspace.resolution + 1e-9)
+    height -= workspace.z_min
+    keep = valid & (col >= 0) & (col < cols) & (row >= 0) & (row < rows) & (height <= workspace.z_max - workspace.z_min)
+    idx = np.flatnonzero(keep)  # the image pixels whose points land in the workspace
+    flat = (row[idx] * cols + col[idx]).astype(np.int64)
+    height = np.maximum(height[idx], 0.0)
+    src = np.arange(idx.size)
     if flat.size:
         # z-buffer: per-pixel max height (ufunc.at is fast in numpy >= 1.25), then the
         # colour of the last point (in image order) that reaches it.
@@ -128,9 +140,10 @@ def heightmap_from_rgbd(
         np.maximum.at(winner, flat[top], src[top])
         seen = winner >= 0
         out_depth[seen] = best[seen]
-        out_color[seen] = color[v[winner[seen]], u[winner[seen]]]
+        pixel = idx[winner[seen]]  # the image pixel of each heightmap pixel's point
+        out_color[seen] = color.reshape(-1, 3)[pixel]
         if segmentation is not None:
-            out_label[seen] = segmentation[v[winner[seen]], u[winner[seen]]]
+            out_label[seen] = np.asarray(segmentation).reshape(-1)[pixel]
     labels = out_label.reshape(rows, cols) if segmentation is not None else None
     return Heightmaps(color=out_color.reshape(rows, cols, 3), depth=out_depth.reshape(rows, cols), geom_id=labels)
 

@@ -12,14 +12,24 @@ colour); :mod:`mpg_envs.scenes.vpg_scenes` reads them and says how their poses m
 
 Errors (:class:`SceneFileError`, a ``ValueError``) name the file, the object (its index and,
 for text files, its line) and what is wrong: an unreadable file, an unknown mesh or asset, a
-missing or out-of-range target, an object outside the workspace. Objects outside the
-workspace can be dropped instead (``drop_outside=True``; a warning names them).
+missing or out-of-range target, a malformed position, orientation or colour, an orientation
+that is not a unit quaternion (:data:`QUAT_TOLERANCE`), more objects than a scene may hold
+(:data:`MAX_OBJECTS`), an object outside the workspace or above it, objects interpenetrating
+(:data:`PENETRATION_TOLERANCE_M`, checked once they are placed:
+:mod:`mpg_envs.scenes.scene_loading`). Objects outside the workspace can be dropped instead
+(``drop_outside=True``; a warning names them).
+
+A scene file records the SHA-256 digest of each mesh file it names (``"sha256"``); reading it
+again with a mesh file that changed since raises, or with ``allow_changed_meshes=True`` warns
+(files written before digests were recorded load as they are).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
+import math
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +45,14 @@ SCENE_FORMAT = "mpg-scene"
 SCENE_VERSION = 1
 BELOW_TABLE = -0.02
 """An object whose centre is this far below the table top (m) has fallen off it."""
+MAX_OBJECTS = 60
+"""The most objects a scene may hold: the envs' largest ``num_objects`` (far more overflow the
+simulator's constraint buffer, and the objects vanish)."""
+QUAT_TOLERANCE = 1e-3
+"""How far from 1 the norm of an orientation quaternion in a scene may be."""
+PENETRATION_TOLERANCE_M = 0.005
+"""How deep (m) two objects of a scene may interpenetrate: the shipped test sets' and
+challenge scenes' resting contacts reach 1.2 mm, the peers' files none."""
 
 
 class SceneFileError(ValueError):
@@ -86,15 +104,32 @@ class SceneFile:
 
 
 # ------------------------------------------------------------------------------ checks
+def check_scene(scene: SceneFile) -> None:
+    """Raise a :class:`SceneFileError` naming the first object whose position is not three
+    finite numbers or whose orientation is not a unit quaternion (w first, norm within
+    :data:`QUAT_TOLERANCE` of 1), or a scene of more than :data:`MAX_OBJECTS` objects."""
+    if len(scene.objects) > MAX_OBJECTS:
+        raise SceneFileError(f"scene {scene.source!r} has {len(scene.objects)} objects; a scene holds at most {MAX_OBJECTS}")
+    for i, obj in enumerate(scene.objects):
+        name = obj.label or f"object {i}"
+        pos, quat = np.asarray(obj.position, float), np.asarray(obj.quat, float)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            raise SceneFileError(f"scene {scene.source!r}: {name} has position {pos.tolist()}; valid: three finite numbers [x, y, z] (m)")
+        norm = float(np.linalg.norm(quat)) if quat.shape == (4,) else math.nan
+        if not abs(norm - 1.0) <= QUAT_TOLERANCE:
+            raise SceneFileError(f"scene {scene.source!r}: {name} has orientation {quat.tolist()} (norm {norm:.6g}); valid: "
+                                 f"a unit quaternion [w, x, y, z], norm within {QUAT_TOLERANCE:g} of 1")
+
+
 def objects_outside(scene: SceneFile, workspace: Workspace) -> list[int]:
     """Active objects whose pose is not finite, whose centre is outside the workspace
-    footprint, or which lie below the table."""
+    footprint, below the table or above the workspace's top."""
     out = []
     for i, obj in enumerate(scene.objects):
         pos = np.asarray(obj.position, float)
         if not obj.active:
             continue
-        if not np.all(np.isfinite(pos)) or not workspace.contains_xy(pos[0], pos[1]) or pos[2] < BELOW_TABLE:
+        if not np.all(np.isfinite(pos)) or not workspace.contains_xy(pos[0], pos[1]) or not BELOW_TABLE <= pos[2] <= workspace.z_max:
             out.append(i)
     return out
 
@@ -124,7 +159,7 @@ def resolve_outside(
     ws = workspace
     what = (
         f"{len(outside)} object(s) outside the workspace (x in [{ws.x_min}, {ws.x_max}], y in [{ws.y_min}, "
-        f"{ws.y_max}], on the table) {when}: {describe_objects(scene, outside, positions)}"
+        f"{ws.y_max}], z in [{BELOW_TABLE}, {ws.z_max}]: on the table) {when}: {describe_objects(scene, outside, positions)}"
     )
     if not drop_outside:
         raise SceneFileError(f"scene {scene.source!r}: {what}. Pass reset(options={{'drop_outside': True}}) to leave them out.")
@@ -156,8 +191,10 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
     (``env.unwrapped.current_scene()``)."""
     if not isinstance(scene, SceneFile):
         scene = scene.unwrapped.current_scene()  # type: ignore[attr-defined]
-    objects = [
-        {
+    digests: dict[str, str] = {}
+    objects = []
+    for obj in scene.objects:
+        entry = {
             "name": obj.asset.name,
             "source": obj.asset.source,
             "rgba": list(obj.asset.rgba),
@@ -165,8 +202,9 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
             "quat": np.asarray(obj.quat, float).tolist(),
             "active": bool(obj.active),
         }
-        for obj in scene.objects
-    ]
+        if obj.asset.source != "blocks" and Path(obj.asset.source).is_file():  # a mesh file (the blocks are made in code)
+            entry["sha256"] = _digest(obj.asset.source, digests)
+        objects.append(entry)
     doc = {
         "format": SCENE_FORMAT,
         "version": SCENE_VERSION,
@@ -181,10 +219,13 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
 
 
 # ------------------------------------------------------------------------------ reading
-def read_scene(path: str | Path, mesh_dir: str | Path | None = None, object_set_seed: int = 0) -> SceneFile:
+def read_scene(
+    path: str | Path, mesh_dir: str | Path | None = None, object_set_seed: int = 0, allow_changed_meshes: bool = False,
+) -> SceneFile:
     """Read a scene file: ours (``.json``), or a VPG test case or Grasping the Invisible
     preset (``.txt``, see :mod:`mpg_envs.scenes.vpg_scenes`); ``object_set_seed`` is used for the
-    text files (ours carry their own)."""
+    text files (ours carry their own). A mesh file whose digest differs from the one our file
+    recorded raises, or with ``allow_changed_meshes`` warns."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
@@ -193,11 +234,11 @@ def read_scene(path: str | Path, mesh_dir: str | Path | None = None, object_set_
 
         return read_vpg_text(path, mesh_dir, object_set_seed)
     if path.suffix.lower() == ".json":
-        return _read_json_scene(path, mesh_dir)
+        return _read_json_scene(path, mesh_dir, allow_changed_meshes)
     raise SceneFileError(f"scene file {str(path)!r}: expected a .json scene, or a VPG test case or Grasping the Invisible preset (.txt)")
 
 
-def _read_json_scene(path: Path, mesh_dir: str | Path | None) -> SceneFile:
+def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_meshes: bool = False) -> SceneFile:
     try:
         doc = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
@@ -208,13 +249,23 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None) -> SceneFile:
     blocks = None
     folders: dict[str, dict[str, ObjectAsset]] = {}
     objects = []
-    for k, obj in enumerate(doc.get("objects") or []):
+    listed = doc.get("objects") or []
+    if not isinstance(listed, list) or len(listed) > MAX_OBJECTS:
+        what = f"{len(listed)} objects" if isinstance(listed, list) else f"objects {listed!r}"
+        raise SceneFileError(f"scene file {str(path)!r} lists {what}; valid: a list of at most {MAX_OBJECTS} objects")
+    digests: dict[str, str] = {}
+    for k, obj in enumerate(listed):
         try:
             name, source = obj["name"], obj["source"]
-            position, quat = np.asarray(obj["position"], float), np.asarray(obj["quat"], float)
-            rgba, active = tuple(obj["rgba"]), bool(obj.get("active", True))
+            position = _numbers(obj["position"], 3, "position", "three numbers [x, y, z] (m)")
+            quat = _numbers(obj["quat"], 4, "quat", "four numbers [w, x, y, z], a unit quaternion")
+            rgba = tuple(_numbers(obj["rgba"], 4, "rgba", "four numbers in [0, 1] [red, green, blue, alpha]", (0.0, 1.0)))
+            active = obj.get("active", True)
+            if not isinstance(active, bool):
+                raise ValueError(f"active is {active!r}; valid: true or false")
         except (KeyError, TypeError, ValueError) as exc:
-            raise SceneFileError(f"scene file {str(path)!r}: object {k} is malformed ({exc!r})") from exc
+            raise SceneFileError(f"scene file {str(path)!r}: object {k} ({obj.get('name') if isinstance(obj, dict) else obj!r}) "
+                                 f"is malformed: {exc if isinstance(exc, ValueError) else repr(exc)}") from exc
         if source == "blocks":
             blocks = blocks or {a.name: a for a in blocks_object_set(seed=seed)}
             asset = blocks.get(name)
@@ -231,6 +282,12 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None) -> SceneFile:
         if asset is None:
             raise SceneFileError(f"scene file {str(path)!r}: object {k} has an unknown asset {name!r} (from {source!r})")
         label = f"object {k} ({name!r})"
+        if "sha256" in obj and Path(asset.source).is_file() and _digest(asset.source, digests) != obj["sha256"]:
+            changed = (f"scene file {str(path)!r}: {label}'s mesh {asset.source!r} changed since the scene was saved "
+                       f"(sha256 {digests[asset.source][:12]}..., recorded {str(obj['sha256'])[:12]}...)")
+            if not allow_changed_meshes:
+                raise SceneFileError(f"{changed}; restore the mesh, or read_scene(..., allow_changed_meshes=True) to load it as it is now")
+            warnings.warn(f"{changed}; loading the mesh as it is now", stacklevel=3)
         objects.append(SceneObject(dataclasses.replace(asset, rgba=rgba), position, quat, active, label))
     if not objects:
         raise SceneFileError(f"scene file {str(path)!r} lists no objects")
@@ -241,3 +298,19 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None) -> SceneFile:
         if not objects[target].active:
             raise SceneFileError(f"scene file {str(path)!r}: the target {objects[target].label} is not in the scene (inactive)")
     return SceneFile(tuple(objects), target, str(path), doc.get("stage"), seed)
+
+
+def _numbers(value: object, count: int, key: str, valid: str, bounds: tuple[float, float] | None = None) -> np.ndarray:
+    """``value`` as ``count`` finite floats (within ``bounds``), else a ``ValueError`` naming ``key``."""
+    ok = isinstance(value, list) and len(value) == count and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    array = np.asarray(value, float) if ok else np.zeros(0)
+    if not ok or not np.all(np.isfinite(array)) or (bounds is not None and not np.all((array >= bounds[0]) & (array <= bounds[1]))):
+        raise ValueError(f"{key} is {value!r}; valid: {valid}")
+    return array
+
+
+def _digest(source: str, cache: dict[str, str]) -> str:
+    """The SHA-256 hex digest of the file ``source`` (once per file and call)."""
+    if source not in cache:
+        cache[source] = hashlib.sha256(Path(source).read_bytes()).hexdigest()
+    return cache[source]

@@ -10,6 +10,11 @@ rest. Loading is faithful: every object of every peer file then lies within
 measured settling is 5.5 mm, a block on the third layer of a stack, and 4.5 degrees, a
 cylinder leaning across two others), stacks stand, and nothing leaves the table.
 :func:`pose_errors` measures it.
+
+Before anything is placed the scene's poses and count are checked
+(:func:`~mpg_envs.scenes.scene_io.check_scene`); once placed, objects interpenetrating deeper than
+:data:`~mpg_envs.scenes.scene_io.PENETRATION_TOLERANCE_M` raise naming the two and the depth
+(:func:`interpenetrations`).
 """
 
 from __future__ import annotations
@@ -20,7 +25,9 @@ import mujoco
 import numpy as np
 
 from mpg_envs.simulation.assets import ObjectAsset
-from mpg_envs.scenes.scene_io import SceneFile, SceneObject, kept_target, objects_outside, resolve_outside
+from mpg_envs.scenes.scene_io import (
+    PENETRATION_TOLERANCE_M, SceneFile, SceneFileError, SceneObject, check_scene, kept_target, objects_outside, resolve_outside,
+)
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.world import World
 
@@ -34,7 +41,7 @@ SETTLE_ROUNDS = 4
 """Settling of a peer file runs up to this many times the physics' usual settling cap."""
 
 
-def apply_scene(
+def load_scene(
     build_world: Callable[[Sequence[ObjectAsset]], World],
     scene: SceneFile,
     workspace: Workspace,
@@ -48,6 +55,7 @@ def apply_scene(
     ``drop_outside``, are left out with a warning (the target then is the first kept object
     for a VPG test case, else it raises).
     """
+    check_scene(scene)
     dropped = objects_outside(scene, workspace)
     resolve_outside(scene, dropped, workspace, drop_outside, "in the file")
     world = build_world([obj.asset for obj in scene.objects])
@@ -55,6 +63,13 @@ def apply_scene(
         if obj.active and i not in dropped:
             world.set_object_pose(i, obj.position, obj.quat)
     world.forward()
+    deep = interpenetrations(world, PENETRATION_TOLERANCE_M)
+    if deep:
+        names = [f"{scene.objects[a].label or f'object {a}'} and {scene.objects[b].label or f'object {b}'} by {1000 * d:.1f} mm"
+                 for a, b, d in deep]
+        raise SceneFileError(f"scene {scene.source!r}: objects interpenetrate: {'; '.join(names[:5])}"
+                             f"{f' (and {len(names) - 5} more pairs)' if len(names) > 5 else ''}; "
+                             f"at most {1000 * PENETRATION_TOLERANCE_M:g} mm is valid")
     if scene.settle:
         world.settle(SETTLE_ROUNDS * world.physics.settle_max_steps)
         moved_out = sorted(set(world.objects_out_of_room().tolist()) | set(world.objects_outside_workspace().tolist()))
@@ -65,6 +80,28 @@ def apply_scene(
         world.forward()
         dropped = dropped + moved_out
     return world, kept_target(scene, set(dropped))
+
+
+def interpenetrations(world: World, tolerance: float = 0.0) -> list[tuple[int, int, float]]:
+    """``(object a, object b, depth in m)`` for each pair of objects of ``world`` whose deepest
+    contact goes deeper than ``tolerance``, deepest first (MuJoCo's contacts of the last
+    ``forward``). MuJoCo finds no contact between two shapes placed exactly on each other, so
+    active objects whose centres lie within 1 mm count too, as deep as the smaller of their
+    smallest extents."""
+    deepest: dict[tuple[int, int], float] = {}
+    for c in world.data.contact[: world.data.ncon]:
+        a, b = int(world.object_of_geom(int(c.geom1))), int(world.object_of_geom(int(c.geom2)))
+        if a >= 0 and b >= 0 and a != b and -float(c.dist) > tolerance:
+            key = (min(a, b), max(a, b))
+            deepest[key] = max(deepest.get(key, 0.0), -float(c.dist))
+    active = world.active_objects()
+    centres = np.array([world.object_position(i) for i in active]).reshape(-1, 3)
+    for k, m in np.argwhere(np.triu(np.linalg.norm(centres[:, None] - centres[None], axis=2) < 1e-3, 1)):
+        a, b = int(active[k]), int(active[m])
+        extent = min(float(np.ptp(world.object_vertices(i), axis=0).min()) for i in (a, b))
+        if (a, b) not in deepest and extent > tolerance:
+            deepest[(a, b)] = extent
+    return sorted(((a, b, d) for (a, b), d in deepest.items()), key=lambda t: -t[2])
 
 
 def pose_errors(world: World, scene: SceneFile) -> tuple[np.ndarray, np.ndarray]:

@@ -66,8 +66,15 @@ class ObjectAsset:
     friction: float
     source: str
     mesh_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """Where the object frame's origin (the centre of mass) lies in the source mesh's frame,
-    so a pose given for the mesh frame (a VPG scene file) converts to the body's pose."""
+    """Where the object frame's origin (the centre of mass) lies in the source mesh's frame
+    (scaled by ``scale``), so a pose given for the mesh frame (a VPG scene file) converts to
+    the body's pose."""
+    scale: float = 1.0
+    """The factor the source mesh's coordinates were multiplied by to make this object (a
+    set's scale times a fit to the gripper), so a scene file can record it and the same object
+    be loaded again from ``source``; 1.0 for generated sets."""
+    licence: str = ""
+    """The licence of the source geometry where it comes from outside (e.g. ``"zlib"``), else ``""``."""
 
     def __post_init__(self) -> None:
         if not self.parts:
@@ -93,6 +100,8 @@ class ObjectAsset:
             raise ValueError(f"object {self.name!r}: mass must be positive, got {self.mass}")
         if not (math.isfinite(self.friction) and self.friction > 0):
             raise ValueError(f"object {self.name!r}: friction must be positive, got {self.friction}")
+        if not (math.isfinite(self.scale) and self.scale > 0):
+            raise ValueError(f"object {self.name!r}: scale must be positive, got {self.scale}")
 
     @property
     def num_parts(self) -> int:
@@ -184,14 +193,26 @@ def make_asset(
     friction: float,
     source: str,
     com: np.ndarray,
+    *,
+    volume: float | None = None,
+    scale: float = 1.0,
+    licence: str = "",
 ) -> ObjectAsset:
-    """An asset from centred parts; ``mass=None`` means ``density * volume`` within MASS_RANGE."""
+    """An asset from centred parts; ``mass=None`` means ``density * volume`` within MASS_RANGE.
+
+    ``volume`` is the solid's volume when the parts overlap (the union of a mesh's bodies);
+    ``None`` means the sum of the part volumes.
+    """
     if mass is None:
         if not (math.isfinite(density) and density > 0):
             raise ValueError(f"density must be positive, got {density!r}")
-        volume = sum(mesh_volume(v, f) for v, f in parts)
+        if volume is None:
+            volume = sum(mesh_volume(v, f) for v, f in parts)
         mass = float(np.clip(density * volume, *MASS_RANGE))
     offset = tuple(float(c) for c in com)
-    return ObjectAsset(name=name, parts=tuple(parts), rgba=rgba, mass=mass, friction=friction, source=source, mesh_offset=offset)
+    return ObjectAsset(
+        name=name, parts=tuple(parts), rgba=rgba, mass=mass, friction=friction, source=source,
+        mesh_offset=offset, scale=float(scale), licence=licence,
+    )  # fmt: skip
 
 

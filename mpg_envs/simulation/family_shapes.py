@@ -13,7 +13,7 @@ Five families of graspable shapes, each a union of disjoint convex parts
 Each family draws its parameters from a ``numpy`` generator (:func:`draw_shape`), rounded to
 0.1 mm (or 0.01 for exponents and angles) so they are readable and an exact cache key, and
 builds its parts from them alone (:func:`build_shape`); the parts are then scaled per axis by
-:func:`~mpg_envs.simulation.solids.fit_scale` into the gripper's range (every extent 2.5-10 cm,
+:func:`~mpg_envs.simulation.solids.axis_fit_factors` into the gripper's range (every extent 2.5-10 cm,
 the two smallest at most 6 cm), which leaves a shape drawn inside the range as it is.
 """
 
@@ -28,7 +28,7 @@ from mpg_envs.simulation.assets import Part, convex_part
 from mpg_envs.simulation.solids import (
     box_part,
     extrude_pieces,
-    fit_scale,
+    axis_fit_factors,
     parts_extents,
     regular_polygon,
     ring_pieces,
@@ -260,5 +260,5 @@ def draw_shape(family: str, seed: int, index: int) -> dict[str, Any]:
 def build_shape(family: str, params: dict[str, Any]) -> list[Part]:
     """The convex parts of a shape from its parameters, fitted to the gripper's range."""
     parts = _FAMILIES[check_family(family)][1](params)
-    factors = fit_scale(parts_extents(parts))
+    factors = axis_fit_factors(parts_extents(parts))
     return parts if np.all(factors == 1.0) else scale_parts(parts, factors)

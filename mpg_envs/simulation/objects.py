@@ -8,6 +8,10 @@ meshes. The pieces live in modules of their own and are re-exported here:
 * :mod:`mpg_envs.simulation.blocks` -- the generated "blocks" set (:func:`blocks_object_set`);
 * :mod:`mpg_envs.simulation.families` -- the procedural sets (:func:`family_object_set`);
 * :mod:`mpg_envs.simulation.meshes` -- mesh folders and coacd decomposition (:func:`load_mesh_folder`);
+* :mod:`mpg_envs.simulation.meshes` -- mesh files and folders (:func:`load_mesh_file`, :func:`load_mesh_folder`),
+  decomposed in a worker process (:mod:`~mpg_envs.simulation.decomposition`,
+  :mod:`~mpg_envs.simulation.isolated_call`) and fitted to the gripper (:mod:`~mpg_envs.simulation.gripper_fit`);
+* :mod:`mpg_envs.simulation.random_urdfs` -- pybullet's ``random_urdfs`` objects (:func:`load_random_urdfs`);
 * :mod:`mpg_envs.simulation.geometry_cache` -- the on-disk geometry cache (:func:`default_cache_dir`);
 * :mod:`mpg_envs.simulation.bodies` -- :func:`add_object_body`, an asset as a free body of an ``MjSpec``.
 """
@@ -22,10 +26,13 @@ from mpg_envs.simulation.blocks import ARCH_TUNNEL_RATIO, BLOCK_SHAPES, BLOCKS_J
 from mpg_envs.simulation.bodies import OBJECT_CONDIM, OBJECT_GEOM_GROUP, ROLLING_FRICTION, TORSIONAL_FRICTION, add_object_body
 from mpg_envs.simulation.families import FAMILY_SEED_RANGES, PROCEDURAL_SETS, family_object_set
 from mpg_envs.simulation.geometry_cache import CACHE_FORMAT_VERSION, default_cache_dir
-from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, load_mesh_folder
+from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange, fit_scale
+from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, MeshLoadError, load_mesh_file, load_mesh_folder
+from mpg_envs.simulation.random_urdfs import RANDOM_URDFS_LICENCE, load_random_urdfs, random_urdf_entries
 
 __all__ = [
     "ARCH_TUNNEL_RATIO",
+    "BLOCKS_EXTENTS",
     "BLOCKS_JITTER",
     "BLOCK_SHAPES",
     "CACHE_FORMAT_VERSION",
@@ -34,14 +41,17 @@ __all__ = [
     "CoacdParams",
     "DEFAULT_FRICTION",
     "FAMILY_SEED_RANGES",
+    "ExtentRange",
     "MASS_RANGE",
     "MESH_SUFFIXES",
+    "MeshLoadError",
     "MIN_PART_VOLUME",
     "OBJECT_CONDIM",
     "OBJECT_GEOM_GROUP",
     "ObjectAsset",
     "PROCEDURAL_SETS",
     "Part",
+    "RANDOM_URDFS_LICENCE",
     "ROLLING_FRICTION",
     "TABLEAU_10",
     "TORSIONAL_FRICTION",
@@ -50,8 +60,12 @@ __all__ = [
     "blocks_object_set",
     "default_cache_dir",
     "family_object_set",
+    "fit_scale",
+    "load_mesh_file",
     "load_mesh_folder",
     "load_object_set",
+    "load_random_urdfs",
+    "random_urdf_entries",
 ]
 
 

@@ -19,10 +19,8 @@ import numpy as np
 import trimesh
 
 from mpg_envs.simulation.assets import Part, convex_part
+from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange
 
-GRIPPER_FIT = (0.025, 0.10, 0.06)
-"""(smallest extent, largest extent, largest of the two smallest extents), metres: the blocks'
-rule, so some width fits the 2F-85's 85 mm opening with margin in any resting pose."""
 
 
 def superquadric_points(
@@ -198,22 +196,21 @@ def box_part(lo: Sequence[float], hi: Sequence[float]) -> Part:
     return convex_part(np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]))
 
 
-def fit_scale(extents: Sequence[float], fit: tuple[float, float, float] = GRIPPER_FIT) -> np.ndarray:
-    """Per-axis factors that bring ``extents`` into the gripper's range.
+def axis_fit_factors(extents: Sequence[float], extent_range: ExtentRange = BLOCKS_EXTENTS) -> np.ndarray:
+    """Per-axis factors that bring ``extents`` into ``extent_range`` (the blocks' by default).
 
-    Each extent is clamped to ``[fit[0], fit[1]]`` and then the two smallest to at most
-    ``fit[2]``; the factor is the new extent over the old. Extents already in range keep
-    factor 1, so a shape drawn inside the range is left exactly as drawn.
+    Each extent is clamped to ``[min_extent, max_extent]`` and then the two smallest to at most
+    ``max_two_smallest``; the factor is the new extent over the old. Extents already in range
+    keep factor 1, so a shape drawn inside the range is left exactly as drawn. (A generated
+    shape may be stretched per axis; an outside mesh is scaled uniformly:
+    :func:`mpg_envs.simulation.gripper_fit.fit_scale`.)
     """
     ext = np.asarray(extents, dtype=np.float64)
-    low, high, small = fit
     if ext.shape != (3,) or not np.all(ext > 0):
         raise ValueError(f"extents must be 3 positive lengths, got {extents}")
-    if not 0 < low <= small <= high:
-        raise ValueError(f"fit must satisfy 0 < smallest <= two smallest <= largest, got {fit}")
-    target = np.clip(ext, low, high)
+    target = np.clip(ext, extent_range.min_extent, extent_range.max_extent)
     two_smallest = np.argsort(target, kind="stable")[:2]
-    target[two_smallest] = np.minimum(target[two_smallest], small)
+    target[two_smallest] = np.minimum(target[two_smallest], extent_range.max_two_smallest)
     return target / ext
 
 

@@ -23,7 +23,7 @@ from mpg_envs.simulation.family_shapes import FAMILY_NAMES, build_shape, draw_sh
 from mpg_envs.simulation.objects import load_object_set
 from mpg_envs.simulation.solids import (
     extrude_pieces,
-    fit_scale,
+    axis_fit_factors,
     ring_pieces,
     star_polygon_pieces,
     superquadric_part,
@@ -107,12 +107,12 @@ def test_mitred_l_bar_and_ring() -> None:
     assert union_mesh(ring).is_watertight and _solid_bodies(ring) == 1
 
 
-def test_fit_scale_hand_cases() -> None:
-    np.testing.assert_allclose(fit_scale([0.02, 0.05, 0.12]), [0.025 / 0.02, 1.0, 0.10 / 0.12])
-    np.testing.assert_allclose(fit_scale([0.07, 0.08, 0.09]), [0.06 / 0.07, 0.06 / 0.08, 1.0])
-    assert np.all(fit_scale([0.03, 0.05, 0.09]) == 1.0)  # in range: exactly as drawn
+def test_axis_fit_factors_hand_cases() -> None:
+    np.testing.assert_allclose(axis_fit_factors([0.02, 0.05, 0.12]), [0.025 / 0.02, 1.0, 0.10 / 0.12])
+    np.testing.assert_allclose(axis_fit_factors([0.07, 0.08, 0.09]), [0.06 / 0.07, 0.06 / 0.08, 1.0])
+    assert np.all(axis_fit_factors([0.03, 0.05, 0.09]) == 1.0)  # in range: exactly as drawn
     with pytest.raises(ValueError, match="3 positive"):
-        fit_scale([0.0, 0.05, 0.09])
+        axis_fit_factors([0.0, 0.05, 0.09])
 
 
 # ------------------------------------------------------------------ families

@@ -163,3 +163,33 @@ def test_an_episode_of_a_continuous_action_wrapper_is_recorded():
     assert record.actions == ((-1.0, -1.0, 0.0, 1.0),) * 2
     json.dumps(record.to_dict())  # the JSON record holds them
     env.close()
+
+
+def test_an_episode_records_its_visual_randomization():
+    """With ``visual_randomization`` on, a record carries the values drawn for its episode
+    (the reset info's); without it, the JSON record has no such key."""
+    import gymnasium as gym
+
+    from mpg_agents.evaluation.evaluate import env_options_of, run_episode
+
+    class Corner:  # the workspace's corner: an empty grasp
+        def act(self, obs):
+            return 0
+
+    records = {}
+    for option in (None, True):
+        env = gym.make("MPG-Stage2-v0", num_objects=2, max_motions=1, visual_randomization=option)
+        records[option] = run_episode(Corner(), env, index=0, seed=3)
+        if option:
+            assert env_options_of(env)["visual_randomization"] is True
+            _, info = env.reset(seed=3)
+            assert records[option].visuals == info["visual_randomization"]
+        env.close()
+    assert "visuals" not in records[None].to_dict()
+    # mpg-eval records a track's own keywords (it makes the env by its id).
+    from mpg_agents.evaluation.evaluate import registered_options
+
+    assert registered_options("MPG-OccludedHardCamera-v0") == {"obs_mode": "camera", "visual_randomization": True}
+    assert registered_options("MPG-OccludedHard-v0") == {}
+    data = json.loads(json.dumps(records[True].to_dict()))
+    assert data["visuals"]["seed"] == 3 and len(data["visuals"]["object_gains"]) == 2

@@ -328,7 +328,9 @@ def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):
     assert read_checkpoint_header(tmp_path / "Stage2" / "weights.safetensors")["q_star"] == pytest.approx(record["q_star"])
     assert sum("in its scenes" in line for line in logged) == 1
     # The state after calibration holds an empty replay; a resumed learner skips calibrating.
-    resumed = Learner(TrainConfig(steps=2, **{**TINY, "net_config": net}), stages[1], tmp_path / "Stage2", log=logged.append)
+    # (steps 2 extends the finished stage of 1 iteration: a changed setting, asked for)
+    resumed = Learner(TrainConfig(steps=2, **{**TINY, "net_config": net}), stages[1], tmp_path / "Stage2", log=logged.append,
+                      resume_anyway=True)
     assert resumed.resumed and resumed.policy.q_star == pytest.approx(record["q_star"])
     resumed.run()
     assert sum("in its scenes" in line for line in logged) == 1

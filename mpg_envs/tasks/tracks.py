@@ -1,0 +1,46 @@
+"""Benchmark tracks beyond the stages: a registered id that is a stage run with fixed env
+keywords (its own table rows), so a track is one name to evaluate on, not a list of options."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from mpg_envs.tasks.stages import STAGES
+
+
+@dataclass(frozen=True)
+class TrackSpec:
+    """A registered id: ``stage``'s env made with ``options`` (``gym.make`` keywords given by
+    the caller override them)."""
+
+    env_id: str
+    stage: str
+    options: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if self.stage not in STAGES:
+            raise ValueError(f"track {self.env_id}: unknown stage {self.stage!r}; valid: {sorted(STAGES)}")
+        if "stage" in self.options:
+            raise ValueError(f"track {self.env_id}: the stage is given by TrackSpec.stage, not options")
+
+    @property
+    def max_motions(self) -> int:
+        return int(self.options.get("max_motions", STAGES[self.stage].max_motions))
+
+
+TRACKS: dict[str, TrackSpec] = {
+    t.env_id: t
+    for t in (
+        TrackSpec(
+            "MPG-OccludedHardCamera-v0",
+            "OccludedHard",
+            {"obs_mode": "camera", "visual_randomization": True},
+            "the hard track seen through two rendered RGB-D cameras with the default visual "
+            "randomization (light, colours, a 1 cm / 1 degree camera calibration error, RealSense "
+            "depth noise and holes), drawn from each episode's seed; needs OpenGL",
+        ),
+    )
+}
+"""Track id -> spec; registered by ``import mpg_envs`` beside the stages' ids."""

@@ -1,0 +1,230 @@
+"""Runs and command lines under faults and bad input: the log survives a kill with its state, a run
+folder has one owner, a resume with other settings refuses, output paths and settings are checked
+before any work."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from mpg_agents.cli import calibrate_main, eval_main, plot_main, train_main
+from mpg_agents.learning.learner import Learner
+from mpg_agents.learning.run_folder import LOCK_NAME, RunFolderBusy, RunLock, prepare_run_folder, resume_differences
+from mpg_agents.learning.train_config import TrainConfig
+from mpg_agents.learning.train_log import CSV_COLUMNS, rewind_progress
+
+REPO = Path(__file__).resolve().parents[2]
+TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
+TINY_TOML = """batch_size = 1
+replay_capacity = 64
+checkpoint_every = 2
+target_update_every = 2
+torch_threads = 1
+[net_config]
+trunk_depth = 2
+"""
+
+
+@pytest.fixture(autouse=True)
+def _quiet_threads():
+    torch.set_num_threads(1)
+
+
+def iterations(path: Path) -> list[int]:
+    lines = path.read_text().splitlines()
+    assert lines[0] == ",".join(CSV_COLUMNS)
+    return [int(line.split(",")[0]) for line in lines[1:]]
+
+
+# ------------------------------------------------------------------------ the log and the state
+def row(it: int) -> str:
+    return ",".join([str(it), "0", "grasp", "greedy"] + ["0"] * (len(CSV_COLUMNS) - 4))
+
+
+def test_rewind_keeps_each_iteration_up_to_the_state_once(tmp_path):
+    path = tmp_path / "progress.csv"
+    # What a kill leaves: no header (it was still buffered), a repeat, rows after the state, a cut row.
+    path.write_text("\n".join([row(1), row(2), row(2), row(3), row(4), row(5)]) + "\n5,0,gra")
+    assert rewind_progress(path, 4) == 4
+    assert iterations(path) == [1, 2, 3, 4]
+    assert rewind_progress(tmp_path / "fresh.csv", 0) == 0 and iterations(tmp_path / "fresh.csv") == []
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_rewind_warns_about_rows_it_cannot_write_again(tmp_path):
+    path = tmp_path / "progress.csv"
+    path.write_text(row(3) + "\n")
+    with pytest.warns(UserWarning, match=r"lacks the rows of 2 iterations \(\[1, 2\]\) that its saved state \(iteration 3\) has done"):
+        rewind_progress(path, 3)
+    assert iterations(path) == [3]
+
+
+class Crash(Exception):
+    """A process dying between two saves."""
+
+
+def test_a_run_crashed_between_saves_resumes_with_every_iteration_once(tmp_path):
+    cfg = TrainConfig(steps=6, **TINY)
+    learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
+    original = learner.iteration
+
+    def iteration_then_crash(obs):
+        out = original(obs)
+        if learner.counters.iteration == 5:
+            raise Crash()  # the state holds iteration 4, the log rows 1..5
+        return out
+
+    learner.iteration = iteration_then_crash
+    with pytest.raises(Crash):
+        learner.run()
+    log = tmp_path / "progress.csv"
+    lines = log.read_text().splitlines()
+    log.write_text("\n".join(lines[1:]) + "\n6,1,gr")  # and lost its header, and a row was cut short
+    resumed = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
+    assert resumed.counters.iteration == 4
+    resumed.run()
+    assert iterations(log) == [1, 2, 3, 4, 5, 6]
+
+
+# ------------------------------------------------------------------------------ one owner
+def hold_lock(folder: Path) -> subprocess.Popen:
+    code = "import sys, time; from mpg_agents.learning.run_folder import RunLock; RunLock(sys.argv[1]); print('held', flush=True); time.sleep(120)"
+    proc = subprocess.Popen([sys.executable, "-c", code, str(folder)], stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert proc.stdout.readline().strip() == "held"
+    return proc
+
+
+def test_a_second_training_on_a_run_folder_refuses_naming_the_owner(tmp_path, capsys):
+    import socket
+
+    out = prepare_run_folder(tmp_path / "run")
+    owner = hold_lock(out)
+    try:
+        code = train_main(["--env", "MPG-Stage2-v0", "--steps", "1", "--out", str(out)])
+        err = capsys.readouterr().err
+        assert code == 2
+        assert f"run folder {str(out)!r} is in use by process {owner.pid} on host {socket.gethostname()!r}" in err
+        assert "wait for it to finish, stop it, or give another --out" in err
+        with pytest.raises(RunFolderBusy, match=f"process {owner.pid}"):
+            Learner(TrainConfig(steps=1, **TINY), "MPG-Stage2-v0", out, log=lambda s: None)
+    finally:
+        owner.kill()
+        owner.wait()
+    # Its owner died (kill -9): the lock is free, and taken over.
+    lock = RunLock(out)
+    assert f'"pid": {os.getpid()}' in (out / LOCK_NAME).read_text()
+    lock.release()
+
+
+def test_a_stale_lock_file_of_a_dead_process_is_taken_over(tmp_path):
+    (tmp_path / LOCK_NAME).write_text('{"pid": 999999, "host": "elsewhere", "started": "2020-01-01T00:00:00"}')
+    with RunLock(tmp_path):
+        assert f'"pid": {os.getpid()}' in (tmp_path / LOCK_NAME).read_text()
+        with RunLock(tmp_path):  # the same process may hold it twice (a learner and its resume)
+            pass
+
+
+# ------------------------------------------------------------------------ settings and resumes
+def test_resume_differences_lists_every_changed_setting():
+    saved = {"seed": 0, "betas": [0.9, 0.99], "stage": {"env_id": "MPG-Stage2-v0", "iterations": 10}}
+    asked = {"seed": 1, "betas": (0.9, 0.99), "stage": {"env_id": "MPG-Stage2-v0", "iterations": 12}}
+    assert resume_differences(saved, asked) == ["seed: saved 0, asked 1", "stage.iterations: saved 10, asked 12"]
+    assert resume_differences({"seed": 0}, {"seed": 0, "window": 200}) == []  # a run saved before `window` existed
+
+
+def test_a_resume_with_other_settings_refuses_unless_asked_to_continue(tmp_path, capsys):
+    config = tmp_path / "tiny.toml"
+    config.write_text(TINY_TOML)
+    out = str(tmp_path / "run")
+    base = ["--env", "MPG-Stage2-v0", "--steps", "2", "--config", str(config), "--out", out]
+    assert train_main(base) == 0
+    capsys.readouterr()
+    assert train_main([*base, "--seed", "1", "--num-objects", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "holds a run with other settings (num_objects: saved None, asked 3; seed: saved 0, asked 1)" in err
+    assert "--resume-anyway to continue it with the new ones" in err
+    config.write_text(TINY_TOML.replace("batch_size = 1", "batch_size = 2"))
+    assert train_main(base) == 2
+    assert "batch_size: saved 1, asked 2" in capsys.readouterr().err
+    config.write_text(TINY_TOML)
+    assert train_main([*base, "--seed", "1", "--resume-anyway"]) == 0
+
+
+@pytest.mark.parametrize("setting, message", [
+    ("learning_rate = \"fast\"", "training setting learning_rate must be a positive finite number, got 'fast'"),
+    ("checkpoint_every = 0", "training setting checkpoint_every must be an integer >= 1, got 0"),
+    ("batch_size = 0", "training setting batch_size must be an integer >= 1, got 0"),
+    ("gamma = 1.5", "training setting gamma must be a number in [0, 1], got 1.5"),
+    ("grasp_symmetry = \"no\"", "training setting grasp_symmetry must be true or false, got 'no'"),
+])
+def test_bad_training_settings_are_named(tmp_path, capsys, setting, message):
+    config = tmp_path / "bad.toml"
+    config.write_text(setting + "\n")
+    assert train_main(["--env", "MPG-Stage2-v0", "--config", str(config), "--out", str(tmp_path / "run")]) == 2
+    assert f"error: {message}" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("flag, message", [
+    (["--steps", "-1"], "training setting steps must be an integer >= 1 or None, got -1"),
+    (["--seed", "-5"], "training setting seed must be an integer >= 0, got -5"),
+    (["--num-objects", "0"], "training setting num_objects must be an integer >= 1 or None, got 0"),
+])
+def test_bad_training_flags_are_named(tmp_path, capsys, flag, message):
+    assert train_main(["--env", "MPG-Stage2-v0", *flag, "--out", str(tmp_path / "run")]) == 2
+    assert f"error: {message}" in capsys.readouterr().err
+
+
+def test_an_out_that_is_a_file_is_refused(tmp_path, capsys):
+    out = tmp_path / "run"
+    out.write_text("not a folder")
+    for argv in (["--env", "MPG-Stage2-v0"], ["--pipeline"]):
+        assert train_main([*argv, "--steps", "1", "--out", str(out)]) == 2
+        assert f"run folder {str(out)!r}: {str(out)!r} is a file, not a folder; give --out a folder path" in capsys.readouterr().err
+    assert out.read_text() == "not a folder"
+
+
+# ------------------------------------------------------------------------------ output paths
+def test_output_paths_are_checked_before_any_episode(tmp_path, capsys, monkeypatch):
+    import mpg_agents.evaluation.eval_runner as eval_runner
+
+    def no_episodes(*args, **kwargs):
+        raise AssertionError("episodes ran before the output path was checked")
+
+    monkeypatch.setattr(eval_runner, "evaluate_parallel", no_episodes)
+    missing = tmp_path / "missing" / "dir" / "out.json"
+    eval_args = ["--policy", "oracle", "--env", "MPG-Stage2-v0", "--episodes", "3", "--quiet"]
+    assert eval_main([*eval_args, "--json", str(missing)]) == 2
+    assert f"--json {str(missing)!r}: the folder {str(missing.parent)!r} does not exist; create it first" in capsys.readouterr().err
+    assert eval_main([*eval_args, "--json", str(tmp_path)]) == 2
+    assert f"--json {str(tmp_path)!r} is a folder; give a file path" in capsys.readouterr().err
+    assert calibrate_main(["--policy", "shipped", "--json", str(missing)]) == 2
+    assert "does not exist; create it first" in capsys.readouterr().err
+    assert plot_main([str(tmp_path), "--out", str(tmp_path / "no" / "curves.png")]) == 2
+    assert "does not exist; create it first" in capsys.readouterr().err
+
+
+def test_a_negative_eval_seed_is_named(capsys):
+    assert eval_main(["--policy", "oracle", "--env", "MPG-Stage2-v0", "--episodes", "1", "--seed", "-5"]) == 2
+    assert "error: --seed must be >= 0, got -5" in capsys.readouterr().err
+    assert calibrate_main(["--policy", "shipped", "--seed", "-5"]) == 2
+    assert "error: --seed must be >= 0, got -5" in capsys.readouterr().err
+
+
+def test_demo_and_train_runs_refuse_an_out_that_is_a_file(tmp_path, capsys):
+    from mpg_agents.demo import main as demo_main
+    from mpg_agents.learning.train_runs import main as runs_main
+
+    out = tmp_path / "file"
+    out.write_text("x")
+    for main in (demo_main, runs_main):
+        with pytest.raises(SystemExit) as exit_info:
+            main(["--out", str(out)])
+        assert exit_info.value.code == 2
+        assert f"--out {str(out)!r} is a file; give a folder (made if missing)" in capsys.readouterr().err
