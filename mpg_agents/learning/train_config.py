@@ -125,7 +125,7 @@ def check_train_config(cfg: TrainConfig) -> None:
         ValueError: naming the first bad setting, its value and what is valid.
     """
     inf = math.inf
-    _integer("steps", cfg.steps, 1, optional=True)
+    _integer("steps", cfg.steps, 0, optional=True)
     _integer("seed", cfg.seed, 0)
     if cfg.variant not in ("small", "large"):
         raise ValueError(f"training setting variant must be 'small' or 'large', got {cfg.variant!r}")
