@@ -61,7 +61,7 @@ def measure_primitives(trials: int) -> dict[str, dict[str, float]]:
         for k in range(trials):
             env.reset(seed=k)
             rotation, row, col = action_for(env, primitive)
-            result = env._primitives.execute(primitive, rotation, row, col, env._obs["depth"], env.target)
+            result = env.sim.executor.execute(primitive, rotation, row, col, env.last_observation["depth"], env.target)
             walls.append(result.seconds)
             steps.append(result.physics_steps)
             fractions.append(result.physics_seconds / result.seconds)
@@ -85,7 +85,7 @@ def measure_obs(mode: str, repeats: int) -> float | None:
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
-        env._observe()
+        env.sim.observe(env.target)
         times.append(time.perf_counter() - start)
     env.close()
     return 1000 * statistics.median(times)

@@ -4,7 +4,7 @@ Each case is a list of blocks (a shape of the ``blocks`` set, a position in mill
 the workspace centre, a yaw in degrees, lying as built or on its side) and the target among
 them. The blocks are stacked in the order listed: each one's lowest point is put just above
 whatever is already under its footprint. The scene then goes through the env's own loading
-path (:func:`mpg_envs.scenes.scene_loading.apply_scene`: placed, settled until at rest) and is
+path (:func:`mpg_envs.scenes.scene_loading.load_scene`: placed, settled until at rest) and is
 checked: every block still within the loading tolerance of its designed pose (so nothing
 toppled), the target's visible fraction in the case's band, and the saved file reproducing
 the settled scene exactly. ``--oracle`` also runs the oracle on each case in strict

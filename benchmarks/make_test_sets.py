@@ -8,6 +8,12 @@ start state exactly. Seeds run on a local process pool, one scene per task.
     python benchmarks/make_test_sets.py --envs MPG-Occluded-v0 MPG-OccludedHard-v0 \\
         --objects 15 30 --count 500 --workers 16 [--out mpg_envs/test_scenes]
 
+Each set records the digest of the code and parameters that dropped it
+(:func:`mpg_envs.tasks.scene_source.generator_digest`); a reset refuses a set whose digest is
+not the running code's. ``--stamp K`` records the running code's digest in existing sets
+without regenerating them, after checking that it drops their first ``K`` scenes identically
+(same assets, bit-identical poses, same target); the scenes themselves are not rewritten.
+
 A track on another object set (``MPG-OccludedHardNovel-v0``: ``object_set="random_urdfs_test"``)
 gets its own files (``occluded_hard_novel_<objects>.npz``), recording the digest of the object
 pack its scenes were made with.
@@ -30,8 +36,9 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401
-from mpg_envs.scenes.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet, test_set_name  # noqa: E402
+from mpg_envs.scenes.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet, load_test_set, test_set_name  # noqa: E402
 from mpg_envs.simulation.random_urdfs import TEST_SET_NAME, test_pack_path  # noqa: E402
+from mpg_envs.tasks.scene_source import generator_digest  # noqa: E402
 
 _ENVS: dict[tuple[str, int, bool], gym.Env] = {}
 
@@ -73,6 +80,45 @@ def _object_pack_meta(object_set: str) -> dict[str, str]:
     return {"object_pack": test_pack_path().name, "object_pack_sha256": hashlib.sha256(test_pack_path().read_bytes()).hexdigest()}
 
 
+def set_name(env_id: str) -> str:
+    """The name of the test sets of ``env_id`` (a stage's, on its object set)."""
+    kwargs = gym.spec(env_id).kwargs
+    return test_set_name(mpg_envs.STAGES[kwargs["stage"]].test_set, kwargs.get("object_set", "blocks"))
+
+
+def stamp(env_ids: list[str], counts: list[int], out: Path, check: int, workers: int) -> int:
+    """Record this code's generator digest in the sets of ``env_ids`` x ``counts`` under ``out``
+    once their first ``check`` scenes drop identically; exit 1 (nothing written) if one does not."""
+    cells = [(e, n, out / f"{set_name(e)}_{n}.npz") for e in env_ids for n in counts]
+    sets = {path: load_test_set(path) for _, _, path in cells}
+    tasks = [(e, n, int(seed)) for e, n, path in cells for seed in sets[path].seeds[:check]]
+    with ProcessPoolExecutor(workers) as pool:
+        made = list(pool.map(make_scene, tasks, chunksize=1))
+    bad = []
+    for (e, n, seed), scene in zip(tasks, made):
+        ts = next(sets[path] for e2, n2, path in cells if (e2, n2) == (e, n))
+        k = int(np.flatnonzero(ts.seeds == seed)[0])
+        same = (
+            list(ts.assets[k]) == scene["assets"] and np.array_equal(ts.positions[k], scene["positions"])
+            and np.array_equal(ts.quats[k], scene["quats"]) and int(ts.targets[k]) == scene["target"]
+        )
+        print(f"{e} {n} objects seed {seed}: {'identical' if same else 'DIFFERENT'}", flush=True)
+        bad += [] if same else [(e, n, seed)]
+    if bad:
+        print(f"not stamped: this code drops other scenes for {bad}; regenerate the sets instead")
+        return 1
+    for e, n, path in cells:
+        ts = sets[path]
+        meta = {**ts.meta, "generator_version": str(GENERATOR_VERSION), "generator_digest": generator_digest(_env(e, n, False).scene_request)}
+        meta.pop("format", None)
+        meta.pop("name", None)
+        TestSet(ts.name, ts.num_objects, ts.seeds, ts.assets, ts.positions, ts.quats, ts.targets, ts.visible_fraction, meta).save(path)
+        again = load_test_set(path)
+        assert all(np.array_equal(getattr(again, f), getattr(ts, f)) for f in ("seeds", "assets", "positions", "quats", "targets", "visible_fraction"))
+        print(f"{path}: stamped {meta['generator_digest']} (scenes unchanged)")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", nargs="+", default=["MPG-Occluded-v0", "MPG-OccludedHard-v0"])
@@ -81,7 +127,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=TEST_SEED_START, help="first seed")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", default=str(Path(mpg_envs.__file__).parent / "test_scenes"))
+    parser.add_argument("--stamp", type=int, metavar="K", help="record the digest in the existing sets after checking their first K scenes")
     args = parser.parse_args(argv)
+    if args.stamp is not None:
+        return stamp(args.envs, args.objects, Path(args.out), args.stamp, args.workers)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     tasks = [(e, n, args.seed + i) for e in args.envs for n in args.objects for i in range(args.count)]
@@ -93,9 +142,8 @@ def main(argv: list[str] | None = None) -> int:
             if len(scenes) % 50 == 0:  # progress of long runs, in task order
                 print(f"{len(scenes)}/{len(tasks)} scenes, {time.perf_counter() - start:.0f} s", flush=True)
     for env_id in args.envs:
-        kwargs = gym.spec(env_id).kwargs
-        object_set = kwargs.get("object_set", "blocks")
-        name = test_set_name(mpg_envs.STAGES[kwargs["stage"]].test_set, object_set)
+        object_set = gym.spec(env_id).kwargs.get("object_set", "blocks")
+        name = set_name(env_id)
         for n in args.objects:
             rows = [s for (e, m, _), s in zip(tasks, scenes) if e == env_id and m == n]
             test_set = TestSet(
@@ -112,6 +160,7 @@ def main(argv: list[str] | None = None) -> int:
                     "object_set": object_set,
                     **_object_pack_meta(object_set),
                     "generator_version": str(GENERATOR_VERSION),
+                    "generator_digest": generator_digest(_env(env_id, n, False).scene_request),
                     "package_version": getattr(mpg_envs, "__version__", "unknown"),
                     "mujoco_version": mujoco.__version__,
                 },

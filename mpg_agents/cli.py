@@ -9,38 +9,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
-import tomllib
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any, Sequence
 
 from mpg_agents.acting.coordination import COORDINATIONS
+from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.evaluation.env_options import parse_env_options
-
-
-class UsageError(Exception):
-    """Bad command-line input: reported on one line, exit status 2."""
-
-
-def _fail(exc: BaseException) -> int:
-    print(f"error: {exc}", file=sys.stderr)
-    return 2
-
-
-def _read_config(path: str | None) -> dict[str, Any]:
-    if path is None:
-        return {}
-    p = Path(path)
-    if not p.is_file():
-        raise UsageError(f"config file {path!r} does not exist")
-    try:
-        if p.suffix == ".toml":
-            return tomllib.loads(p.read_text())
-        return json.loads(p.read_text())
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise UsageError(f"config file {path!r} is not valid {p.suffix[1:] or 'JSON'}: {exc}") from exc
+from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_output, fail, read_config
 
 
 def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
@@ -49,18 +26,9 @@ def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
     from mpg_agents.learning import training_stages as ts
     from mpg_agents.learning.train_config import TrainConfig
 
-    settings = _read_config(path)
+    settings = read_config(path)
     stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
     return TrainConfig.from_dict(settings), stages
-
-
-def _check_env_id(env_id: str) -> None:
-    import gymnasium as gym
-
-    import mpg_envs
-
-    if env_id not in gym.registry:
-        raise UsageError(f"unknown env id {env_id!r}; valid: {', '.join(mpg_envs.ENV_IDS)}")
 
 
 def _add_net_setting_arguments(parser: argparse.ArgumentParser, prefix: str) -> None:
@@ -85,32 +53,6 @@ def _net_settings(args: argparse.Namespace) -> dict[str, Any]:
     return {name: value for name, value in given if value is not None}
 
 
-def _check_output(path: str | None, flag: str) -> None:
-    """An output file's path, checked before any work: a file in a folder that exists and may be written."""
-    if path is None:
-        return
-    p, parent = Path(path), Path(path).parent
-    if p.is_dir():
-        raise UsageError(f"{flag} {path!r} is a folder; give a file path")
-    if not parent.is_dir():
-        raise UsageError(f"{flag} {path!r}: the folder {str(parent)!r} does not exist; create it first")
-    if not os.access(parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
-        raise UsageError(f"{flag} {path!r} cannot be written (permission denied)")
-
-
-def _check_checkpoint(path: str | None) -> None:
-    if path is None:
-        return
-    if not Path(path).is_file():
-        raise UsageError(f"checkpoint {path!r} does not exist")
-    from mpg_agents.acting.weights import read_checkpoint_header
-
-    try:
-        read_checkpoint_header(path)
-    except Exception as exc:  # safetensors raises its own types for foreign files
-        raise UsageError(f"{path!r} is not an MPGNet safetensors checkpoint: {exc}") from exc
-
-
 # ---------------------------------------------------------------------------- train
 def train_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="mpg-train", description="Train MPGNet: one stage (--env) or the five-stage pipeline (--pipeline).")
@@ -129,6 +71,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--variant", choices=("small", "large"), help="MobileNetV3 trunks (default small)")
     parser.add_argument("--num-objects", type=int, help="a fixed object count (default: the stage's)")
     parser.add_argument("--q-star", type=float, help="the grasp threshold Q*_g (default: from --init or calibrated)")
+    parser.add_argument("--device", choices=DEVICES, help="networks and batches: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument("--discriminator", help="the discriminator: a fixed grasp-net checkpoint scoring states (Stages III-V)")
     parser.add_argument("--stages", help="pipeline: which stages, by name or position, e.g. 1,2")
     parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: only Stage V, from scratch")
@@ -153,8 +96,8 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         base, stages = training_settings(args.config)
         flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name, None) is not None}
         base = replace(base, **flags)
-        _check_checkpoint(args.init)
-        _check_checkpoint(args.discriminator)
+        check_checkpoint(args.init)
+        check_checkpoint(args.discriminator)
         if args.pipeline:
             from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 
@@ -169,13 +112,13 @@ def train_main(argv: Sequence[str] | None = None) -> int:
             summary = run_pipeline(PipelineConfig(base=base, stages=stages), args.out, init=args.init, resume_anyway=args.resume_anyway)
             print(json.dumps(summary, indent=1))
             return 0
-        _check_env_id(args.env)
+        check_env_id(args.env)
         learner = Learner(base, ts.stage_for_env(args.env, stages), args.out, init=args.init, resume_anyway=args.resume_anyway)
         summary = learner.run()
         print(json.dumps({**json_safe(summary), "q_star": as_record(learner.policy.q_star)}))  # the Q*_g its weights carry
         return 0
     except (UsageError, FileNotFoundError, ValueError, RunFolderBusy) as exc:  # also another architecture, a run folder in use
-        return _fail(exc)
+        return fail(exc)
     except KeyboardInterrupt:
         print("interrupted: state saved, run the same command to resume", file=sys.stderr)
         return 130
@@ -203,6 +146,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                         help="network policies: grasp threshold Q*_g (override the checkpoint's calibrated one)")
     parser.add_argument("--avoid-repeats", action="store_true",
                         help="network policies: never repeat an action on an unchanged scene (take the best other one)")
+    parser.add_argument("--device", choices=DEVICES, help="network policies: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
     parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="with --workers > 1: Ray (default) or a local process pool (no Ray start-up)")
@@ -218,12 +162,14 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.evaluation.policy_zoo import BUILTIN
         from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel
 
-        _check_env_id(args.env)
+        check_env_id(args.env)
         if args.seed < 0:
             raise UsageError(f"--seed must be >= 0, got {args.seed}")
-        _check_output(args.json, "--json")
+        check_output(args.json, "--json")
+        if args.device is not None:
+            resolve_device(args.device)  # CUDA asked for where there is none: say so before any episode
         if args.policy not in BUILTIN:
-            _check_checkpoint(args.policy)
+            check_checkpoint(args.policy)
         if args.episodes < 1:
             raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
         if args.workers is not None and args.workers < 1:
@@ -235,6 +181,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             extra += (("avoid_repeats", True),)
         if args.q_star is not None:
             extra += (("q_star", args.q_star),)
+        if args.device is not None:
+            extra += (("device", args.device),)
         env_options = parse_env_options(args.env_option)
         if args.cases is not None:
             return _eval_cases(args, dict(extra), env_options)
@@ -242,7 +190,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
         result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend)
     except (UsageError, FileNotFoundError, ValueError) as exc:
-        return _fail(exc)
+        return fail(exc)
     return _report(result, args.json)
 
 
@@ -292,26 +240,28 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--grasp-fingers", choices=("any", "clear"),
                         help="which grasps may act (override the checkpoint's; calibrate with the setting you evaluate with)")
     parser.add_argument("--json", help="also write the measurement (every successful grasp's Q) to this JSON file")
+    parser.add_argument("--device", choices=DEVICES, help="the network: auto (default: CUDA when available), cpu or cuda")
     args = parser.parse_args(argv)
     try:
         import gymnasium as gym
 
-        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict
+        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict, format_q_star
         from mpg_agents.evaluation.policy_zoo import make_policy
 
-        _check_env_id(args.env)
+        check_env_id(args.env)
         if args.seed < 0:
             raise UsageError(f"--seed must be >= 0, got {args.seed}")
-        _check_output(args.json, "--json")
+        check_output(args.json, "--json")
         if args.policy != "shipped":
-            _check_checkpoint(args.policy)
+            check_checkpoint(args.policy)
         if args.episodes < 1:
             raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
         if not 0.0 <= args.quantile <= 1.0:
             raise UsageError(f"--quantile must be in [0, 1], got {args.quantile}")
         env = gym.make(args.env, **({"num_objects": args.num_objects} if args.num_objects is not None else {}))
-        net = make_policy(args.policy, env, **({"grasp_fingers": args.grasp_fingers} if args.grasp_fingers else {})).policy
-        print(f"Q*_g in the checkpoint: {net.q_star:.4f}")
+        options = {"grasp_fingers": args.grasp_fingers} if args.grasp_fingers else {}
+        net = make_policy(args.policy, env, **options, **({"device": args.device} if args.device else {})).policy
+        print(f"Q*_g in the checkpoint: {format_q_star(net.q_star)}")
 
         def progress(k: int, grasps: int, taken: int) -> None:
             print(f"  episode {k + 1}/{args.episodes}: {taken} of {grasps} grasps took the target", flush=True)
@@ -319,7 +269,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         measured = calibrate_q_star(net, env, args.episodes, args.seed, args.quantile, on_episode=progress)
         env.close()
     except (UsageError, FileNotFoundError, ValueError, RuntimeError) as exc:
-        return _fail(exc)
+        return fail(exc)
     print(f"Q*_g {measured.q_star:.4f}: quantile {measured.quantile:g} of the Q of {len(measured.target_grasp_q)} "
           f"of {measured.grasps} greedy grasps that took the target in {measured.episodes} episodes")
     if args.json:
@@ -351,15 +301,15 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     try:
         from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
-        _check_checkpoint(args.src)
-        _check_output(args.dst, "dst")
+        check_checkpoint(args.src)
+        check_output(args.dst, "dst")
         settings = _net_settings(args)
         primitives = tuple(p.strip() for p in args.primitives.split(",")) if args.primitives else None
         dst = export_weights(args.src, args.dst, primitives=primitives, half=not args.float32, settings=settings,
                              coordination=args.coordination, q_star=args.q_star)
         header = read_checkpoint_header(dst)
     except (UsageError, FileNotFoundError, ValueError) as exc:
-        return _fail(exc)
+        return fail(exc)
     q_star = "none (never calibrated)" if header["q_star"] is None else f"{header['q_star']:.4f}"
     print(f"{dst}: {dst.stat().st_size / 1000:.0f} kB, branches {header['primitives']}, Q*_g {q_star}, "
           f"coordination {header['extra'].get('coordination', 'workflow')}, settings after training "
@@ -380,7 +330,7 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
     try:
         from mpg_agents.learning.plotting import plot_compare, plot_run
 
-        _check_output(args.out, "--out")
+        check_output(args.out, "--out")
         if args.stage or len(args.run) > 1:
             if not args.stage or not args.out:
                 raise ValueError("comparing runs needs --stage and --out")
@@ -391,7 +341,7 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
         else:
             out = plot_run(args.run[0], args.out, args.window)
     except (UsageError, FileNotFoundError, ValueError) as exc:
-        return _fail(exc)
+        return fail(exc)
     print(f"learning curves written to {out}")
     return 0
 

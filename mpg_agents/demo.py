@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
+from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_envs.perception.render import RenderUnavailableError
 
 DEMO_ENV = "MPG-OccludedHard-v0"
@@ -114,9 +115,14 @@ def main(argv: list[str] | None = None) -> int:
     # scene it never trained on.
     parser.add_argument("--seed", type=int, default=DEMO_SEED, help=f"episode i is reset with seed + i (default {DEMO_SEED}, a held-out test seed)")
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps_<k>.png (default demo_out)")
+    parser.add_argument("--device", choices=DEVICES, default="auto", help="a network policy's device: auto (default: CUDA when available), cpu or cuda")
     args = parser.parse_args(argv)
     if Path(args.out).exists() and not Path(args.out).is_dir():
         parser.error(f"--out {args.out!r} is a file; give a folder (made if missing)")
+    try:
+        device = resolve_device(args.device)
+    except ValueError as exc:
+        parser.error(str(exc))
 
     from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_agents.evaluation.evaluate import evaluate
@@ -127,8 +133,8 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(args.env, render_mode="rgb_array")
-    policy = make_policy(args.policy, env)
-    print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}, {threads} torch threads")
+    policy = make_policy(args.policy, env, device=str(device))
+    print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}, {threads} torch threads, {device}")
 
     def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
         if episode == 0:

@@ -2,6 +2,7 @@
 
 import os
 import sys
+from pathlib import Path
 
 if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -36,15 +37,35 @@ def blocks():
     return {asset.name: asset for asset in blocks_object_set()}
 
 
-@pytest.fixture(scope="session")
-def vpg_dir():
-    """The VPG peer files (meshes and test cases), outside the repo; skip if absent."""
-    from pathlib import Path
+PEERS_DIR = Path(os.environ.get("MPG_PEERS_DIR") or Path(__file__).resolve().parents[1].parent / "shared" / "peers")
+"""The peers' published files, beside the repository (``<repo>/../shared/peers``) and never
+copied into it; ``MPG_PEERS_DIR`` names another folder."""
 
-    path = Path(__file__).resolve().parents[2] / "shared" / "peers" / "vpg"
-    if not path.is_dir():
-        pytest.skip(f"VPG peer files not found at {path}")
-    return path
+PEER_FOLDERS = ("vpg/test-cases", "vpg/blocks", "gti")
+
+
+def peers_or_stop(folder: Path, ci: bool) -> Path:
+    """``folder`` if it holds the peers' files; else the test skips on a user's machine and
+    fails under CI, where a skip would hide that the test never ran."""
+    missing = [sub for sub in PEER_FOLDERS if not (folder / sub).is_dir()]
+    if missing:
+        message = f"the peers' files ({', '.join(missing)}) are not in {folder}; set MPG_PEERS_DIR to their folder"
+        if ci:
+            pytest.fail(message)
+        pytest.skip(message)
+    return folder
+
+
+@pytest.fixture(scope="session")
+def peers_dir() -> Path:
+    """The one lookup of the peers' folder (:data:`PEERS_DIR`; fails when absent under ``CI=true``)."""
+    return peers_or_stop(PEERS_DIR, os.environ.get("CI", "").lower() == "true")
+
+
+@pytest.fixture(scope="session")
+def vpg_dir(peers_dir: Path) -> Path:
+    """The VPG peer files (meshes and test cases)."""
+    return peers_dir / "vpg"
 
 
 @pytest.fixture

@@ -15,40 +15,22 @@ Its parts: :attr:`MPGAgent.q_net` (:class:`~mpg_agents.acting.q_function.MPGQFun
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Self, Sequence
+from typing import Any, Iterator, Mapping, Self
 
 import numpy as np
 import torch
 from gymnasium import spaces
 from torch import Tensor, nn
 
+from mpg_agents.acting.agent_settings import AgentSettings, agent_net_config  # noqa: F401  (agent_net_config: re-exported)
 from mpg_agents.acting.coordination import check_coordination, usable_primitives
 from mpg_agents.acting.decision import Decision, alternatives, decide
 from mpg_agents.acting.discriminator import Discriminator
-from mpg_agents.acting.grasp_threshold import UNCALIBRATED, GraspThreshold, from_header
+from mpg_agents.acting.grasp_threshold import GraspThreshold, from_header
 from mpg_agents.network.mpgnet_config import MPGNetConfig
-from mpg_agents.acting.q_function import MPGQFunction, check_action_space
-from mpg_agents.acting.spaces import check_observation_space, resolve_primitives
+from mpg_agents.acting.q_function import MPGQFunction
+from mpg_agents.acting.spaces import resolve_primitives
 from mpg_agents.acting.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet
-from mpg_envs.grid.actions import check_primitives
-
-
-def agent_net_config(
-    variant: str, net_config: MPGNetConfig | Mapping[str, Any] | None, branches: Sequence[str]
-) -> MPGNetConfig:
-    """The network an agent builds: ``net_config`` (a config, or a dict overriding
-    ``variant``'s defaults) with ``branches`` as its primitives.
-
-    Raises:
-        ValueError: ``net_config`` names another variant.
-    """
-    if isinstance(net_config, MPGNetConfig):
-        return MPGNetConfig.from_dict({**net_config.to_dict(), "primitives": list(branches)})
-    overrides = dict(net_config or {})
-    overrides["primitives"] = tuple(branches)
-    if overrides.pop("variant", variant) != variant:
-        raise ValueError(f"net_config variant {net_config['variant']!r} contradicts variant={variant!r}")  # type: ignore[index]
-    return MPGNetConfig.for_variant(variant, **overrides)
 
 
 def checkpoint_settings(
@@ -98,7 +80,8 @@ class AgentMethods:
 
     @classmethod
     def build(cls, observation_space: spaces.Dict, action_space: spaces.Discrete, **settings: Any) -> Self:
-        """A fresh one for an env's spaces (the settings are :meth:`MPGAgent.build`'s)."""
+        """A fresh one for an env's spaces (``settings``: the fields of
+        :class:`~mpg_agents.acting.agent_settings.AgentSettings`)."""
         raise NotImplementedError
 
     @classmethod
@@ -123,12 +106,12 @@ class AgentMethods:
 
     # ------------------------------------------------------------------ Q*_g
     @property
-    def q_star(self) -> float:
-        """The grasp threshold Q*_g it decides with (NaN until calibrated)."""
-        return float(self.threshold)
+    def q_star(self) -> float | None:
+        """The Q*_g it decides with (``None`` before any)."""
+        return self.threshold.get()
 
-    def set_q_star(self, value: float) -> None:
-        """Decide with ``value`` as Q*_g from now on (saved with the weights)."""
+    def set_q_star(self, value: float | None) -> None:
+        """Decide with ``value`` as Q*_g from now on (saved with the weights; ``None``: none)."""
         self.threshold.set(value)
 
     def set_coordination(self, coordination: str) -> None:
@@ -215,44 +198,25 @@ class MPGAgent(AgentMethods):
         self.threshold = threshold if threshold is not None else GraspThreshold()
 
     @classmethod
-    def build(
-        cls,
-        observation_space: spaces.Dict,
-        action_space: spaces.Discrete,
-        variant: str = "small",
-        primitives: Sequence[str] | None = None,
-        branches: Sequence[str] | None = None,
-        coordination: str = "workflow",
-        q_star: float = UNCALIBRATED,
-        net_config: MPGNetConfig | Mapping[str, Any] | None = None,
-        imagenet_weights: str | None = None,
-    ) -> "MPGAgent":
+    def build(cls, observation_space: spaces.Dict, action_space: spaces.Discrete, **settings: Any) -> "MPGAgent":
         """A fresh agent for an env's spaces.
 
         Args:
             observation_space: the MPG Dict space (``color``, ``depth``, ``mask``, ``occluded``).
             action_space: the env's pixel action space.
-            variant: ``"small"`` (CPU-friendly) or ``"large"`` (paper) MobileNetV3 trunks.
-            primitives: the action space's primitives when it does not carry ``.primitives``.
-            branches: the nets to build (default: the action primitives); a superset keeps e.g.
-                the grasp net as Stage III's discriminator next to the move net.
-            coordination: see the class.
-            q_star: the grasp threshold Q*_g; NaN until calibrated.
-            net_config: ``MPGNetConfig`` or its dict overriding the variant's defaults.
-            imagenet_weights: optional torchvision MobileNetV3 checkpoint to initialise every trunk.
+            settings: the fields of :class:`~mpg_agents.acting.agent_settings.AgentSettings`
+                (variant, primitives, branches, coordination, q_star, net_config,
+                imagenet_weights, geometry).
 
         Raises:
             ValueError: the spaces are not MPG's, or a setting is unknown.
         """
-        action_primitives = resolve_primitives(action_space, primitives)
-        check_coordination(coordination)
-        cfg = agent_net_config(variant, net_config, check_primitives(branches) if branches is not None else action_primitives)
-        check_observation_space(observation_space, cfg.heightmap_size)
-        check_action_space(action_space, action_primitives, cfg)
-        q_net = MPGQFunction(cfg, action_primitives)
-        if imagenet_weights:
-            q_net.mpgnet.load_imagenet(imagenet_weights)
-        return cls(q_net, coordination, GraspThreshold(q_star))
+        built = AgentSettings(**settings)
+        resolved = built.resolve(observation_space, action_space)
+        q_net = MPGQFunction(resolved.net_config, resolved.action_primitives, resolved.geometry)
+        if built.imagenet_weights:
+            q_net.mpgnet.load_imagenet(built.imagenet_weights)
+        return cls(q_net, built.coordination, GraspThreshold(built.q_star))
 
     # ------------------------------------------------------------ properties
     @property
@@ -279,6 +243,12 @@ class MPGAgent(AgentMethods):
     def device(self) -> torch.device:
         """Where the network's tensors are."""
         return next(self.parameters()).device
+
+    def to(self, device: torch.device | str) -> "MPGAgent":
+        """Move the network (and Q*_g's buffer) to ``device``; returns the agent."""
+        self.q_net.to(device)
+        self.threshold.to(device)
+        return self
 
     def parameters(self) -> Iterator[nn.Parameter]:
         """The network's parameters (what an optimiser trains)."""

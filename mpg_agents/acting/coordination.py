@@ -8,12 +8,12 @@ the rule needs, so a policy computes only those branches.
 Rules (:data:`COORDINATIONS`):
 
 - ``"workflow"`` (paper, Section III-C): target occluded -> move; else grasp when the best
-  grasp Q is at least Q*_g; else push. Until Q*_g is calibrated (NaN) the grasp/push choice
+  grasp Q is at least Q*_g; else push. Without a Q*_g (``q_star`` ``None``) the grasp/push choice
   is the larger of the best grasp Q and the best push Q.
 - ``"grasp_first"``: the workflow, but the grasp is asked first: a grasp whose best Q is at
   least Q*_g is taken even when the target is occluded (a partly covered target the grasp
   net already scores graspable needs no move); otherwise occluded -> move, else push. Not
-  the paper's rule; measured against it on the Experiments page of the documentation. Until Q*_g is calibrated it is the workflow.
+  the paper's rule; measured against it on the Experiments page of the documentation. Without a Q*_g it is the workflow.
 - ``"uncover_max_q"``: the workflow, but while the target is occluded the larger of the best
   move Q and the best push Q (either may uncover it). Not the paper's rule; meant for nets
   whose push is paid for uncovering as the move is (``RewardConfig.push_uncovers``), so the
@@ -61,7 +61,7 @@ def choose_primitive(
     rule: str,
     available: Sequence[str],
     occluded: bool,
-    q_star: float,
+    q_star: float | None,
     best_q: Callable[[str], float],
 ) -> str:
     """The primitive to use now.
@@ -70,16 +70,21 @@ def choose_primitive(
         rule: one of :data:`COORDINATIONS`.
         available: usable primitives in canonical order (see :func:`usable_primitives`).
         occluded: the observation's occlusion bit.
-        q_star: the grasp threshold Q*_g (NaN: not calibrated).
+        q_star: Q*_g; ``None``: none yet (compare the best grasp and push Q instead).
         best_q: ``primitive -> best Q`` (called only for the primitives the rule compares).
+
+    Raises:
+        ValueError: an unknown rule, or a NaN ``q_star`` (``None`` says "no Q*_g").
     """
     check_coordination(rule)
+    if q_star is not None and math.isnan(q_star):
+        raise ValueError("q_star must be a number, or None for no Q*_g yet; got NaN")
     available = check_primitives(available)
     if len(available) == 1:
         return available[0]
     if rule == "max_q":
         return _largest(available, best_q)
-    if rule == "grasp_first" and occluded and "grasp" in available and not math.isnan(q_star):
+    if rule == "grasp_first" and occluded and "grasp" in available and q_star is not None:
         if best_q("grasp") >= q_star:
             return "grasp"
     if "move" in available and occluded:
@@ -87,7 +92,7 @@ def choose_primitive(
             return _largest(("move", "push"), best_q)
         return "move"
     if "grasp" in available and "push" in available:
-        if math.isnan(q_star):
+        if q_star is None:
             return _largest(("grasp", "push"), best_q)
         return "grasp" if best_q("grasp") >= q_star else "push"
     # Not occluded and only one of grasp/push usable besides move (e.g. a move+grasp net).

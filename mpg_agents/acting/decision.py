@@ -37,7 +37,7 @@ def decide(
     q: MPGQFunction,
     obs: Mapping[str, Tensor],
     coordination: str,
-    q_star: float,
+    q_star: float | None,
     primitive: str | None = None,
     forbidden: Mapping[str, Tensor] | None = None,
 ) -> list[Decision]:
@@ -47,7 +47,7 @@ def decide(
         q: the network on the env's action space.
         obs: a batch (leading axis) of raw observation tensors.
         coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS`.
-        q_star: the grasp threshold Q*_g (NaN: uncalibrated).
+        q_star: Q*_g (``None``: none yet).
         primitive: overrides the coordination's choice of primitive (e.g. Stage IV's final grasp).
         forbidden: ``{primitive: (R, H, W) bool}`` actions not to take (one sample only; e.g.
             actions that already failed on this unchanged scene).
@@ -70,7 +70,7 @@ def _decide_one(
     q: MPGQFunction,
     enc: EncodedObs,
     coordination: str,
-    q_star: float,
+    q_star: float | None,
     primitive: str | None,
     forbidden: Mapping[str, Tensor] | None,
 ) -> Decision:

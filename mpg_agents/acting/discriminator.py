@@ -11,6 +11,7 @@ from typing import Any, Mapping
 
 import torch
 
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.acting.weights import load_mpgnet
 
@@ -27,10 +28,13 @@ class Discriminator:
         self.net = net
 
     @classmethod
-    def from_weights(cls, path: str | Path) -> "Discriminator":
-        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net)."""
-        net, _ = load_mpgnet(path, primitives=("grasp",))
-        return cls(net)
+    def from_weights(
+        cls, path: str | Path, geometry: FingerGeometry | None = None, device: torch.device | str = "cpu"
+    ) -> "Discriminator":
+        """A discriminator from a saved MPGNet (e.g. the Stage II grasp net) on ``device``;
+        ``geometry``: the grasp geometry of the envs it scores for (default: the default env's)."""
+        net, _ = load_mpgnet(path, primitives=("grasp",), geometry=geometry)
+        return cls(net.to(device))
 
     def __call__(self, obs: Mapping[str, Any]) -> float:
         was_training = self.net.training

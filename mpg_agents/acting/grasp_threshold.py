@@ -2,6 +2,8 @@
 and recorded. Every other module reads it through this one.
 
 The paper's workflow grasps when the best grasp Q reaches Q*_g (:mod:`mpg_agents.acting.coordination`).
+In code Q*_g has one name, ``q_star``: a number, or ``None`` (:data:`UNCALIBRATED`) before any
+estimate. NaN is refused everywhere (:func:`check_q_star`); it is no way to say "none".
 
 - **Estimate**: :func:`estimate_q_star`, a quantile of the Q of greedy grasps that took the
   target (the paper sets Q*_g from the Q of successful grasps). :func:`calibrate_q_star` measures
@@ -35,40 +37,65 @@ import numpy as np
 import torch
 from torch import nn
 
+from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 
 if TYPE_CHECKING:
     from mpg_agents.acting.agent import MPGAgent
 
-UNCALIBRATED = float("nan")
+UNCALIBRATED: float | None = None
 """Q*_g before any estimate: the coordination then compares the best grasp and push Q instead."""
 
 
+def check_q_star(value: float | None) -> float | None:
+    """``value`` as Q*_g: a float (infinities allowed: always / never grasp), or ``None`` for none yet.
+
+    Raises:
+        ValueError: NaN (say ``None`` for "no Q*_g"), or not a number.
+    """
+    if value is None:
+        return None
+    q_star = float(value)
+    if math.isnan(q_star):
+        raise ValueError("Q*_g must be a number, or None for no Q*_g yet; got NaN")
+    return q_star
+
+
+def format_q_star(q_star: float | None) -> str:
+    """Q*_g for a log line: ``"none"`` before any estimate."""
+    return "none" if q_star is None else f"{q_star:.4g}"
+
+
 class GraspThreshold(nn.Module):
-    """The Q*_g an agent decides with.
+    """The Q*_g (``q_star``) an agent decides with.
 
     A module with one float64 buffer, so the value travels with state dicts (SB3's ``save``)
-    and a calibrated value such as 1.85 round-trips exactly.
+    and a calibrated value such as 1.85 round-trips exactly. The buffer stores "none yet" as
+    NaN (a tensor holds no ``None``); :meth:`get` and :meth:`set` speak ``None``.
     """
 
-    def __init__(self, value: float = UNCALIBRATED) -> None:
+    def __init__(self, q_star: float | None = UNCALIBRATED) -> None:
         super().__init__()
-        self.register_buffer("value", torch.tensor(float(value), dtype=torch.float64))
+        self.register_buffer("value", torch.tensor(math.nan, dtype=torch.float64))
+        self.set(q_star)
 
-    def __float__(self) -> float:
-        return float(self.value)
+    def get(self) -> float | None:
+        """The Q*_g held, ``None`` before any."""
+        value = float(self.value)
+        return None if math.isnan(value) else value
 
-    def set(self, value: float) -> None:
-        """Hold ``value`` from now on (NaN: uncalibrated)."""
-        self.value.fill_(float(value))
+    def set(self, q_star: float | None) -> None:
+        """Hold ``q_star`` from now on (``None``: none)."""
+        q_star = check_q_star(q_star)
+        self.value.fill_(math.nan if q_star is None else q_star)
 
     @property
     def calibrated(self) -> bool:
-        """Whether a value has been set (it is not NaN)."""
-        return not math.isnan(float(self))
+        """Whether a value is held."""
+        return self.get() is not None
 
     def extra_repr(self) -> str:
-        return f"q_star={float(self):.6g}"
+        return f"q_star={format_q_star(self.get())}"
 
 
 # -------------------------------------------------------------------------------- estimate
@@ -143,14 +170,10 @@ def calibrate_q_star(
     for n in range(episodes):
         # A seed without a valid scene passes to the next one: the same scenes every calibration.
         obs, _, k = reset_first_valid(env, lambda j: episode_seed(seed, j, calibration=True), k + 1, on_skip=on_skip)
-        done = False
-        while not done:
-            decision = agent.decide(obs, "grasp")
-            obs, _, terminated, truncated, info = env.step(decision.action)
+        for step in episode_steps(env, obs, lambda o: agent.decide(o, "grasp"), lambda decision: decision.action):
             grasps += 1
-            if info["target_grasped"] and math.isfinite(decision.q_value):
-                taken.append(float(decision.q_value))
-            done = bool(terminated or truncated)
+            if step.info["target_grasped"] and math.isfinite(step.choice.q_value):
+                taken.append(float(step.choice.q_value))
         if on_episode is not None:
             on_episode(n, grasps, len(taken))
     if not taken:
@@ -159,30 +182,30 @@ def calibrate_q_star(
 
 
 # ------------------------------------------------------------------ store and record
-def as_record(q_star: float) -> float | None:
-    """Q*_g as a weights header, ``calibration.json`` or ``pipeline.json`` holds it: ``None``
-    when uncalibrated (NaN, which JSON cannot hold)."""
-    return None if math.isnan(q_star) else float(q_star)
+def as_record(q_star: float | None) -> float | None:
+    """Q*_g as a weights header, ``calibration.json`` or ``pipeline.json`` holds it (JSON
+    ``null`` when none)."""
+    return check_q_star(q_star)
 
 
-def from_record(value: float | None) -> float:
-    """The inverse of :func:`as_record`: ``None`` is NaN (uncalibrated)."""
-    return UNCALIBRATED if value is None else float(value)
+def from_record(value: float | None) -> float | None:
+    """The inverse of :func:`as_record` (``null``: none)."""
+    return check_q_star(value)
 
 
-def from_header(header: Mapping[str, Any]) -> float:
-    """The Q*_g a checkpoint's weights header stores (NaN when it has none)."""
+def from_header(header: Mapping[str, Any]) -> float | None:
+    """The Q*_g a checkpoint's weights header stores (``None`` when it has none)."""
     return from_record(header.get("q_star"))
 
 
 def write_calibration(
-    path: str | Path, calibration: Calibration, iteration: int, q_star_before: float, continue_history: bool,
+    path: str | Path, calibration: Calibration, iteration: int, q_star_before: float | None, continue_history: bool,
 ) -> dict[str, Any]:
     """Write ``calibration.json``: the latest measurement whole, and one line per calibration.
 
     With ``continue_history`` the lines already in ``path`` are kept (a stage calibrating again);
-    otherwise the history starts with this one. Returns what was written. A NaN ``q_star_before``
-    (no Q*_g yet) is written as ``null``.
+    otherwise the history starts with this one. Returns what was written. A ``q_star_before``
+    of ``None`` (no Q*_g yet) is written as ``null``.
     """
     path = Path(path)
     history: list[dict[str, Any]] = []
@@ -219,15 +242,15 @@ def check_override(q_star: float) -> float:
     return q_star
 
 
-def starting_q_star(override: float, checkpoint: float) -> float:
+def starting_q_star(override: float | None, checkpoint: float | None) -> float | None:
     """The Q*_g a training run starts with: the ``override`` (``TrainConfig.q_star``) unless it
-    is NaN, else the starting checkpoint's (NaN: none)."""
-    return checkpoint if math.isnan(override) else float(override)
+    is ``None``, else the starting checkpoint's (``None``: none)."""
+    return check_q_star(checkpoint) if override is None else check_q_star(override)
 
 
 def exported_q_star(
     header: Mapping[str, Any], override: float | None, extra: Mapping[str, Any]
-) -> tuple[float, dict[str, Any]]:
+) -> tuple[float | None, dict[str, Any]]:
     """The Q*_g of an exported copy of a checkpoint, and the copy's header ``extra``.
 
     Without ``override`` the copy keeps the checkpoint's value. An ``override`` (e.g. one

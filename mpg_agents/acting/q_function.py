@@ -21,6 +21,7 @@ from gymnasium import spaces
 from torch import Tensor, nn
 
 from mpg_agents.acting.coordination import usable_primitives
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import EncodedObs, MPGNet, flat_q
 from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives
@@ -48,19 +49,22 @@ class MPGQFunction(nn.Module):
     Args:
         net_config: the network (its ``primitives`` are the branches built).
         action_primitives: the env's primitives, in its action order.
+        geometry: the env's grasp geometry (for finger masks; see :class:`~mpg_agents.network.mpgnet.MPGNet`).
     """
 
-    def __init__(self, net_config: MPGNetConfig, action_primitives: Sequence[str]) -> None:
+    def __init__(
+        self, net_config: MPGNetConfig, action_primitives: Sequence[str], geometry: FingerGeometry | None = None
+    ) -> None:
         super().__init__()
-        self._setup(net_config, action_primitives)
+        self._setup(net_config, action_primitives, geometry)
 
-    def _setup(self, net_config: MPGNetConfig, action_primitives: Sequence[str]) -> None:
+    def _setup(self, net_config: MPGNetConfig, action_primitives: Sequence[str], geometry: FingerGeometry | None = None) -> None:
         """Build the network (also called by the SB3 adapter, whose ``__init__`` is SB3's)."""
         self.action_primitives: tuple[str, ...] = check_primitives(action_primitives)
         # What a decision may choose: the env's primitives the network has a branch for.
         self.usable_primitives: tuple[str, ...] = usable_primitives(self.action_primitives, net_config.primitives)
         self.net_config = net_config
-        self.mpgnet = MPGNet(net_config)
+        self.mpgnet = MPGNet(net_config, geometry)
 
     @property
     def num_actions(self) -> int:

@@ -1,14 +1,40 @@
-"""The spaces MPGNet acts on: which primitives an action space indexes, and the observation check."""
+"""The env MPGNet acts on: which primitives an action space indexes, the observation check, and
+the env's grasp geometry (what the finger masks are made with)."""
 
 from __future__ import annotations
 
 import warnings
-from typing import Sequence
+from typing import Any, Sequence
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_envs.grid.actions import PRIMITIVES, check_primitives
+
+
+def finger_geometry(env: gym.Env | None = None) -> FingerGeometry:
+    """The grasp geometry of ``env`` (read from its ``config``, an ``mpg_envs.tasks.config.EnvConfig``:
+    the workspace and the grasp primitive's depth and lowest height), or of an env made with the
+    default ``EnvConfig`` when ``env`` is ``None``.
+
+    Raises:
+        TypeError: ``env`` is not an MPG env (it has no ``EnvConfig``).
+    """
+    if env is None:
+        from mpg_envs.tasks.config import EnvConfig  # lazily: it loads the simulation
+
+        return geometry_of_config(EnvConfig())
+    config = getattr(env.unwrapped, "config", None)
+    if config is None or not hasattr(config, "workspace") or not hasattr(config, "primitives"):
+        raise TypeError(f"{env.unwrapped!r} is no MPG env: it has no EnvConfig to read the grasp geometry from")
+    return geometry_of_config(config)
+
+
+def geometry_of_config(config: Any) -> FingerGeometry:
+    """The grasp geometry an ``EnvConfig`` makes its envs with."""
+    return FingerGeometry(config.workspace, config.primitives.grasp_depth, config.primitives.grasp_min_height)
 
 
 def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | None = None) -> tuple[str, ...]:

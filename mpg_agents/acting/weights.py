@@ -16,6 +16,8 @@ from typing import Any, Mapping, Sequence
 
 from mpg_agents.acting.coordination import check_coordination
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, exported_q_star
+from mpg_agents.acting.spaces import finger_geometry
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives
@@ -161,18 +163,24 @@ def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = T
     return header
 
 
-def load_mpgnet(path: str | Path, primitives: Sequence[str] | None = None) -> tuple[MPGNet, dict[str, Any]]:
+def load_mpgnet(
+    path: str | Path, primitives: Sequence[str] | None = None, geometry: FingerGeometry | None = None
+) -> tuple[MPGNet, dict[str, Any]]:
     """Build an MPGNet from a checkpoint's own configuration and load it.
 
     Args:
         path: a :func:`save_mpgnet` safetensors file.
         primitives: branches to keep (default: all the file has).
+        geometry: the grasp geometry of the env it acts on, for finger masks (default: the
+            default env's, :func:`~mpg_agents.acting.spaces.finger_geometry`).
     """
     header = read_checkpoint_header(path)
     cfg = MPGNetConfig.from_checkpoint(header["config"])
     if primitives is not None:
         cfg.primitives = check_primitives(primitives)
-    net = MPGNet(cfg)
+    if geometry is None and cfg.uses_finger_masks:
+        geometry = finger_geometry()
+    net = MPGNet(cfg, geometry)
     load_mpgnet_weights(net, path)
     return net, header
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, run_episodes, summarise
+from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, registered_options, run_episodes, summarise
 
 # what mpg_envs.threads.worker_init sets, before the worker imports torch
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "MPG_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE", "MKL_NUM_THREADS": "1"}
@@ -288,7 +288,10 @@ def evaluate_jobs(
         first = job_chunks[0]
         records = [r for c in job_chunks for r in c.records]
         results.append(
-            summarise(records, first.policy_name, first.env_id, first.num_objects, job.seed, job_wall, used_workers, dict(job.env_kwargs))
+            summarise(
+                records, first.policy_name, first.env_id, first.num_objects, job.seed, job_wall, used_workers,
+                {**registered_options(job.env_id), **dict(job.env_kwargs)},  # a track's own keywords too
+            )
         )
     timing = RunTiming(
         wall_seconds=max(done_at),  # Ray's start-up and shutdown are not part of the run

@@ -23,6 +23,7 @@ from typing import Any, Callable, Iterable, Sequence
 import gymnasium as gym
 import numpy as np
 
+from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
 
@@ -184,18 +185,16 @@ def run_episode(
     primitives = dict.fromkeys(PRIMITIVES, 0)
     grasps = target_grasps = wrong_grasps = 0
     actions = []
-    while True:
-        actions.append(_recorded(policy.act(obs)))
-        obs, reward, terminated, truncated, info = env.step(actions[-1])
+    for step in episode_steps(env, obs, policy.act, _recorded):
+        actions.append(step.action)
+        info = step.info
         if on_step is not None:
-            on_step(index, reward, info)
+            on_step(index, step.reward, info)
         primitives[info["primitive"]] += 1
         if info["primitive"] == "grasp":
             grasps += 1
             target_grasps += int(info["target_grasped"])
             wrong_grasps += int(info.get("wrong_grasp", False))
-        if terminated or truncated:
-            break
     return EpisodeRecord(
         index=index,
         seed=episode_seed,
@@ -293,10 +292,19 @@ def env_options_of(env: gym.Env) -> dict[str, Any]:
     """The keywords ``env`` was made with besides its registered ones (from its spec),
     JSON-ready (other values by ``repr``)."""
     spec = env.unwrapped.spec
-    if spec is None:
-        return {}
+    return {} if spec is None else _json_options(spec.kwargs)
+
+
+def registered_options(env_id: str) -> dict[str, Any]:
+    """The keywords ``env_id`` is registered with besides its stage (a track's fixed ones,
+    such as ``MPG-OccludedHardCamera-v0``'s ``obs_mode``), JSON-ready; ``{}`` for an id
+    Gymnasium does not know."""
+    return _json_options(gym.registry[env_id].kwargs) if env_id in gym.registry else {}
+
+
+def _json_options(kwargs: dict[str, Any]) -> dict[str, Any]:
     options = {}
-    for key, value in spec.kwargs.items():
+    for key, value in kwargs.items():
         if key in ("stage", "num_objects"):  # the env and the object count are recorded apart
             continue
         options[key] = value if isinstance(value, (bool, int, float, str, type(None), list, tuple)) else repr(value)

@@ -29,11 +29,10 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.evaluation.evaluate import run_episodes
 from mpg_agents.evaluation.policy_zoo import NetworkPolicy, make_network_policy
-from mpg_envs.grid.grasp_geometry import fingers_blocked, other_grasp_angles
-from mpg_envs.simulation.primitives import PrimitiveConfig
-from mpg_envs.grid.workspace import Workspace
+from mpg_envs.grid.grasp_geometry import other_grasp_angles
 
 
 def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
@@ -73,9 +72,8 @@ class GraspProbe:
         self.other_angle_takes = None
         self.blocked = float("nan")
         if decision.primitive == "grasp":
-            grasp = PrimitiveConfig()
-            resolution = Workspace().resolution
-            blocked = fingers_blocked(np.asarray(obs["depth"]), resolution, grasp.grasp_depth, grasp.grasp_min_height)
+            geometry = self.net.policy.q_net.mpgnet.geometry or finger_geometry()  # the env's, when the net has it
+            blocked = geometry.blocked(np.asarray(obs["depth"])[None], self.net.policy.net_config.num_rotations)[0]
             self.blocked = float(blocked[decision.rotation, decision.row, decision.col])
         if self.env is not None and decision.primitive == "grasp":
             u = self.env.unwrapped
@@ -98,6 +96,8 @@ def grasp_records(
     """
     env = gym.make(env_id, num_objects=num_objects)
     policy = make_network_policy(policy_name, env, **({"grasp_fingers": grasp_fingers} if grasp_fingers else {}))
+    if policy.policy.q_star is None:
+        raise ValueError(f"{policy.name} has no Q*_g to compare its grasp Q with: calibrate it (mpg-calibrate) first")
     acting = GraspProbe(policy, env if angle_trials else None)
     records: list[dict] = []
     others: list[dict] = []
@@ -118,7 +118,7 @@ def grasp_records(
 
     run_episodes(acting, env, range(episodes), seed, on_step=on_step)
     env.close()
-    return policy.name, float(policy.policy.q_star), records, others
+    return policy.name, policy.policy.q_star, records, others
 
 
 def summarise_motions(others: list[dict]) -> dict:

@@ -2,7 +2,8 @@
 
 Runs a checkpoint greedily (its own coordination and Q*_g) on seeded episodes and, before each
 move it makes, looks at the move in a copy of the simulation (each trial is run and undone,
-:func:`mpg_envs.policies.oracle.try_primitive`; the episode itself is unchanged; :class:`MoveProbe`):
+:meth:`mpg_envs.tasks.episode_sim.EpisodeSim.try_primitive` on the env's ``sim``; the episode itself
+is unchanged; :class:`MoveProbe`):
 
 - what the move's pixel shows: bare table, the target, an occluder (an object seen over the
   target's footprint above the target's top, as the scripted oracle finds them) or another
@@ -30,7 +31,6 @@ from mpg_agents.evaluation.evaluate import run_episodes
 from mpg_agents.evaluation.policy_zoo import NetworkPolicy, make_network_policy
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, angle_gap, footprint_rect, other_grasp_angles
 from mpg_envs.policies.oracle import OraclePolicy
-from mpg_envs.policies.oracle import try_primitive
 
 ON_WHAT = ("table", "target", "occluder", "other")
 """What a move's pixel shows."""
@@ -67,15 +67,14 @@ class MoveProbe:
 
     def _lifts(self, rotation: int, row: int, col: int, depth: np.ndarray, obj: int | None = None) -> bool:
         u = self.env.unwrapped
-        result = try_primitive(u._primitives, "move", rotation, row, col, depth, u.target)
-        return bool(result.grasp_success and (obj is None or result.grasped_object == obj))
+        result = u.sim.try_primitive("move", rotation, row, col, depth, u.target)
+        return bool(result.lifted and (obj is None or result.grasped_object == obj))
 
     def _look(self, obs, rotation: int, row: int, col: int) -> dict[str, Any]:
         u, oracle = self.env.unwrapped, self.oracle
         world, target, depth = u.world, u.target, np.asarray(obs["depth"])
-        oracle._obs = obs
-        _, ids = oracle._cast(world)
-        occluders = oracle._occluders(u, target, depth, ids)
+        _, ids = oracle.view(world)
+        occluders = oracle.occluders(world, target, depth, ids, obs["mask"])
         obj = int(ids[row, col])
         record: dict[str, Any] = {"on": classify_pixel(obj, target, occluders), "angle_off_deg": None}
         if obj >= 0:
@@ -87,7 +86,7 @@ class MoveProbe:
         )
         record["oracle_lifts"] = None
         if occluders:
-            plans = oracle._grasp_plans(u, occluders[0], depth, ids, require_fit=False)
+            plans = oracle.grasp_plans(u, occluders[0], depth, ids, require_fit=False)
             record["oracle_lifts"] = bool(plans) and self._lifts(plans[0].rotation, plans[0].row, plans[0].col, depth, occluders[0])
         return record
 

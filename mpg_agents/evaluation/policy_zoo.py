@@ -86,7 +86,8 @@ class NetworkPolicy:
     env's primitives the network has branches for; when that is fewer than the env allows,
     ``name`` ends with e.g. ``(grasp-only net)``. The keyword settings override the
     checkpoint's: the coordination, Q*_g (:func:`~mpg_agents.acting.grasp_threshold.check_override`)
-    and settings that change no weight.
+    and settings that change no weight. ``device``: where the network runs (``auto``, the
+    default: CUDA when available; ``cpu``; ``cuda``).
 
     A greedy Q policy is a function of the observation: when an action changes nothing (a
     grasp that closes on air), it meets the same observation and takes the same action until
@@ -99,12 +100,14 @@ class NetworkPolicy:
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
         grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
         move_region: str | None = None, q_star: float | None = None, grasp_fingers: str | None = None,
-        move_fingers: str | None = None,
+        move_fingers: str | None = None, device: str | None = None,
     ):
         import torch
 
         from mpg_agents.acting.agent import MPGAgent
+        from mpg_agents.acting.device import resolve_device
         from mpg_agents.acting.grasp_threshold import check_override
+        from mpg_agents.acting.spaces import finger_geometry
 
         torch.set_flush_denormal(True)  # see mpg_agents.learning.learner: denormals slow CPUs down
         path = Path(path)
@@ -119,13 +122,16 @@ class NetworkPolicy:
             overrides["grasp_fingers"] = grasp_fingers
         if move_fingers is not None:
             overrides["move_fingers"] = move_fingers
-        self.policy = MPGAgent.from_weights(path, env.observation_space, env.action_space, net_overrides=overrides)
+        self.policy = MPGAgent.from_weights(
+            path, env.observation_space, env.action_space, net_overrides=overrides, geometry=finger_geometry(env)
+        )
+        self.policy.to(resolve_device(device if device is not None else "auto"))
         if coordination is not None:
             self.policy.set_coordination(coordination)
         if q_star is not None:
             self.policy.set_q_star(check_override(q_star))
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
-        if self.policy.coordination != "max_q" and {"grasp", "push"} <= set(self.primitives) and np.isnan(self.policy.q_star):
+        if self.policy.coordination != "max_q" and {"grasp", "push"} <= set(self.primitives) and self.policy.q_star is None:
             import warnings
 
             warnings.warn(f"checkpoint {path} carries no Q*_g (null: never calibrated): its {self.policy.coordination!r} "

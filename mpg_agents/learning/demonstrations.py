@@ -19,6 +19,7 @@ from typing import Any, Callable, Sequence
 
 import gymnasium as gym
 
+from mpg_agents.acting.episode_loop import episode_steps
 from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.policies.oracle import OraclePolicy
 
@@ -70,16 +71,12 @@ def collect_demonstrations(
     for i in range(episodes):
         policy.reset()
         obs, _ = env.reset(seed=seed + i)
-        while True:
-            action = int(policy.act(obs))
-            next_obs, reward, terminated, truncated, info = env.step(action)
-            if space.decode(action).primitive in keep:
-                add(obs, next_obs, action, float(reward), bool(terminated))
+        for step in episode_steps(env, obs, lambda o: int(policy.act(o))):
+            if space.decode(step.action).primitive in keep:
+                add(step.obs, step.next_obs, step.action, step.reward, step.terminated)
                 kept += 1
             else:
                 dropped += 1
-            if terminated or truncated:
-                successes += int(bool(info["is_success"]))
-                break
-            obs = next_obs
+            if step.done:
+                successes += int(bool(step.info["is_success"]))
     return DemoStats(episodes, kept, dropped, successes, time.perf_counter() - start)

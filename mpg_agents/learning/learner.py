@@ -1,30 +1,26 @@
 """The DQN learner of MPGNet for one training stage (paper Sections III-C and III-D).
 
-One iteration: observe, decide (the agent's coordination, :class:`~mpg_agents.acting.agent.MPGAgent`;
-Stage IV's forced grasp after its push budget), explore (:mod:`mpg_agents.learning.exploration`), act,
-store the transition, and take one gradient step (:func:`mpg_agents.learning.td_step.td_step`) on a
-prioritised batch with the stage's frozen branches left out. What the stage trains comes from
-its :class:`~mpg_agents.learning.training_stages.TrainingStage`; the algorithm's settings from
+Episodes run through the one episode loop (:func:`mpg_agents.acting.episode_loop.episode_steps`).
+One iteration: decide (:class:`~mpg_agents.acting.agent.MPGAgent`; Stage IV's forced grasp after
+its push budget), explore (:mod:`mpg_agents.learning.exploration`), act, store, and one gradient
+step (:func:`mpg_agents.learning.td_step.td_step`) with the stage's frozen branches left out.
+The stage is a :class:`~mpg_agents.learning.training_stages.TrainingStage`, the settings a
 :class:`~mpg_agents.learning.train_config.TrainConfig`.
 
-Q*_g (:mod:`mpg_agents.acting.grasp_threshold`): a run starts with ``TrainConfig.q_star`` or else the
-starting checkpoint's; a stage with ``calibration_episodes`` calibrates it in its own scenes,
-one with ``calibrates_q_star`` estimates it from its own greedy grasps at its end. The weights
-carry it.
+Q*_g (:mod:`mpg_agents.acting.grasp_threshold`): ``TrainConfig.q_star`` or the starting checkpoint's;
+calibrated in the stage's scenes (``calibration_episodes``) or from its own greedy grasps at its
+end (``calibrates_q_star``). The weights carry it.
 
-Everything needed to continue is saved every ``checkpoint_every`` iterations and when the
-process is asked to stop (SIGINT/SIGTERM) (:mod:`mpg_agents.learning.run_state`): a killed run resumes
-with the same counters, replay, weights, optimiser and random generators; an interrupted
-episode starts afresh (the same scene: it comes from the episode counter). The log
-(:mod:`mpg_agents.learning.train_log`, TensorBoard and ``progress.csv``) is rewound with the state.
+The state is saved every ``checkpoint_every`` iterations and on SIGINT/SIGTERM
+(:mod:`mpg_agents.learning.run_state`): a killed run resumes with the same counters, replay,
+weights, optimiser and generators; its interrupted episode restarts on the same scene. The log
+(:mod:`mpg_agents.learning.train_log`) goes to TensorBoard and ``progress.csv``, rewound with
+the state.
 
-Optionally (``TrainConfig.demonstration_episodes``; off by default, the paper is pure RL) a
-fresh run first fills the replay with the oracle's transitions
-(:mod:`mpg_agents.learning.demonstrations`); they are no iterations or episodes of the run. With
-``TrainingStage.grasp_trials``, ``move_trials`` or ``rival_trials`` (off by default) each grasp
-is also tried at other gripper orientations, each move at the move net's next-best places, a
-covered target's move or push as the other's best action, in the simulation and undone, those
-transitions stored too (:mod:`mpg_agents.learning.trials`; privileged).
+Optionally (off by default, the paper is pure RL): oracle transitions fill a fresh run's replay
+(``TrainConfig.demonstration_episodes``, :mod:`mpg_agents.learning.demonstrations`); actions not
+taken are tried in the simulation, undone and stored (``TrainingStage.grasp_trials``,
+``move_trials``, ``rival_trials``; :mod:`mpg_agents.learning.trials`; privileged).
 """
 
 from __future__ import annotations
@@ -44,18 +40,22 @@ import torch
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.acting.agent import MPGAgent
 from mpg_agents.learning.demonstrations import collect_demonstrations
+from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.discriminator import Discriminator
+from mpg_agents.acting.episode_loop import Step, episode_steps
 from mpg_agents.learning.exploration import Choice, Explorer, linear_epsilon
-from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, from_header, starting_q_star, write_calibration
+from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, format_q_star, from_header
+from mpg_agents.acting.grasp_threshold import starting_q_star, write_calibration
 from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
 from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+from mpg_agents.acting.spaces import finger_geometry, geometry_of_config
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
-from mpg_agents.learning.trials import grasp_trial_actions, move_trial_actions, rival_trial_actions, run_trials
+from mpg_agents.learning.trials import try_alternatives
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_envs.grid.actions import PRIMITIVES
@@ -101,6 +101,7 @@ class Learner:
         torch.set_num_threads(config.torch_threads)
         # A young network's eval-mode activations go denormal and slow the CPU down 10x.
         torch.set_flush_denormal(True)
+        self.device = resolve_device(config.device)  # networks and batches; the replay and the env stay on the host
         torch.manual_seed(config.seed)  # before the networks are built: the seed fixes their initial weights
         self.env = self._make_env(self._objects_now(0))
         env = self.env.unwrapped
@@ -108,9 +109,10 @@ class Learner:
         # The online agent, then the target network: their initial weights come from the seed in this order.
         self.policy = MPGAgent.build(
             env.observation_space, env.action_space, variant=config.variant, branches=self.stage.branches or PRIMITIVES,
-            coordination=self.stage.coordination, net_config=config.net_config,
-        )
-        self.target_q = MPGQFunction(self.policy.net_config, self.policy.action_primitives)
+            coordination=self.stage.coordination, net_config=config.net_config, geometry=finger_geometry(self.env),
+        ).to(self.device)
+        self.target_q = MPGQFunction(self.policy.net_config, self.policy.action_primitives, self.policy.q_net.mpgnet.geometry)
+        self.target_q.to(self.device)
         self.target_q.set_training_mode(False)
         # What the agent acts with: the env's primitives it has a branch for.
         self.trainable = self.stage.trainable if self.stage.trainable is not None else self.policy.usable_primitives
@@ -123,7 +125,7 @@ class Learner:
             self.net.branches[to].load_state_dict(self.net.branches[source].state_dict())
         self.target.load_state_dict(self.net.state_dict())
         self.replay = PrioritizedHeightmapReplayBuffer(
-            config.replay_capacity, env.observation_space, env.action_space, device="cpu", alpha=config.priority_alpha, seed=config.seed
+            config.replay_capacity, env.observation_space, env.action_space, device=self.device, alpha=config.priority_alpha, seed=config.seed
         )
         self.rng = np.random.default_rng(config.seed)
         net_cfg = self.policy.net_config
@@ -141,11 +143,14 @@ class Learner:
 
     def _make_env(self, num_objects: int | None) -> gym.Env:
         """The training env; refuses objects held out for testing (:func:`~mpg_envs.simulation.objects.check_not_held_out`)."""
-        kwargs: dict[str, Any] = {} if num_objects is None else {"num_objects": num_objects}
+        kwargs: dict[str, Any] = {}
+        if num_objects is not None:
+            kwargs["num_objects"] = num_objects
+        env_config = EnvConfig(reward=self.stage.reward_config()) if self.stage.reward else EnvConfig()
         if self.config.discriminator is not None:
-            kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator)
+            kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator, geometry_of_config(env_config), self.device)
         if self.stage.reward:
-            kwargs["config"] = EnvConfig(reward=self.stage.reward_config())
+            kwargs["config"] = env_config
         env = gym.make(self.stage.env_id, **kwargs)
         check_not_held_out("custom", env.unwrapped.object_set, f"training on {self.stage.env_id}")  # however they got there
         return env
@@ -170,7 +175,7 @@ class Learner:
             folder, online=self.net, target=self.target, optimizer=self.optimizer, replay=self.replay, rng=self.rng
         )
         self.counters = Counters(**counters)
-        if not math.isnan(q_star):  # the Q*_g the saved weights carry
+        if q_star is not None:  # the Q*_g the saved weights carry
             self.policy.set_q_star(q_star)
         self.log(f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})"
                  + (f" with changed settings: {'; '.join(changed)}" if changed else ""))
@@ -198,15 +203,16 @@ class Learner:
         bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)
         try:
             with TrainingLog(self.out, self.counters.iteration) as self._log:
-                obs = self._reset_episode()
                 while self.counters.iteration < self.steps:
-                    obs = self.iteration(obs)
-                    bar.update(1)
-                    if self.counters.iteration % self.config.checkpoint_every == 0 or self.counters.iteration == self.steps:
-                        self.save_state()
-                    if self._stop:
-                        self.save_state()
-                        raise StopRequested()
+                    for step in episode_steps(self.env, self._reset_episode(), self.choose, lambda chosen: chosen[0].action):
+                        self.iteration(step)
+                        bar.update(1)
+                        if self.counters.iteration % self.config.checkpoint_every == 0 or self.counters.iteration == self.steps or self._stop:
+                            self.save_state()
+                        if self._stop:
+                            raise StopRequested()
+                        if self.counters.iteration >= self.steps:
+                            break
         finally:
             self._log = None
             bar.close()
@@ -248,24 +254,24 @@ class Learner:
         self.policy.set_q_star(measured.q_star)
         c = self.counters
         write_calibration(self.out / "calibration.json", measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
-        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {measured.q_star:.4g} in its scenes at iteration {c.iteration} "
+        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {measured.q_star:.4g} in its scenes at iteration {c.iteration} "
                  f"({len(measured.target_grasp_q)} of {measured.grasps} greedy grasps took the target in {episodes} episodes)")
         c.calibrated_at = c.iteration
         self.save_state()
         return measured.q_star
 
-    def calibrate_from_own_grasps(self) -> float:
+    def calibrate_from_own_grasps(self) -> float | None:
         """A ``calibrates_q_star`` stage at its end: Q*_g estimated from the Q of its recent
         greedy grasps that took the target (:func:`~mpg_agents.acting.grasp_threshold.estimate_q_star`
         at the stage's ``calibration_quantile``), and the state saved; unchanged when no greedy
-        grasp took the target. Returns Q*_g."""
+        grasp took the target. Returns Q*_g (``None``: none yet)."""
         taken = self.counters.successful_grasp_q
         if not taken:
-            self.log(f"{self.stage.name}: no greedy grasp took the target; Q*_g stays {self.policy.q_star:.4g}")
+            self.log(f"{self.stage.name}: no greedy grasp took the target; Q*_g stays {format_q_star(self.policy.q_star)}")
             return self.policy.q_star
         before = self.policy.q_star
         self.policy.set_q_star(estimate_q_star(taken, self.stage.calibration_quantile))
-        self.log(f"{self.stage.name}: Q*_g {before:.4g} -> {self.policy.q_star:.4g} from its last {len(taken)} "
+        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {format_q_star(self.policy.q_star)} from its last {len(taken)} "
                  "greedy grasps that took the target")
         self.save_state()
         return self.policy.q_star
@@ -308,15 +314,19 @@ class Learner:
         stage with a finish trains its ``finish_trainable`` alone at the end)."""
         return self.stage.branches_at(self.counters.iteration, self.steps, self.trainable)
 
-    def iteration(self, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        c = self.counters
-        start = time.perf_counter()
+    def choose(self, obs: dict[str, np.ndarray]) -> tuple[Choice, list[int]]:
+        """What this step does on ``obs``: the action (:meth:`act`) and the stage's trials of the
+        actions not taken, tried and stored before it (:meth:`try_alternatives`)."""
         choice = self.act(obs)
-        t_decide = time.perf_counter() - start
-        trials = self.try_alternatives(obs, choice)
-        next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
-        t_act = time.perf_counter() - start - t_decide
-        self.store(obs, next_obs, choice.action, float(reward), bool(terminated))
+        return choice, self.try_alternatives(obs, choice)
+
+    def iteration(self, step: Step[tuple[Choice, list[int]]]) -> None:
+        """One iteration after the env stepped: store, learn, count, log (times: deciding with the
+        trials, the env's step, all); at an episode's end, a stage's periodic Q*_g calibration."""
+        learning = time.perf_counter()
+        c = self.counters
+        (choice, trials), info = step.choice, step.info
+        self.store(step.obs, step.next_obs, choice.action, step.reward, step.terminated)
         loss = self.learn()
         if trials:
             self.learn()  # the replay grew by 1 + len(trials) transitions
@@ -335,18 +345,17 @@ class Learner:
             rate = c.window_target_grasps / c.window_grasps
             c.window_grasps = c.window_target_grasps = 0
         assert self._log is not None
+        t_decide, t_act = step.choose_seconds, step.step_seconds
         self._log.record(
-            IterationRecord(c.iteration, c.episode, choice.primitive, choice.how, float(reward), loss, self.epsilon(), info,
-                            t_decide, t_act, time.perf_counter() - start, rate)
+            IterationRecord(c.iteration, c.episode, choice.primitive, choice.how, step.reward, loss, self.epsilon(), info,
+                            t_decide, t_act, t_decide + t_act + time.perf_counter() - learning, rate)
         )
-        if terminated or truncated:
+        if step.done:
             self._log.episode_end(c.iteration, info)
             c.episode += 1
             every = self.stage.calibrate_every
             if every and c.iteration < self.steps and c.iteration // every > max(c.calibrated_at, 0) // every:
                 self.calibrate_in_scenes(self.stage.calibration_episodes)
-            return self._reset_episode()
-        return next_obs
 
     def store(self, obs: dict[str, np.ndarray], next_obs: dict[str, np.ndarray], action: int, reward: float, terminated: bool) -> None:
         """Add one transition to the replay (batch of one; a truncation is no terminal state)."""
@@ -360,29 +369,9 @@ class Learner:
         )
 
     def try_alternatives(self, obs: dict[str, np.ndarray], choice: Choice) -> list[int]:
-        """The stage's counterfactual trials of this step (:mod:`mpg_agents.learning.trials`),
+        """The stage's counterfactual trials of this step (:func:`mpg_agents.learning.trials.try_alternatives`),
         tried, stored and counted; returns their actions (none when the stage has none)."""
-        env, c, stage = self.env.unwrapped, self.counters, self.stage
-        tried: list[int] = []
-        if choice.primitive == "grasp" and stage.grasp_trials:
-            actions = grasp_trial_actions(env, choice.action, stage.grasp_trials, self.rng)
-            infos = run_trials(env, obs, actions, self.store)
-            c.grasp_trials += len(infos)
-            c.grasp_trial_targets += sum(int(i["target_grasped"]) for i in infos)
-            tried += actions
-        if choice.primitive == "move" and stage.move_trials:
-            actions = move_trial_actions(env, self.policy, obs, choice.action, stage.move_trials)
-            infos = run_trials(env, obs, actions, self.store)
-            c.move_trials += len(infos)
-            c.move_trial_successes += sum(int(i["move_success"]) for i in infos)
-            tried += actions
-        if stage.rival_trials:
-            actions = rival_trial_actions(self.policy, obs, choice.primitive)
-            infos = run_trials(env, obs, actions, self.store)
-            c.rival_trials += len(infos)
-            c.rival_trial_clears += sum(int(not i["occluded"] and not i["target_grasped"]) for i in infos)
-            tried += actions
-        return tried
+        return try_alternatives(self.env.unwrapped, self.policy, self.stage, self.counters, obs, choice, self.rng, self.store)
 
     def act(self, obs: dict[str, np.ndarray]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""

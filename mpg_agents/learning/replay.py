@@ -1,4 +1,4 @@
-"""Compact, surprise-prioritised replay of heightmap transitions on SB3's buffer API.
+"""Compact, surprise-prioritised replay of heightmap transitions (SB3's buffer API, without SB3).
 
 Storage (exact, lossless): each observation is kept once as a :class:`Frame` of compressed
 planes and shared by reference between consecutive transitions (the ``next_obs`` of step t
@@ -18,20 +18,23 @@ Sampling is proportional to ``priority ** alpha`` with ``priority = |Q - y| + ep
 new transitions get the largest priority seen so far so each is replayed at least once
 early. :meth:`PrioritizedHeightmapReplayBuffer.update_priorities` takes the indices the
 samples carry.
+
+The buffer speaks SB3's buffer API (``add``, ``sample``, ``size``, ``reset``, ``pos``, ``full``)
+but imports no Stable-Baselines3: ``mpg-train`` runs without it. The SB3 adapter's buffer
+(:class:`mpg_agents.sb3.replay.SB3HeightmapReplayBuffer`) is a thin subclass that is also SB3's
+``DictReplayBuffer`` and returns SB3's sample type.
 """
 
 from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
 from gymnasium import spaces
-from stable_baselines3.common.buffers import BaseBuffer, DictReplayBuffer
-from stable_baselines3.common.type_aliases import DictReplayBufferSamples
-from stable_baselines3.common.vec_env import VecNormalize
+from torch import Tensor
 
 _RAW_LIMIT = 64  # planes up to this many bytes are cheaper raw than deflated
 
@@ -80,26 +83,28 @@ class Frame:
         self.nbytes = sum(len(blob) for _, blob in planes.values())
 
 
-class PrioritizedDictReplayBufferSamples(DictReplayBufferSamples):
-    """SB3's ``DictReplayBufferSamples`` plus the sampled buffer ``indices`` (for priority updates)."""
+class ReplaySamples(NamedTuple):
+    """A sampled batch (the fields of SB3's ``DictReplayBufferSamples``, plus the buffer
+    ``indices`` the priorities are written back to)."""
 
-    indices: np.ndarray
+    observations: dict[str, Tensor]
+    actions: Tensor  # (B, action_dim)
+    next_observations: dict[str, Tensor]
+    dones: Tensor  # (B, 1): terminal, not truncated
+    rewards: Tensor  # (B, 1)
+    indices: np.ndarray  # (B,) flat buffer index ``pos * n_envs + env``
+    discounts: Tensor | None = None  # per-sample discounts (none here: the step's gamma)
 
-    def __new__(cls, *args: Any, indices: np.ndarray, **kwargs: Any) -> "PrioritizedDictReplayBufferSamples":
-        self = super().__new__(cls, *args, **kwargs)
-        self.indices = indices
-        return self
 
-
-class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
-    """SB3 ``DictReplayBuffer`` drop-in: compact lossless heightmap storage + surprise priorities.
+class PrioritizedHeightmapReplayBuffer:
+    """Compact lossless heightmap storage + surprise priorities, on SB3's buffer API.
 
     Args:
         buffer_size: transitions kept (per env: ``buffer_size // n_envs``).
         observation_space: as in SB3.
         action_space: as in SB3.
-        device: as in SB3.
-        n_envs: as in SB3.
+        device: where sampled batches go (``"auto"``: CUDA when available); storage stays on the host.
+        n_envs: parallel envs whose steps :meth:`add` takes at once.
         optimize_memory_usage: accepted for SB3's signature; frame sharing already stores
             each observation once, so it changes nothing.
         handle_timeout_termination: as in SB3 (truncations do not end the bootstrap).
@@ -127,8 +132,15 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
             raise TypeError(f"PrioritizedHeightmapReplayBuffer needs a Dict observation space, got {observation_space}")
         if alpha < 0 or priority_eps <= 0:
             raise ValueError(f"need alpha >= 0 and priority_eps > 0, got alpha={alpha}, priority_eps={priority_eps}")
-        BaseBuffer.__init__(self, buffer_size, observation_space, action_space, device, n_envs=n_envs)
+        self.observation_space = observation_space
+        self.action_space = action_space
+        self.obs_shape = {key: tuple(sub.shape) for key, sub in observation_space.spaces.items()}
+        self.action_dim = 1 if isinstance(action_space, spaces.Discrete) else int(np.prod(action_space.shape))
+        self.device = _device(device)
+        self.n_envs = int(n_envs)
         self.buffer_size = max(buffer_size // n_envs, 1)
+        self.pos = 0
+        self.full = False
         self.optimize_memory_usage = False
         self.handle_timeout_termination = handle_timeout_termination
         self.alpha = float(alpha)
@@ -142,7 +154,9 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
         shape = (self.buffer_size, self.n_envs)
         self.obs_frames = np.empty(shape, dtype=object)
         self.next_obs_frames = np.empty(shape, dtype=object)
-        self.actions = np.zeros((*shape, self.action_dim), dtype=self._maybe_cast_dtype(action_space.dtype))
+        # float64 actions are kept as float32, as SB3 does
+        action_dtype = np.float32 if np.dtype(action_space.dtype) == np.float64 else action_space.dtype
+        self.actions = np.zeros((*shape, self.action_dim), dtype=action_dtype)
         self.rewards = np.zeros(shape, dtype=np.float32)
         self.dones = np.zeros(shape, dtype=np.float32)
         self.timeouts = np.zeros(shape, dtype=np.float32)
@@ -226,8 +240,18 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
             self.full = True
             self.pos = 0
 
+    def size(self) -> int:
+        """Stored steps (per env)."""
+        return self.buffer_size if self.full else self.pos
+
+    def to_torch(self, array: np.ndarray, copy: bool = True) -> Tensor:
+        """``array`` as a tensor on the buffer's device."""
+        return torch.tensor(array, device=self.device) if copy else torch.as_tensor(array, device=self.device)
+
     def reset(self) -> None:
-        super().reset()
+        """Forget every stored transition."""
+        self.pos = 0
+        self.full = False
         self.obs_frames[:] = None
         self.next_obs_frames[:] = None
         self.priorities[:] = 0.0
@@ -256,8 +280,9 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
         p = self.priorities[: self.size()].reshape(-1) ** self.alpha
         return p / p.sum()
 
-    def sample(self, batch_size: int, env: VecNormalize | None = None) -> PrioritizedDictReplayBufferSamples:  # type: ignore[override]
-        """Draw ``batch_size`` transitions with probability proportional to ``priority ** alpha``."""
+    def sample(self, batch_size: int, env: Any = None) -> ReplaySamples:
+        """Draw ``batch_size`` transitions with probability proportional to ``priority ** alpha``
+        (``env``: SB3's observation normaliser, which only the SB3 adapter's buffer applies)."""
         if self.size() == 0:
             raise ValueError("cannot sample from an empty replay buffer")
         cumulative = np.cumsum(self.priorities[: self.size()].reshape(-1) ** self.alpha)
@@ -265,30 +290,38 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
             -1
         ]
         flat = np.minimum(np.searchsorted(cumulative, draws, side="right"), cumulative.size - 1)
-        return self._get_flat_samples(flat, env)
+        return self.samples_at(flat, env)
 
-    def _get_samples(  # type: ignore[override]
-        self, batch_inds: np.ndarray, env: VecNormalize | None = None
-    ) -> PrioritizedDictReplayBufferSamples:
-        # SB3's uniform path (BaseBuffer.sample) draws positions and picks envs at random.
-        envs = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
-        return self._get_flat_samples(np.asarray(batch_inds) * self.n_envs + envs, env)
-
-    def _get_flat_samples(self, flat: np.ndarray, env: VecNormalize | None) -> PrioritizedDictReplayBufferSamples:
-        pos, envs = np.divmod(flat, self.n_envs)
+    def samples_at(self, flat: np.ndarray, env: Any = None) -> ReplaySamples:
+        """The stored transitions at flat indices ``flat`` (``pos * n_envs + env``) as a batch."""
+        pos, envs = np.divmod(np.asarray(flat), self.n_envs)
         obs = [self.decode(self.obs_frames[p, e]) for p, e in zip(pos, envs, strict=True)]
         nxt = [self.decode(self.next_obs_frames[p, e]) for p, e in zip(pos, envs, strict=True)]
-        obs_ = self._normalize_obs({k: np.stack([o[k] for o in obs]) for k in self.codecs}, env)
-        nxt_ = self._normalize_obs({k: np.stack([o[k] for o in nxt]) for k in self.codecs}, env)
-        assert isinstance(obs_, dict) and isinstance(nxt_, dict)
         dones = self.dones[pos, envs] * (1 - self.timeouts[pos, envs])
-        return PrioritizedDictReplayBufferSamples(
-            observations={k: self.to_torch(v) for k, v in obs_.items()},
-            actions=self.to_torch(self.actions[pos, envs]),
-            next_observations={k: self.to_torch(v) for k, v in nxt_.items()},
-            dones=self.to_torch(dones).reshape(-1, 1),
-            rewards=self.to_torch(self._normalize_reward(self.rewards[pos, envs].reshape(-1, 1), env)),
-            indices=flat,
+        return self.batch(
+            {k: np.stack([o[k] for o in obs]) for k in self.codecs},
+            self.actions[pos, envs],
+            {k: np.stack([o[k] for o in nxt]) for k in self.codecs},
+            dones.reshape(-1, 1),
+            self.rewards[pos, envs].reshape(-1, 1),
+            np.asarray(flat),
+            env,
+        )
+
+    def batch(
+        self, obs: dict[str, np.ndarray], actions: np.ndarray, next_obs: dict[str, np.ndarray], dones: np.ndarray,
+        rewards: np.ndarray, indices: np.ndarray, env: Any = None,
+    ) -> ReplaySamples:
+        """Decoded arrays as the sample type, on the buffer's device (the SB3 adapter returns SB3's type)."""
+        if env is not None:
+            raise ValueError("this buffer applies no observation normaliser (env); use the SB3 adapter's buffer")
+        return ReplaySamples(
+            observations={k: self.to_torch(v) for k, v in obs.items()},
+            actions=self.to_torch(actions),
+            next_observations={k: self.to_torch(v) for k, v in next_obs.items()},
+            dones=self.to_torch(dones),
+            rewards=self.to_torch(rewards),
+            indices=indices,
         )
 
     def update_priorities(self, indices: np.ndarray, td_errors: np.ndarray | torch.Tensor) -> None:
@@ -336,7 +369,7 @@ class PrioritizedHeightmapReplayBuffer(DictReplayBuffer):
         return self._frame_bytes() / n + per_slot
 
 
-def sb3_dict_buffer_nbytes(buffer: DictReplayBuffer) -> int:
+def sb3_dict_buffer_nbytes(buffer: Any) -> int:
     """Bytes SB3's own ``DictReplayBuffer`` holds (its preallocated arrays), for comparisons."""
     arrays = (*buffer.observations.values(), *buffer.next_observations.values(), buffer.actions, buffer.rewards, buffer.dones, buffer.timeouts)
     return sum(a.nbytes for a in arrays)
@@ -352,3 +385,10 @@ def _is_binary(space: spaces.Space) -> bool:
         and bool(np.all(space.low == 0))
         and bool(np.all(space.high == 1))
     )
+
+
+def _device(device: torch.device | str) -> torch.device:
+    """``"auto"``: CUDA when available, else the CPU (SB3's meaning)."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)

@@ -171,7 +171,7 @@ def save_run_state(
     *,
     online: MPGNet,
     target: MPGNet,
-    q_star: float,
+    q_star: float | None,
     optimizer: torch.optim.Optimizer,
     replay: PrioritizedHeightmapReplayBuffer,
     rng: np.random.Generator,
@@ -202,9 +202,9 @@ def load_run_state(
     optimizer: torch.optim.Optimizer,
     replay: PrioritizedHeightmapReplayBuffer,
     rng: np.random.Generator,
-) -> tuple[dict[str, Any], dict[str, Any], float]:
+) -> tuple[dict[str, Any], dict[str, Any], float | None]:
     """Restore a :func:`save_run_state` folder into the given objects; returns the saved
-    ``(counters, config, Q*_g)`` (Q*_g NaN when the run had none)."""
+    ``(counters, config, Q*_g)`` (Q*_g ``None`` when the run had none)."""
     header = load_mpgnet_weights(online, folder / "online.safetensors")
     load_mpgnet_weights(target, folder / "target.safetensors")
     load_optimizer(optimizer, folder)

@@ -139,7 +139,7 @@ def td_step(
     keep = [i for i, p in enumerate(prim.tolist()) if active is None or primitives[p] in active]
     if not keep:
         return TDStepResult(float("nan"), surprise)  # every sampled transition is frozen
-    sel = torch.tensor(keep, dtype=torch.long)
+    sel = torch.tensor(keep, dtype=torch.long, device=actions.device)
     obs = {k: v[sel] for k, v in batch.observations.items()}
     acts, ys = actions[sel], targets[sel]
     if config.grasp_symmetry and "grasp" in primitives:
@@ -152,7 +152,7 @@ def td_step(
     if config.max_grad_norm is not None:
         torch.nn.utils.clip_grad_norm_(q_net.parameters(), config.max_grad_norm)
     optimizer.step()
-    surprise[sel.numpy()] = (q[: len(sel)] - ys[: len(sel)]).abs().detach().reshape(-1).cpu().numpy()
+    surprise[keep] = (q[: len(sel)] - ys[: len(sel)]).abs().detach().reshape(-1).cpu().numpy()
     indices = getattr(batch, "indices", None)
     if replay is not None and indices is not None and hasattr(replay, "update_priorities"):
         replay.update_priorities(indices, surprise)

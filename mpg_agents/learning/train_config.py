@@ -44,9 +44,9 @@ class TrainConfig:
     q_bounds: tuple[float, float] | None = None  # clamp TD targets to the feasible returns (see td_step.TDStepConfig)
     # Training aids (paper, Simulation Experiments).
     heuristic_after_failed_grasps: int = 2
-    # The run's starting Q*_g, overriding the starting checkpoint's; NaN: the checkpoint's
+    # The run's starting Q*_g, overriding the starting checkpoint's; None: the checkpoint's
     # (mpg_agents.acting.grasp_threshold.starting_q_star).
-    q_star: float = UNCALIBRATED
+    q_star: float | None = UNCALIBRATED
     # Not the paper's (pure RL): oracle episodes whose transitions seed the replay of a fresh run (0: none).
     demonstration_episodes: int = 0
     # The discriminator: the fixed Stage II grasp net that scores states for the move/push rewards.
@@ -55,6 +55,7 @@ class TrainConfig:
     checkpoint_every: int = 100
     window: int = 200  # grasp success rate per this many iterations (paper)
     torch_threads: int = 2
+    device: str = "auto"  # networks and batches: auto (CUDA when available) | cpu | cuda; replay and envs stay on the host
     net_config: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -124,7 +125,7 @@ def check_train_config(cfg: TrainConfig) -> None:
         ValueError: naming the first bad setting, its value and what is valid.
     """
     inf = math.inf
-    _integer("steps", cfg.steps, 1, optional=True)
+    _integer("steps", cfg.steps, 0, optional=True)
     _integer("seed", cfg.seed, 0)
     if cfg.variant not in ("small", "large"):
         raise ValueError(f"training setting variant must be 'small' or 'large', got {cfg.variant!r}")
@@ -147,8 +148,8 @@ def check_train_config(cfg: TrainConfig) -> None:
         _pair("q_bounds", cfg.q_bounds, "two finite numbers [low, high] with low < high",
               lambda a, b: math.isfinite(a) and math.isfinite(b) and a < b)
     _integer("heuristic_after_failed_grasps", cfg.heuristic_after_failed_grasps, 0)
-    if isinstance(cfg.q_star, bool) or not isinstance(cfg.q_star, Real) or math.isinf(cfg.q_star):
-        raise ValueError(f"training setting q_star must be a finite number (NaN: the starting weights'), got {cfg.q_star!r}")
+    if cfg.q_star is not None and (isinstance(cfg.q_star, bool) or not isinstance(cfg.q_star, Real) or not math.isfinite(cfg.q_star)):
+        raise ValueError(f"training setting q_star must be a finite number or None (the starting weights'), got {cfg.q_star!r}")
     _integer("demonstration_episodes", cfg.demonstration_episodes, 0)
     if cfg.discriminator is not None and not isinstance(cfg.discriminator, str):
         raise ValueError(f"training setting discriminator must be a checkpoint path or None, got {cfg.discriminator!r}")

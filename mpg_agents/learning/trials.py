@@ -70,3 +70,34 @@ def run_trials(env: Any, obs: dict[str, np.ndarray], actions: list[int], store: 
         store(obs, next_obs, action, float(reward), bool(terminated))
         infos.append(info)
     return infos
+
+
+def try_alternatives(
+    env: Any, policy: MPGAgent, stage: Any, counters: Any, obs: dict[str, np.ndarray], choice: Any,
+    rng: np.random.Generator, store: Store,
+) -> list[int]:
+    """The trials ``stage`` (a :class:`~mpg_agents.learning.training_stages.TrainingStage`) asks for
+    around ``choice`` (the step's :class:`~mpg_agents.learning.exploration.Choice` on ``obs``):
+    tried, stored and counted in ``counters`` (the learner's
+    :class:`~mpg_agents.learning.run_state.Counters`); returns their actions."""
+    c = counters
+    tried: list[int] = []
+    if choice.primitive == "grasp" and stage.grasp_trials:
+        actions = grasp_trial_actions(env, choice.action, stage.grasp_trials, rng)
+        infos = run_trials(env, obs, actions, store)
+        c.grasp_trials += len(infos)
+        c.grasp_trial_targets += sum(int(i["target_grasped"]) for i in infos)
+        tried += actions
+    if choice.primitive == "move" and stage.move_trials:
+        actions = move_trial_actions(env, policy, obs, choice.action, stage.move_trials)
+        infos = run_trials(env, obs, actions, store)
+        c.move_trials += len(infos)
+        c.move_trial_successes += sum(int(i["move_success"]) for i in infos)
+        tried += actions
+    if stage.rival_trials:
+        actions = rival_trial_actions(policy, obs, choice.primitive)
+        infos = run_trials(env, obs, actions, store)
+        c.rival_trials += len(infos)
+        c.rival_trial_clears += sum(int(not i["occluded"] and not i["target_grasped"]) for i in infos)
+        tried += actions
+    return tried

@@ -31,20 +31,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.inputs import normalize_inputs
 from mpg_agents.network.mobilenet import MobileNetV3Features, load_torchvision_features
 from mpg_agents.network.mpgnet_config import ROUGH_MASKED, MPGNetConfig
-from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches
+from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches, trunk_chunk
 from mpg_agents.network.regions import footprint_top, grasp_pixels, least_blocked, region_max, target_region
 from mpg_agents.network.rotations import rotation_grids
-from mpg_envs.grid.grasp_geometry import fingers_blocked
-from mpg_envs.simulation.primitives import PrimitiveConfig
-from mpg_envs.grid.workspace import Workspace
 
 
 @dataclass
@@ -95,12 +92,28 @@ class MPGNet(nn.Module):
     ``depth`` metres ``(B, 224, 224)``, ``mask`` 0/1 ``(B, 224, 224)``), as numpy arrays or
     tensors, batched or not. The output of :meth:`forward` is one ``(B, 16, 224, 224)`` Q
     tensor per primitive.
+
+    Args:
+        config: the architecture and its settings (default: the paper's).
+        geometry: the env's grasp geometry; needed (and only read) when ``config`` asks for
+            finger masks (``grasp_fingers`` or ``move_fingers`` ``"clear"``).
+
+    Raises:
+        ValueError: finger masks without a ``geometry``, or one of another heightmap size.
     """
 
-    def __init__(self, config: MPGNetConfig | None = None) -> None:
+    def __init__(self, config: MPGNetConfig | None = None, geometry: FingerGeometry | None = None) -> None:
         super().__init__()
         self.config = config if config is not None else MPGNetConfig()
         cfg = self.config
+        if geometry is None and self.needs_geometry:
+            raise ValueError(
+                "this MPGNet masks grasps or moves by where the fingers land (grasp_fingers/move_fingers 'clear'), "
+                "which needs the env's FingerGeometry (mpg_agents.acting.spaces.finger_geometry(env))"
+            )
+        if geometry is not None:
+            geometry.check_size(cfg.heightmap_size)
+        self.geometry = geometry
         self.mask_trunk = MobileNetV3Features(cfg.variant, 1, cfg.trunk_depth, cfg.bn_momentum)
         self.branches = nn.ModuleDict({p: PrimitiveNet(cfg, self.mask_trunk.out_channels) for p in cfg.primitives})
         self.output_stride = self.mask_trunk.output_stride
@@ -118,6 +131,11 @@ class MPGNet(nn.Module):
     def primitives(self) -> tuple[str, ...]:
         """The branches this network has, in canonical order."""
         return self.config.primitives
+
+    @property
+    def needs_geometry(self) -> bool:
+        """Whether the configuration asks for finger masks (made with a :class:`FingerGeometry`)."""
+        return self.config.uses_finger_masks
 
     # ------------------------------------------------------------------ inputs
     def normalize(self, obs: Mapping[str, Any]) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor | None]:
@@ -157,7 +175,8 @@ class MPGNet(nn.Module):
         Rotation ``k + R/4`` is rotation ``k`` turned by exactly 90 degrees about the padded
         frame's centre, which maps pixel centres onto pixel centres; so only the first quarter
         is interpolated and the rest are exact ``rot90`` copies (4x less resampling, identical
-        values).
+        values). The whole batch is resampled in one call: the quarter's grids are stacked
+        along the output rows, so each sample is read once and no loop runs per sample.
         """
         r, s = self.config.num_rotations, self.config.padded_size
         b, c = x.shape[:2]
@@ -165,12 +184,11 @@ class MPGNet(nn.Module):
         quarter = r // 4 if r % 4 == 0 else r
         out = torch.empty((b * r, c, s, s), device=x.device, dtype=x.dtype, memory_format=self._memory_format())
         blocks = out.view(b, r // quarter, quarter, c, s, s)
-        padded = self._padded(x)
-        for i in range(b):
-            source = padded[i : i + 1].expand(quarter, -1, -1, -1)
-            base = F.grid_sample(source, grids[:quarter], mode="bilinear", padding_mode="zeros", align_corners=True)
-            for turns in range(r // quarter):
-                blocks[i, turns].copy_(torch.rot90(base, turns, dims=(2, 3)) if turns else base)
+        stacked = grids[:quarter].reshape(1, quarter * s, s, 2).expand(b, -1, -1, -1)
+        base = F.grid_sample(self._padded(x), stacked, mode="bilinear", padding_mode="zeros", align_corners=True)
+        base = base.view(b, c, quarter, s, s).transpose(1, 2)  # (B, quarter, C, S, S)
+        for turns in range(r // quarter):
+            blocks[:, turns].copy_(torch.rot90(base, turns, dims=(3, 4)) if turns else base)
         return out
 
     def _unrotate(self, coarse: Tensor, rotations: Tensor) -> Tensor:
@@ -190,7 +208,7 @@ class MPGNet(nn.Module):
             grasp_region = grasp_pixels(binary, depth, cfg.target_margin_px, band)
         move_region = footprint_top(binary, depth, cfg.move_band_m / cfg.depth_std) if cfg.move_region == "top" else None
         region = target_region(binary)
-        blocked = self._finger_blocking(depth) if "clear" in (cfg.grasp_fingers, cfg.move_fingers) else None
+        blocked = self._finger_blocking(depth) if self.needs_geometry else None
         grasp_fingers = move_fingers = None
         if cfg.grasp_fingers == "clear":
             grasp_fingers = least_blocked(blocked, region if grasp_region is None else grasp_region, cfg.finger_tolerance_m)
@@ -205,11 +223,9 @@ class MPGNet(nn.Module):
         pixel and rotation land blocked, ``(B, R, H, W)`` metres, from the normalised depth
         planes ``(B, 1, H, W)`` (the clip at ``depth_max`` lies far above any finger)."""
         cfg = self.config
+        assert self.geometry is not None  # checked when built
         metres = (depth[:, 0].float() * cfg.depth_std + cfg.depth_mean).cpu().numpy()
-        grasp, resolution = PrimitiveConfig(), Workspace().resolution
-        return torch.from_numpy(
-            np.stack([fingers_blocked(m, resolution, grasp.grasp_depth, grasp.grasp_min_height, cfg.num_rotations) for m in metres])
-        ).to(depth.device)
+        return torch.from_numpy(self.geometry.blocked(metres, cfg.num_rotations)).to(depth.device)
 
     def encode(self, obs: Mapping[str, Any] | PreparedObs, rotations: Tensor | None = None) -> EncodedObs:
         """Pad and rotate a batch and run the shared mask trunk once.
@@ -232,7 +248,7 @@ class MPGNet(nn.Module):
             if rot.numel() != b or (rot < 0).any() or (rot >= r).any():
                 raise ValueError(f"rotations must be {b} indices in 0..{r - 1}, got {rotations}")
             planes = self._rotate(prep.planes, rot)
-        size = None if self.training else self.config.trunk_batch
+        size = trunk_chunk(self.config, self.training, planes)
         return EncodedObs(
             planes=planes,
             mask_features=run_in_batches(self.mask_trunk, planes, size, first_channel=PLANES["mask"]),

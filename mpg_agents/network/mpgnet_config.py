@@ -105,7 +105,8 @@ class MPGNetConfig:
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
             either way).
-        trunk_batch: most rotated images per trunk convolution at inference; ``None`` = all
+        trunk_batch: most rotated images per trunk convolution at inference on the CPU (an
+            accelerator takes them all at once: :func:`~mpg_agents.network.primitive_net.trunk_chunk`); ``None`` = all
             16 at once. The rotations still form one batch (resampled together, one set of BN
             statistics in training); this only splits the inference convolutions so their
             activations stay in the CPU caches: a 16-image batch at 320 x 320 has ~100 MB per
@@ -197,6 +198,12 @@ class MPGNetConfig:
         if variant == "large":
             return cls.large(**overrides)
         raise ValueError(f"variant must be 'large' or 'small', got {variant!r}")
+
+    @property
+    def uses_finger_masks(self) -> bool:
+        """Whether grasps or moves are masked by where the fingers land (``"clear"``), which
+        needs the env's grasp geometry (:class:`~mpg_agents.network.finger_geometry.FingerGeometry`)."""
+        return "clear" in (self.grasp_fingers, self.move_fingers)
 
     @property
     def padded_size(self) -> int:

@@ -58,7 +58,7 @@ class PrimitiveNet(nn.Module):
 
     def __init__(self, config: MPGNetConfig, mask_channels: int) -> None:
         super().__init__()
-        self.trunk_batch = config.trunk_batch
+        self.config = config
         self.color_trunk = MobileNetV3Features(config.variant, 3, config.trunk_depth, config.bn_momentum)
         # Depth and mask are single-channel: a 1-channel stem is equivalent to replicating them to
         # 3 channels (an ImageNet stem is loaded by summing its RGB kernels) and 3x cheaper.
@@ -69,10 +69,17 @@ class PrimitiveNet(nn.Module):
     def forward(self, planes: Tensor, mask_features: Tensor) -> Tensor:
         """Coarse Q map ``(N, 1, h, w)`` from rotated, padded input planes (:data:`PLANES`) and
         mask-trunk features."""
-        size = None if self.training else self.trunk_batch
+        size = trunk_chunk(self.config, self.training, planes)
         color_f = run_in_batches(self.color_trunk, planes, size, first_channel=PLANES["color"])
         depth_f = run_in_batches(self.depth_trunk, planes, size, first_channel=PLANES["depth"])
         return self.head(torch.cat([color_f, depth_f, mask_features], dim=1))
+
+
+def trunk_chunk(config: MPGNetConfig, training: bool, planes: Tensor) -> int | None:
+    """How many rotated images go through a trunk at once: all in training and on an
+    accelerator (which wants one large batch), ``config.trunk_batch`` at inference on the CPU
+    (where small batches keep the activations in cache)."""
+    return None if training or planes.device.type != "cpu" else config.trunk_batch
 
 
 def run_in_batches(module: nn.Module, x: Tensor, size: int | None, **kwargs: Any) -> Tensor:

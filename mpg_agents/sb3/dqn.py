@@ -18,7 +18,10 @@ from typing import Any, Sequence
 import numpy as np
 from stable_baselines3.dqn.dqn import DQN
 
+from mpg_agents.acting.device import resolve_device
+from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.sb3.replay import SB3HeightmapReplayBuffer
 from mpg_agents.sb3.policy import MPGNetPolicy
 from mpg_agents.learning.td_step import TDStepConfig, td_step
 from mpg_agents.learning.train_config import TrainConfig
@@ -32,8 +35,8 @@ def sb3_settings(config: TrainConfig) -> dict[str, Any]:
 
     Replay capacity, batch size, learning rate, discount, epsilon start and end (annealed over
     the whole run, as ``mpg-train`` does by default), target-network sync, priority exponent,
-    grasp symmetry, TD-target clamp, gradient clipping, and the policy's variant, network
-    settings and Adam weight decay and betas.
+    grasp symmetry, TD-target clamp, gradient clipping, the device, and the policy's variant,
+    network settings and Adam weight decay and betas.
 
     Raises:
         ValueError: ``config.epsilon_decay_steps`` is set (SB3 anneals over a fraction of the
@@ -55,6 +58,7 @@ def sb3_settings(config: TrainConfig) -> dict[str, Any]:
         "grasp_symmetry": config.grasp_symmetry,
         "target_bounds": config.q_bounds,
         "max_grad_norm": config.max_grad_norm,
+        "device": config.device,
         "policy_kwargs": {
             "variant": config.variant, "net_config": dict(config.net_config), "optimizer_kwargs": config.optimizer_kwargs(),
         },
@@ -90,8 +94,11 @@ class MPGDQN(DQN):
     ) -> None:
         settings = sb3_settings(config if config is not None else TrainConfig())
         settings["policy_kwargs"] = {**settings["policy_kwargs"], **(kwargs.pop("policy_kwargs", None) or {})}
-        settings.update(learning_starts=LEARNING_STARTS, replay_buffer_class=PrioritizedHeightmapReplayBuffer)
+        if env is not None and not isinstance(env, str) and hasattr(env.unwrapped, "config"):
+            settings["policy_kwargs"].setdefault("geometry", finger_geometry(env))  # the finger masks of this env
+        settings.update(learning_starts=LEARNING_STARTS, replay_buffer_class=SB3HeightmapReplayBuffer)
         settings.update(kwargs)
+        settings["device"] = resolve_device(settings["device"])  # auto | cpu | cuda, with a clear error for CUDA without one
         buffer_class = settings["replay_buffer_class"]
         if not (isinstance(buffer_class, type) and issubclass(buffer_class, PrioritizedHeightmapReplayBuffer)):
             settings.pop("replay_buffer_kwargs")  # the priority exponent is the prioritised buffer's alone

@@ -9,7 +9,7 @@ network, coordination and Q*_g); the target network is SB3's.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Sequence
 
 import torch
 from gymnasium import spaces
@@ -18,12 +18,13 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from torch import Tensor, nn
 
-from mpg_agents.acting.agent import AgentMethods, agent_net_config
-from mpg_agents.acting.coordination import check_coordination
-from mpg_agents.acting.grasp_threshold import UNCALIBRATED, GraspThreshold
+from mpg_agents.acting.agent import AgentMethods
+from mpg_agents.acting.agent_settings import AgentSettings
+from mpg_agents.acting.grasp_threshold import GraspThreshold
+from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.acting.q_function import MPGQFunction, check_action_space
-from mpg_agents.acting.spaces import check_observation_space, resolve_primitives
+from mpg_agents.acting.spaces import check_observation_space
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_envs.grid.actions import check_primitives
 
@@ -44,16 +45,17 @@ class MPGQNetwork(MPGQFunction, QNetwork):
         action_space: the env's pixel action space.
         net_config: the network.
         action_primitives: the action space's primitives, in its order.
+        geometry: the env's grasp geometry (for finger masks).
     """
 
     def __init__(
         self, observation_space: spaces.Dict, action_space: spaces.Discrete, net_config: MPGNetConfig,
-        action_primitives: Sequence[str],
+        action_primitives: Sequence[str], geometry: FingerGeometry | None = None,
     ) -> None:
         BasePolicy.__init__(self, observation_space, action_space, features_extractor=None, normalize_images=False)
         check_observation_space(observation_space, net_config.heightmap_size)
         check_action_space(action_space, check_primitives(action_primitives), net_config)
-        self._setup(net_config, action_primitives)
+        self._setup(net_config, action_primitives, geometry)
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> Tensor:
         # The max-Q action where each primitive may act (MPGNetPolicy decides with the coordination).
@@ -61,7 +63,7 @@ class MPGQNetwork(MPGQFunction, QNetwork):
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = BasePolicy._get_constructor_parameters(self)
-        data.update(net_config=self.net_config, action_primitives=self.action_primitives)
+        data.update(net_config=self.net_config, action_primitives=self.action_primitives, geometry=self.mpgnet.geometry)
         return data
 
 
@@ -74,16 +76,9 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
             ``color`` may be channels-first (SB3 transposes image spaces).
         action_space: the env's pixel action space.
         lr_schedule: learning-rate schedule (from the algorithm).
-        variant: ``"small"`` (CPU-friendly, ``mpg-train``'s default) or ``"large"`` (paper).
-        primitives: the action space's primitives when it does not carry ``.primitives``.
-        branches: the nets to build (default: the action primitives); a superset keeps e.g.
-            the grasp net as Stage III's discriminator next to the move net.
-        coordination: one of :data:`~mpg_agents.acting.coordination.COORDINATIONS`
-            (``"workflow"``: the paper's; ``"max_q"``: its ablation);
-            see :mod:`mpg_agents.acting.coordination`.
-        q_star: the calibrated grasp threshold Q*_g; NaN until calibrated.
-        net_config: ``MPGNetConfig`` or its dict overriding the variant's defaults.
-        imagenet_weights: optional torchvision MobileNetV3 checkpoint to initialise every trunk.
+        settings: the fields of :class:`~mpg_agents.acting.agent_settings.AgentSettings` (variant,
+            primitives, branches, coordination, q_star, net_config, imagenet_weights, geometry),
+            as :meth:`~mpg_agents.acting.agent.MPGAgent.build` takes them.
         normalize_images: must stay ``False``: MPGNet normalises its inputs itself.
         optimizer_class: default Adam.
         optimizer_kwargs: default: ``mpg-train``'s weight decay and betas (the paper's 2^-5 and
@@ -100,33 +95,26 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
         observation_space: spaces.Dict,
         action_space: spaces.Discrete,
         lr_schedule: Schedule,
-        variant: str = DEFAULTS.variant,
-        primitives: Sequence[str] | None = None,
-        branches: Sequence[str] | None = None,
-        coordination: str = "workflow",
-        q_star: float = UNCALIBRATED,
-        net_config: MPGNetConfig | Mapping[str, Any] | None = None,
-        imagenet_weights: str | None = None,
         normalize_images: bool = False,
         optimizer_class: type[torch.optim.Optimizer] = torch.optim.Adam,
         optimizer_kwargs: dict[str, Any] | None = None,
         net_arch: list[int] | None = None,
         activation_fn: type[nn.Module] = nn.ReLU,
-        **unused: Any,
+        **settings: Any,
     ) -> None:
         if normalize_images:
             raise ValueError(
                 "MPGNetPolicy needs normalize_images=False: MPGNet normalises colour (/255, ImageNet "
                 "mean/std), depth and mask itself, and SB3's /255 would apply twice"
             )
-        if unused:
-            raise TypeError(f"MPGNetPolicy got unexpected keyword arguments {sorted(unused)}")
-        self.action_primitives = resolve_primitives(action_space, primitives)
-        self.coordination = check_coordination(coordination)
-        self.branches = check_primitives(branches) if branches is not None else self.action_primitives
-        self.net_config = agent_net_config(variant, net_config, self.branches)
+        self.settings = AgentSettings(**settings)
+        resolved = self.settings.resolve(observation_space, action_space)
+        self.action_primitives = resolved.action_primitives
+        self.coordination = self.settings.coordination
+        self.net_config = resolved.net_config
+        self.branches = self.net_config.primitives
         self.variant = self.net_config.variant
-        self.imagenet_weights = imagenet_weights
+        self.geometry = resolved.geometry
         super().__init__(
             observation_space,
             action_space,
@@ -137,12 +125,12 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
             optimizer_class=optimizer_class,
             optimizer_kwargs=DEFAULTS.optimizer_kwargs() if optimizer_kwargs is None else optimizer_kwargs,
         )
-        self.threshold = GraspThreshold(q_star)  # a module: SB3's save keeps Q*_g
+        self.threshold = GraspThreshold(self.settings.q_star)  # a module: SB3's save keeps Q*_g
 
     def _build(self, lr_schedule: Schedule) -> None:
         self.q_net = self.make_q_net()
-        if self.imagenet_weights:
-            self.q_net.mpgnet.load_imagenet(self.imagenet_weights)
+        if self.settings.imagenet_weights:
+            self.q_net.mpgnet.load_imagenet(self.settings.imagenet_weights)
         self.q_net_target = self.make_q_net()
         self.q_net_target.load_state_dict(self.q_net.state_dict())
         self.q_net_target.set_training_mode(False)
@@ -157,6 +145,7 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
             self.action_space,  # type: ignore[arg-type]
             self.net_config,
             self.action_primitives,
+            self.geometry,
         ).to(self.device)
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> Tensor:
@@ -170,14 +159,11 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
         data = super()._get_constructor_parameters()
         for key in ("features_extractor_class", "features_extractor_kwargs"):
             data.pop(key, None)
-        data.update(
-            variant=self.variant,
-            primitives=self.action_primitives,
-            branches=self.branches,
-            coordination=self.coordination,
-            q_star=self.q_star,
-            net_config=self.net_config.to_dict(),
-        )
+        # The settings as built (weights come from the saved state, not ImageNet again).
+        data.update(self.settings.replace(
+            primitives=self.action_primitives, branches=self.branches, coordination=self.coordination, q_star=self.q_star,
+            net_config=self.net_config, imagenet_weights=None, geometry=self.geometry,
+        ).to_dict())
         return data
 
     # ----------------------------------------------------- safetensors

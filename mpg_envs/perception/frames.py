@@ -88,7 +88,8 @@ class SceneFrames:
             self._render(self._rgb, self._zbuffer)
         finally:
             np.copyto(self.scene.flags, flags)
-        segid = self._rgb[..., 0].astype(np.int64) + (self._rgb[..., 1].astype(np.int64) << 8) + (self._rgb[..., 2].astype(np.int64) << 16)
+        rgb = self._rgb.astype(np.int32)
+        segid = rgb[..., 0] | (rgb[..., 1] << 8) | (rgb[..., 2] << 16)
         lookup = np.full(self.scene.ngeom + 1, -1, dtype=np.int32)  # segid 0: nothing drawn
         for geom in self.scene.geoms[: self.scene.ngeom]:
             if geom.segid >= 0 and geom.objtype == mujoco.mjtObj.mjOBJ_GEOM:

@@ -125,11 +125,11 @@ def change_detected(
     before: np.ndarray,
     after: np.ndarray,
     target_mask: np.ndarray | None = None,
-    grasp_success: bool = False,
+    lifted: bool = False,
     config: ChangeConfig = ChangeConfig(),
 ) -> bool:
-    """VPG's change test: > 300 changed pixels, > 50 around the target, or a grasp."""
-    if grasp_success:
+    """VPG's change test: > 300 changed pixels, > 50 around the target, or an object lifted."""
+    if lifted:
         return True
     changed = changed_pixels(before, after, config)
     if int(changed.sum()) > config.scene_pixels:

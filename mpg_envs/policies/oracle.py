@@ -2,8 +2,9 @@
 
 :class:`OraclePolicy` reads the simulator's state (object poses and shapes, which object is
 the target, which object each heightmap pixel shows), never pixels alone, and, as a planner
-with a perfect model of the physics, tries candidate actions in a checkpointed copy of the
-simulation (:func:`try_primitive`) before taking one. It proves the suite is solvable
+with a perfect model of the physics, tries candidate actions in the env's simulation and undoes
+them (``env.sim``: :meth:`~mpg_envs.tasks.episode_sim.EpisodeSim.try_primitive` and
+:meth:`~mpg_envs.tasks.episode_sim.EpisodeSim.trial`) before taking one. It proves the suite is solvable
 and is the upper baseline of evaluations. Each step it re-plans from the current state:
 
 1. its best target grasps (across the short axis, where the open fingers come down on the
@@ -18,6 +19,10 @@ With ``OracleConfig(verify_grasps=0)`` it plans by geometry alone (no trials). I
 every action it took or tried with the heightmap it was on and never repeats one whose
 surroundings did not change (:class:`ActionMemory`), so a failed action is never retried
 unchanged.
+
+Diagnostics read the oracle's view through its public methods: :meth:`OraclePolicy.view`
+(depth and which object each pixel shows), :meth:`OraclePolicy.occluders` and
+:meth:`OraclePolicy.grasp_plans`.
 """
 
 from __future__ import annotations
@@ -40,23 +45,9 @@ from mpg_envs.grid.grasp_geometry import (
     jaw_strip_heights,
 )
 from mpg_envs.policies.policy import Policy
-from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
-from mpg_envs.simulation.world import WorldCheckpoint
 from mpg_envs.grid.workspace import NUM_ROTATIONS, world_to_pixel
 
-__all__ = ["ActionMemory", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect", "try_primitive"]
-
-
-def try_primitive(
-    primitives: Primitives, primitive: str, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None = None
-) -> PrimitiveResult:
-    """Run a primitive on ``primitives.world`` and undo it exactly (:class:`WorldCheckpoint`,
-    warm starts included): what a planner with a perfect model of the physics can do."""
-    checkpoint = WorldCheckpoint(primitives.world)
-    try:
-        return primitives.execute(primitive, rotation, row, col, depth, target)
-    finally:
-        checkpoint.restore()
+__all__ = ["ActionMemory", "GraspPlan", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect"]
 
 
 @dataclass(frozen=True)
@@ -131,7 +122,7 @@ class OraclePolicy:
         if env.num_motions == 0 and self._episode_motions != 0:
             self.reset()  # a new episode even if the caller did not say so
         self._episode_motions = env.num_motions
-        self._obs = env._obs if obs is None else obs
+        self._obs = env.last_observation if obs is None else obs
         depth = np.asarray(self._obs["depth"])
         primitive, rotation, row, col, plan = self._choose(env, depth)
         self.memory.record(primitive, rotation, row, col, depth)
@@ -141,11 +132,11 @@ class OraclePolicy:
     # ------------------------------------------------------------ planning
     def _choose(self, env, depth: np.ndarray):
         world, allowed, target = env.world, env.primitives, env.target
-        ids = self._object_ids(world)
+        ids = self.view(world)[1]
         if target is None or env.stage.mask_all_objects or not world.active[target]:
             inside = set(world.active_objects().tolist()) - set(world.objects_outside_workspace().tolist())
             for i in sorted(inside, key=lambda i: -world.object_top(i)):
-                step = self._first_new("grasp", self._grasp_plans(env, i, depth, ids), depth)
+                step = self._first_new("grasp", self.grasp_plans(env, i, depth, ids), depth)
                 if step:
                     return (*step, {"kind": "grasp_any"})
             return self._last_resort(env, depth, "grasp")
@@ -154,7 +145,7 @@ class OraclePolicy:
             step = self._verified_grasp(env, target, depth, ids)
             if step:
                 return (*step, {"kind": "grasp_verified"})
-        plans = self._grasp_plans(env, target, depth, ids) if "grasp" in allowed else []
+        plans = self.grasp_plans(env, target, depth, ids) if "grasp" in allowed else []
         if not verify:
             occluded = bool(self._obs["occluded"][0])
             if "move" in allowed and (occluded or "grasp" not in allowed):
@@ -186,14 +177,14 @@ class OraclePolicy:
         budget = 2 * self.config.verify_grasps
         for move in moves:
             j = move[4]["object"]
-            for p in self._grasp_plans(env, j, depth, ids, require_fit=False):
+            for p in self.grasp_plans(env, j, depth, ids, require_fit=False):
                 if budget <= 0:
                     return moves[0]
                 if self.memory.repeats("move", p.rotation, p.row, p.col, depth):
                     continue
                 budget -= 1
-                result = try_primitive(env._primitives, "move", p.rotation, p.row, p.col, depth, target)
-                if result.grasp_success and result.grasped_object == j and not result.target_moved:
+                result = env.sim.try_primitive("move", p.rotation, p.row, p.col, depth, target)
+                if result.lifted and result.grasped_object == j and not result.target_moved:
                     return "move", p.rotation, p.row, p.col, move[4]
         return moves[0] if moves else None
 
@@ -204,7 +195,7 @@ class OraclePolicy:
         world, allowed = env.world, env.primitives
         if "move" not in allowed:
             return
-        movers = self._occluders(env, target, depth, ids)
+        movers = self.occluders(world, target, depth, ids, self._obs["mask"])
         if not movers and "grasp" not in allowed:  # Stage III, nothing on top: clear the nearest
             movers = self._neighbours(world, target)
         kinds = {j: "move_occluder" for j in movers}
@@ -215,7 +206,7 @@ class OraclePolicy:
                         movers.append(j)
                         kinds[j] = "move_blocker"
         for j in movers:
-            step = self._first_new("move", self._grasp_plans(env, j, depth, ids, require_fit=False), depth)
+            step = self._first_new("move", self.grasp_plans(env, j, depth, ids, require_fit=False), depth)
             if step:
                 yield (*step, {"kind": kinds[j], "object": j})
 
@@ -238,42 +229,38 @@ class OraclePolicy:
         candidates = list(self._moves(env, target, depth, ids, plans))[: c.verify_preparations]
         candidates += list(self._pushes(env, target, depth, plans))[: max(0, c.verify_preparations - len(candidates))]
         best, best_score = None, None
-        obs = self._obs
+        sim = env.sim
         for cand in candidates:
             primitive, rotation, row, col, info = cand
-            checkpoint = WorldCheckpoint(env.world)
-            try:
-                env._primitives.execute(primitive, rotation, row, col, depth, target)
-                if not env.world.active[target] or target in set(env.world.objects_outside_workspace().tolist()):
+            with sim.trial():
+                sim.executor.execute(primitive, rotation, row, col, depth, target)
+                if not sim.world.active[target] or target in set(sim.world.objects_outside_workspace().tolist()):
                     continue
-                after, ids_after = self._cast(env.world)
-                mask, occluded = env._target_view(after, target)
-                self._obs = {"depth": after, "mask": mask, "occluded": np.array([int(occluded)])}
-                plans_after = self._grasp_plans(env, target, after, ids_after)
+                after, ids_after = self.view(sim.world)
+                mask, _ = sim.target_view(after, target)
+                plans_after = self.grasp_plans(env, target, after, ids_after)
                 for p in plans_after[: c.verify_grasps]:
-                    result = try_primitive(env._primitives, "grasp", p.rotation, p.row, p.col, after, target)
-                    if result.grasp_success and result.grasped_object == target:
+                    result = sim.try_primitive("grasp", p.rotation, p.row, p.col, after, target)
+                    if result.lifted and result.grasped_object == target:
                         return primitive, rotation, row, col, {**info, "verified_next": True}
-                score = (len(self._occluders(env, target, after, ids_after)), min((p.blocked for p in plans_after), default=1.0))
+                occluders = self.occluders(sim.world, target, after, ids_after, mask)
+                score = (len(occluders), min((p.blocked for p in plans_after), default=1.0))
                 if best_score is None or score < best_score:
                     best, best_score = cand, score
-            finally:
-                self._obs = obs
-                checkpoint.restore()
         return best
 
     def _verified_grasp(self, env, target: int, depth: np.ndarray, ids: np.ndarray):
         """The first of the best ``verify_grasps`` untried target grasps that holds the target
         when tried in a copy of the simulation; the ones that did not are remembered as tried."""
         tried = 0
-        for p in self._grasp_plans(env, target, depth, ids):
+        for p in self.grasp_plans(env, target, depth, ids):
             if tried >= self.config.verify_grasps:
                 break
             if self.memory.repeats("grasp", p.rotation, p.row, p.col, depth):
                 continue
             tried += 1
-            result = try_primitive(env._primitives, "grasp", p.rotation, p.row, p.col, depth, target)
-            if result.grasp_success and result.grasped_object == target:
+            result = env.sim.try_primitive("grasp", p.rotation, p.row, p.col, depth, target)
+            if result.lifted and result.grasped_object == target:
                 return "grasp", p.rotation, p.row, p.col
             self.memory.record("grasp", p.rotation, p.row, p.col, depth)
         return None
@@ -300,7 +287,7 @@ class OraclePolicy:
         return primitive, 0, r, c, {"kind": "last_resort", "no_free_grasp": True}
 
     # ------------------------------------------------------------ pieces
-    def _grasp_plans(self, env, i: int, depth: np.ndarray, ids: np.ndarray, require_fit: bool = True) -> list[GraspPlan]:
+    def grasp_plans(self, env, i: int, depth: np.ndarray, ids: np.ndarray, require_fit: bool = True) -> list[GraspPlan]:
         """Grasps of object ``i`` at the 8 angles, best first: free ones nearest the short
         axis, then the least blocked. At each angle the jaw slides along the closing
         direction (the open fingers span 85 mm) to where both fingers come down on free space."""
@@ -363,10 +350,10 @@ class OraclePolicy:
                 options.append((side, start, rotation))
         return options
 
-    def _occluders(self, env, target: int, depth: np.ndarray, ids: np.ndarray) -> list[int]:
-        """Objects seen above the target's footprint higher than its top, topmost first."""
-        world = env.world
-        mask = np.asarray(self._obs["mask"]) > 0
+    def occluders(self, world, target: int, depth: np.ndarray, ids: np.ndarray, mask: np.ndarray) -> list[int]:
+        """Objects seen over the target's footprint ``mask`` (``depth``, ``ids``: a :meth:`view`)
+        higher than the target's top, topmost first."""
+        mask = np.asarray(mask) > 0
         over = mask & (depth > world.object_top(target) + self.config.occluder_tolerance)
         found = {int(j): float(depth[over & (ids == j)].max()) for j in np.unique(ids[over]) if j >= 0 and j != target}
         return sorted(found, key=lambda j: -found[j])
@@ -376,13 +363,10 @@ class OraclePolicy:
         others = [int(j) for j in world.active_objects() if j != target]
         return sorted(others, key=lambda j: float(np.linalg.norm(world.object_position(j)[:2] - t)))
 
-    def _object_ids(self, world) -> np.ndarray:
-        """Which object each heightmap pixel shows (-1 for the table)."""
-        return self._cast(world)[1]
-
-    def _cast(self, world) -> tuple[np.ndarray, np.ndarray]:
-        """The oracle's own ray-cast view of the current state: depth heightmap and which
-        object each pixel shows (its own caster, so trials never touch the env's cameras or RNG)."""
+    def view(self, world) -> tuple[np.ndarray, np.ndarray]:
+        """The oracle's own ray-cast view of ``world``'s current state: the depth heightmap and
+        which object each pixel shows (-1: the table; its own caster, so trials never touch
+        the env's cameras or generator)."""
         if self._ids_model is not world.model:
             from mpg_envs.perception.heightmap import RaycastHeightmapper
 

@@ -40,11 +40,11 @@ class SceneLayout:
     redrop: Callable[[], np.ndarray]
 
 
-SceneFn = Callable[[World, np.random.Generator, "SceneConfig"], SceneLayout]
+GeneratorFn = Callable[[World, np.random.Generator, "GeneratorConfig"], SceneLayout]
 
 
 @dataclass(frozen=True)
-class SceneConfig:
+class GeneratorConfig:
     """Distances (metres) shaping the generated scenes."""
 
     edge_margin: float = 0.07  # drops stay this far inside the workspace edges
@@ -77,7 +77,7 @@ def _uniform_point(world: World, rng: np.random.Generator, margin: float) -> np.
     return np.array([rng.uniform(ws.x_min + margin, ws.x_max - margin), rng.uniform(ws.y_min + margin, ws.y_max - margin)])
 
 
-def _points_apart(world: World, rng: np.random.Generator, n: int, distance: float, cfg: SceneConfig) -> list[np.ndarray]:
+def _points_apart(world: World, rng: np.random.Generator, n: int, distance: float, cfg: GeneratorConfig) -> list[np.ndarray]:
     points: list[np.ndarray] = []
     for _ in range(cfg.max_point_tries):
         if len(points) == n:
@@ -97,14 +97,14 @@ def _cluster_point(center: np.ndarray, radius: float, rng: np.random.Generator) 
     return center + r * np.array([math.cos(a), math.sin(a)])
 
 
-def scattered(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def scattered(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage I: every object dropped apart from the others; the mask shows them all."""
     for i, p in enumerate(_points_apart(world, rng, world.num_objects, cfg.apart_distance, cfg)):
         world.drop_object(i, p, random_quat(rng))
     return SceneLayout((), lambda: _uniform_point(world, rng, cfg.edge_margin))
 
 
-def isolated_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def isolated_target(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage II: the n-th dropped object is the target, kept clear of the others."""
     n = world.num_objects
     target = int(rng.integers(n))
@@ -117,7 +117,7 @@ def isolated_target(world: World, rng: np.random.Generator, cfg: SceneConfig) ->
     return SceneLayout((target,), lambda: _uniform_point(world, rng, cfg.edge_margin))
 
 
-def occluded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def occluded_target(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage III: an occluder dropped onto the target, more objects nearby as they grow."""
     center = _uniform_point(world, rng, cfg.edge_margin + 0.03)
     world.drop_object(0, center, yaw_quat(rng))
@@ -128,7 +128,7 @@ def occluded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) ->
     return SceneLayout((0,), lambda: _cluster_point(center, 2 * cfg.cluster_radius, rng))
 
 
-def surrounded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def surrounded_target(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage IV: the target boxed in by neighbours on all sides, none on top of it."""
     center = _uniform_point(world, rng, cfg.edge_margin + 0.05)
     world.drop_object(0, center, yaw_quat(rng), height=0.02)
@@ -144,7 +144,7 @@ def surrounded_target(world: World, rng: np.random.Generator, cfg: SceneConfig) 
     return SceneLayout((0,), lambda: _cluster_point(center, 3 * target_radius, rng))
 
 
-def clustered(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def clustered(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage V: all objects dropped close together; the target is the 1st or 2nd dropped."""
     center = _uniform_point(world, rng, cfg.edge_margin + cfg.cluster_radius)
     for i in range(world.num_objects):
@@ -152,7 +152,7 @@ def clustered(world: World, rng: np.random.Generator, cfg: SceneConfig) -> Scene
     return SceneLayout(tuple(int(k) for k in rng.permutation(2)), lambda: _cluster_point(center, cfg.cluster_radius, rng))
 
 
-def test_scene(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def test_cluster(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Test scenes: 15 or 30 objects close together; the target one of the first five."""
     center = _uniform_point(world, rng, cfg.edge_margin + cfg.test_cluster_radius)
     for i in range(world.num_objects):
@@ -161,7 +161,7 @@ def test_scene(world: World, rng: np.random.Generator, cfg: SceneConfig) -> Scen
     return SceneLayout(tuple(int(k) for k in first), lambda: _cluster_point(center, cfg.test_cluster_radius, rng))
 
 
-def _buried(world: World, rng: np.random.Generator, cfg: SceneConfig, radius: float) -> SceneLayout:
+def _buried(world: World, rng: np.random.Generator, cfg: GeneratorConfig, radius: float) -> SceneLayout:
     """The target (object 0) dropped flat at a cluster's centre, ``cfg.buried_occluders``
     objects dropped onto it, the rest around it within ``radius``."""
     center = _uniform_point(world, rng, cfg.edge_margin + radius)
@@ -174,12 +174,12 @@ def _buried(world: World, rng: np.random.Generator, cfg: SceneConfig, radius: fl
     return SceneLayout((0,), lambda: _cluster_point(center, radius, rng))
 
 
-def buried_cluster(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def buried_cluster(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage V's cluster with the target buried: occluders dropped onto it by construction."""
     return _buried(world, rng, cfg, cfg.cluster_radius)
 
 
-def buried_test_scene(world: World, rng: np.random.Generator, cfg: SceneConfig) -> SceneLayout:
+def buried_test_cluster(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """The test scenes' cluster with the target buried: occluders dropped onto it by construction."""
     return _buried(world, rng, cfg, cfg.test_cluster_radius)
 
@@ -192,7 +192,7 @@ def objects_astray(world: World) -> np.ndarray:
     return np.array(sorted(astray), dtype=int)
 
 
-def keep_inside(world: World, rng: np.random.Generator, layout: SceneLayout, cfg: SceneConfig) -> tuple[int, ...] | None:
+def keep_inside(world: World, rng: np.random.Generator, layout: SceneLayout, cfg: GeneratorConfig) -> tuple[int, ...] | None:
     """Re-drop, at ``layout.redrop`` points, every object that is not resting inside the
     workspace, for up to ``cfg.redrop_rounds`` rounds.
 
@@ -218,16 +218,19 @@ def keep_inside(world: World, rng: np.random.Generator, layout: SceneLayout, cfg
     return None  # not reached: the last round returns
 
 
-SCENES: dict[str, SceneFn] = {
+GENERATORS: dict[str, GeneratorFn] = {
     "scattered": scattered,
     "isolated_target": isolated_target,
     "occluded_target": occluded_target,
     "surrounded_target": surrounded_target,
     "clustered": clustered,
-    "test_scene": test_scene,
+    "test_cluster": test_cluster,
     "buried_cluster": buried_cluster,
-    "buried_test_scene": buried_test_scene,
+    "buried_test_cluster": buried_test_cluster,
 }
 
-BURIED: dict[str, str] = {"clustered": "buried_cluster", "test_scene": "buried_test_scene"}
+SceneConfig = GeneratorConfig
+"""The former name of :class:`GeneratorConfig` (kept for code that sets it)."""
+
+BURIED: dict[str, str] = {"clustered": "buried_cluster", "test_cluster": "buried_test_cluster"}
 """A generator -> its variant that buries the target (for bands of low visibility)."""

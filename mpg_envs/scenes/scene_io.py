@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mpg_envs.simulation.families import family_asset
+from mpg_envs.simulation.family_shapes import FAMILY_NAMES
 from mpg_envs.simulation.objects import ObjectAsset, blocks_object_set, load_mesh_folder, load_object_set
 from mpg_envs.simulation.random_urdfs import PACKED_SOURCE_PREFIX, TEST_SET_NAME
 from mpg_envs.grid.workspace import Workspace
@@ -276,6 +278,11 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
         elif source.startswith(PACKED_SOURCE_PREFIX):  # the shipped random_urdfs test objects
             packed = packed or {a.name: a for a in load_object_set(TEST_SET_NAME)}
             asset = packed.get(name)
+        elif source in FAMILY_NAMES:
+            try:
+                asset = family_asset(source, name, seed)
+            except ValueError:
+                asset = None
         else:
             folder = str(Path(mesh_dir) if mesh_dir is not None else Path(source).parent)
             if folder not in folders:

@@ -42,7 +42,7 @@ SETTLE_ROUNDS = 4
 """Settling of a peer file runs up to this many times the physics' usual settling cap."""
 
 
-def apply_scene(
+def load_scene(
     build_world: Callable[[Sequence[ObjectAsset]], World],
     scene: SceneFile,
     workspace: Workspace,

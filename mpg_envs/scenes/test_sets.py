@@ -10,8 +10,12 @@ set rebuilds scene ``i`` in tens of milliseconds and gives the same observation 
 machine; any other seed is generated afresh as before, so users can still draw new scenes.
 
 Each file records how it was made: the generator version (:data:`GENERATOR_VERSION`, bumped
-when scene generation changes), the package and MuJoCo versions, the env id, and each
-scene's visible fraction at reset. ``benchmarks/make_test_sets.py`` writes them.
+when scene generation changes), a digest of the generator's code and parameters
+(``generator_digest``: :func:`mpg_envs.tasks.scene_source.generator_digest`), the package and
+MuJoCo versions, the env id, and each scene's visible fraction at reset.
+``benchmarks/make_test_sets.py`` writes them. A set is used only by the generator that made it:
+:meth:`TestSet.check_made_by` raises :class:`StaleTestSetError`, saying how to regenerate the
+set, when the code that drops scenes has changed since.
 """
 
 from __future__ import annotations
@@ -52,6 +56,11 @@ def test_set_name(stage_test_set: str, object_set: str) -> str | None:
 
 
 test_set_name.__test__ = False  # type: ignore[attr-defined]  # not a pytest test
+
+
+class StaleTestSetError(RuntimeError):
+    """A test set was made by another scene generator (code, parameters or version) than the
+    running code's: its scenes are not the ones this code drops for its seeds."""
 
 
 @dataclass(frozen=True)
@@ -109,6 +118,20 @@ class TestSet:
                 raise KeyError(f"test set {self.name!r}: asset {name!r} is not in the object set ({sorted(by_name)})")
             objects.append(SceneObject(by_name[name], self.positions[k, i], self.quats[k, i], True, f"object {i} ({name!r})"))
         return SceneFile(tuple(objects), int(self.targets[k]), f"{self.name}_{self.num_objects}:{seed}", simulated=True)
+
+    def check_made_by(self, digest: str) -> None:
+        """Raise :class:`StaleTestSetError` unless the set was made by generator version
+        :data:`GENERATOR_VERSION` with code and parameters of ``digest``."""
+        made = self.meta.get("generator_digest"), self.meta.get("generator_version")
+        if made == (digest, str(GENERATOR_VERSION)):
+            return
+        env_id = self.meta.get("env_id", "<its env id>")
+        raise StaleTestSetError(
+            f"test set {self.name}_{self.num_objects} was made by another scene generator (digest {made[0]!r}, "
+            f"version {made[1]!r}) than this code's (digest {digest!r}, version {GENERATOR_VERSION}): its scenes are "
+            f"not what this code drops for its seeds. Regenerate it with `python benchmarks/make_test_sets.py "
+            f"--envs {env_id} --objects {self.num_objects}` (or reset with use_test_set=False to drop every scene)."
+        )
 
     def save(self, path: str | Path) -> Path:
         """Write the set as a compressed ``.npz``."""

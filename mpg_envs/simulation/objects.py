@@ -1,10 +1,13 @@
 """Object sets: rigid objects made of convex parts, ready to be added to a MuJoCo scene.
 
-:func:`load_object_set` picks a set by name (``"blocks"``) or by the path of a folder of
+:func:`load_object_set` picks a set by name (``"blocks"``, a procedural family such as
+``"superquadrics"``, or ``"procedural"``) or by the path of a folder of
 meshes. The pieces live in modules of their own and are re-exported here:
 
 * :mod:`mpg_envs.simulation.assets` -- the :class:`ObjectAsset` type, colours and material defaults;
 * :mod:`mpg_envs.simulation.blocks` -- the generated "blocks" set (:func:`blocks_object_set`);
+* :mod:`mpg_envs.simulation.families` -- the procedural sets (:func:`family_object_set`);
+* :mod:`mpg_envs.simulation.meshes` -- mesh folders and coacd decomposition (:func:`load_mesh_folder`);
 * :mod:`mpg_envs.simulation.meshes` -- mesh files and folders (:func:`load_mesh_file`, :func:`load_mesh_folder`),
   decomposed in a worker process (:mod:`~mpg_envs.simulation.decomposition`,
   :mod:`~mpg_envs.simulation.isolated_call`) and fitted to the gripper (:mod:`~mpg_envs.simulation.gripper_fit`);
@@ -24,6 +27,7 @@ from typing import Sequence
 from mpg_envs.simulation.assets import DEFAULT_FRICTION, MASS_RANGE, MIN_PART_VOLUME, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part
 from mpg_envs.simulation.blocks import ARCH_TUNNEL_RATIO, BLOCK_SHAPES, BLOCKS_JITTER, CYLINDER_SECTIONS, blocks_object_set
 from mpg_envs.simulation.bodies import OBJECT_CONDIM, OBJECT_GEOM_GROUP, ROLLING_FRICTION, TORSIONAL_FRICTION, add_object_body
+from mpg_envs.simulation.families import FAMILY_SEED_RANGES, PROCEDURAL_SETS, family_object_set
 from mpg_envs.simulation.geometry_cache import CACHE_FORMAT_VERSION, default_cache_dir
 from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange, fit_scale
 from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, MeshLoadError, load_mesh_file, load_mesh_folder
@@ -44,6 +48,7 @@ __all__ = [
     "HELD_OUT_OBJECT_SETS",
     "HeldOutObjectsError",
     "DEFAULT_FRICTION",
+    "FAMILY_SEED_RANGES",
     "ExtentRange",
     "MASS_RANGE",
     "MESH_SUFFIXES",
@@ -52,6 +57,7 @@ __all__ = [
     "OBJECT_CONDIM",
     "OBJECT_GEOM_GROUP",
     "ObjectAsset",
+    "PROCEDURAL_SETS",
     "Part",
     "RANDOM_URDFS_LICENCE",
     "ROLLING_FRICTION",
@@ -62,6 +68,7 @@ __all__ = [
     "blocks_object_set",
     "check_not_held_out",
     "default_cache_dir",
+    "family_object_set",
     "fit_scale",
     "held_out_objects",
     "load_mesh_file",
@@ -111,13 +118,15 @@ def load_object_set(
     seed: int = 0,
     cache_dir: str | os.PathLike[str] | None = None,
 ) -> list[ObjectAsset]:
-    """An object set by name (``"blocks"``, ``"random_urdfs_test"``) or by the path of a folder of OBJ/STL meshes.
+    """An object set by name (``"blocks"``, a procedural family, ``"random_urdfs_test"``) or by the path of a folder of OBJ/STL meshes.
 
     ``"random_urdfs_test"`` is pybullet's ``random_urdfs`` test split as shipped: fitted to the
     gripper and packed beside the test scenes (no pybullet needed; ``seed`` and ``cache_dir``
     do not apply). It is held out from training.
 
-    The name ``"blocks"`` wins over a folder that happens to be called ``blocks`` in the
+    Names: ``"blocks"``, and the procedural sets of :data:`PROCEDURAL_SETS` (each family,
+    e.g. ``"superquadrics"``, and ``"procedural"``, a mix of all; ``seed`` picks the set, see
+    :data:`FAMILY_SEED_RANGES`). A name wins over a folder that happens to be called so in the
     working directory; pass ``"./blocks"`` to load such a folder.
 
     Raises:
@@ -127,12 +136,14 @@ def load_object_set(
         return blocks_object_set(seed=seed, cache_dir=cache_dir)
     if isinstance(name_or_path, str) and name_or_path == TEST_SET_NAME:
         return load_object_pack(test_pack_path())
+    if isinstance(name_or_path, str) and name_or_path in PROCEDURAL_SETS:
+        return family_object_set(name_or_path, seed=seed, cache_dir=cache_dir)
     # str(...) guards against "" silently meaning the working directory.
     path = Path(name_or_path).expanduser()
     if str(name_or_path).strip() and path.is_dir():
         return load_mesh_folder(path, seed=seed, cache_dir=cache_dir)
     raise ValueError(
-        f"unknown object set {str(name_or_path)!r}: valid choices are {', '.join(map(repr, NAMED_SETS))} or the path of an "
+        f"unknown object set {str(name_or_path)!r}: valid choices are {', '.join(map(repr, NAMED_SETS))}, one of {list(PROCEDURAL_SETS)} or the path of an "
         f"existing folder of {'/'.join(MESH_SUFFIXES)} meshes"
     )
 

@@ -71,7 +71,7 @@ class PrimitiveResult:
     rotation: int
     pixel: tuple[int, int]
     position: tuple[float, float, float]  # world (x, y, z) the TCP was sent to
-    grasp_success: bool = False  # an object came up in the fingers (grasp and move)
+    lifted: bool = False  # an object came up in the fingers (a grasp or a move lifted it)
     grasped_object: int | None = None  # index of that object
     grasp_failure: str | None = None  # grasp/move that held nothing: one of GRASP_FAILURES
     placed_object: int | None = None  # move: the object put down elsewhere
@@ -153,7 +153,7 @@ class Primitives:
         result = PrimitiveResult("grasp", rotation, (row, col), (x, y, z))
         held = self._pick(x, y, z, z_pre, theta, result)
         if held is not None:
-            result.grasp_success, result.grasped_object = True, held
+            result.lifted, result.grasped_object = True, held
             self.world.remove_object(held)
             result.removed_objects = (held,)
         self._finish()
@@ -164,7 +164,7 @@ class Primitives:
         result = PrimitiveResult("move", rotation, (row, col), (x, y, z))
         held = self._pick(x, y, z, z_pre, theta, result)
         if held is not None:
-            result.grasp_success, result.grasped_object = True, held
+            result.lifted, result.grasped_object = True, held
             spot = self._free_place(held, target)
             if spot is None:
                 # Nowhere free in the workspace: set it aside off the table.

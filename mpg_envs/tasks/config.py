@@ -11,7 +11,7 @@ from mpg_envs.perception.occlusion import ChangeConfig, OcclusionConfig
 from mpg_envs.simulation.primitives import PrimitiveConfig
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.simulation.robot import RobotConfig
-from mpg_envs.scenes.generators import SceneConfig
+from mpg_envs.scenes.generators import GeneratorConfig
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.world import PhysicsConfig
 
@@ -27,7 +27,7 @@ class EnvConfig:
     robot: RobotConfig = RobotConfig()
     physics: PhysicsConfig = PhysicsConfig()
     primitives: PrimitiveConfig = PrimitiveConfig()
-    scene: SceneConfig = SceneConfig()
+    generator: GeneratorConfig = GeneratorConfig()
     reward: RewardConfig = RewardConfig()
     occlusion: OcclusionConfig = OcclusionConfig()
     change: ChangeConfig = ChangeConfig()

@@ -3,8 +3,10 @@
 Life of a step, as named hooks: decode the pixel-wise action, run the primitive in the world,
 observe (heightmaps, target mask, occlusion, visible fraction), ``evaluate`` what the step did
 (a :class:`~mpg_envs.tasks.step_evaluation.StepEvaluation`), ``step_reward`` it, and decide the end
-(:func:`~mpg_envs.tasks.stages.episode_end`). A reset's scene comes from ``_load_scene``: a scene
-file, the shipped test set of the seed, or a fresh drop (:mod:`mpg_envs.tasks.scene_source`).
+(:func:`~mpg_envs.tasks.stages.episode_end`). A reset's scene comes from ``_initialize_episode``: a
+scene file, the shipped test set of the seed, or a fresh drop (:mod:`mpg_envs.tasks.scene_source`).
+The world, the primitives executor and the views of the episode are one public handle,
+``env.sim`` (:class:`~mpg_envs.tasks.episode_sim.EpisodeSim`).
 """
 
 from __future__ import annotations
@@ -18,18 +20,18 @@ import numpy as np
 from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.tasks.config import OBS_MODES, EnvConfig, observation_space
 from mpg_envs.simulation.objects import ObjectAsset, load_object_set
-from mpg_envs.perception.occlusion import change_detected, check_band, is_occluded, visible_fraction
-from mpg_envs.perception.visual_randomization import VisualRandomization, episode_visuals, randomized_raycast
-from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
+from mpg_envs.perception.occlusion import change_detected, check_band
+from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
+from mpg_envs.simulation.primitives import PrimitiveResult
+from mpg_envs.tasks.episode_sim import EpisodeSim
 from mpg_envs.tasks.rewards import StepOutcome
-from mpg_envs.tasks.scene_source import draw_scene, shipped_scene
+from mpg_envs.tasks.scene_source import SceneRequest, drop_scene, scene_from_test_set
 from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
-from mpg_envs.simulation.robot import ArmIK
 from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, read_scene
-from mpg_envs.scenes.scene_loading import apply_scene, scene_of
+from mpg_envs.scenes.scene_loading import load_scene, scene_of
 from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.tasks.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
-from mpg_envs.simulation.world import World, WorldCheckpoint
+from mpg_envs.simulation.world import World
 
 __all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "InvalidSceneError", "MPGEnv", "StepEvaluation", "observation_space"]
 
@@ -47,8 +49,14 @@ class MPGEnv(gym.Env):
         primitives: the primitive names this env accepts, in action-code order.
         max_motions: the motion cap; an episode is truncated when it is reached.
         num_motions: motions taken so far in the current episode.
-        target: index of the target object in the world (``None`` in Stage 1: every object is a target).
-        world: the :class:`~mpg_envs.simulation.world.World` of the current episode (``None`` before the first reset).
+        target: index of the target object in the world (``None`` in Stage 1, where every
+            object is a target).
+        world: the :class:`~mpg_envs.simulation.world.World` of the current episode (``None`` before
+            the first reset; ``sim.world``).
+        sim: the episode's simulation (:class:`~mpg_envs.tasks.episode_sim.EpisodeSim`): world,
+            primitives executor (``sim.executor``), heightmaps and target views, try-and-undo;
+            what scene making, the oracle and diagnostics work on.
+        visuals: this episode's drawn visual randomization (``None`` when off; ``sim.visuals``).
 
     Keywords beyond the stage: ``wrong_grasp`` (``"remove"``, the paper's protocol, or ``"fail"``: strict
     retrieval, a mis-pick ends the episode), ``visible_range`` (a band of the target's visible fraction at
@@ -119,7 +127,6 @@ class MPGEnv(gym.Env):
         self.grasp_scorer = grasp_scorer
         self.camera_config = camera_config
         self.visual_randomization = VisualRandomization.from_option(visual_randomization)  # None: off
-        self.visuals = None  # this episode's drawn EpisodeVisuals
         self.object_set = (
             load_object_set(object_set, seed=config.object_set_seed) if isinstance(object_set, (str, Path)) else list(object_set)
         )
@@ -130,11 +137,12 @@ class MPGEnv(gym.Env):
         size = config.workspace.shape
         self.action_space = PixelActionSpace(self.primitives, size=size[0])
         self.observation_space = observation_space(config.workspace)
-        self._ik = ArmIK(config.robot)
-        self._raycaster = None
-        self._camera = None
+        # The arm's visual meshes matter only to pictures: leave them out unless something renders.
+        visual = render_mode is not None or obs_mode == "camera"
+        self.sim = EpisodeSim(
+            config, obs_mode=obs_mode, camera_config=camera_config, robot_visual=visual, mask_all_objects=stage_spec.mask_all_objects
+        )
         self._renderer = None
-        self.world: World | None = None
         self.target: int | None = None
         self._obs: dict[str, np.ndarray] | None = None
         self._score: tuple[dict, float] | None = None  # (observation, its grasp score)
@@ -150,10 +158,10 @@ class MPGEnv(gym.Env):
         if unknown:
             raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
         self.num_objects = self._checked_num_objects(options.get("num_objects", self.default_num_objects))
-        self.visuals = None  # a drawn scene's start condition is judged unrandomized: the same scenes either way
-        self._load_scene(seed, options)
+        self.sim.visuals = None  # a drawn scene's start condition is judged unrandomized: the same scenes either way
+        self._initialize_episode(seed, options)
         self.num_motions, self._ended = 0, None
-        self.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
+        self.sim.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
         self._obs = self._observe()
         self._score = None
         return self._copy_obs(self._obs), self._reset_info()
@@ -165,7 +173,7 @@ class MPGEnv(gym.Env):
         before = self._obs
         score_before = self._grasp_score(before) if primitive != "grasp" else None
         visible_before = self._visible
-        result = self._primitives.execute(primitive, rotation, row, col, before["depth"], self.target)
+        result = self.sim.executor.execute(primitive, rotation, row, col, before["depth"], self.target)
         self.num_motions += 1
         sim_warnings = self._check_physics()
         self._obs = self._observe()
@@ -187,20 +195,22 @@ class MPGEnv(gym.Env):
         return self._copy_obs(self._obs), reward, bool(terminated), bool(truncated), info
 
     # ------------------------------------------------------------ task hooks
-    def _load_scene(self, seed: int | None, options: dict[str, Any]) -> None:
-        """Build this episode's world and target: a scene file, else the shipped test set's
-        scene of ``seed``, else objects dropped afresh (:mod:`mpg_envs.tasks.scene_source`)."""
+    def _initialize_episode(self, seed: int | None, options: dict[str, Any]) -> None:
+        """Build this episode's world and target in ``sim``: a scene file, else the shipped
+        test set's scene of ``seed``, else objects dropped afresh (:mod:`mpg_envs.tasks.scene_source`)."""
+        self.sim.initialize_episode(self.np_random)
         scene = options.get("scene")
         if scene is not None:
             if not isinstance(scene, SceneFile):
                 scene = read_scene(scene, options.get("mesh_dir"), self.config.object_set_seed)
-            self._apply_scene(scene, drop_outside=bool(options.get("drop_outside", False)))
+            self._load_scene_file(scene, drop_outside=bool(options.get("drop_outside", False)))
             return
-        fixed = shipped_scene(self, seed)
+        request = self.scene_request
+        fixed = scene_from_test_set(request, seed)
         if fixed is not None:
-            self._apply_scene(fixed, drop_outside=False)
+            self._load_scene_file(fixed, drop_outside=False)
         else:
-            draw_scene(self)
+            self.target = drop_scene(self.sim, request)
 
     def evaluate(
         self, primitive: str, before: dict[str, np.ndarray], result: PrimitiveResult, score_before: float | None, visible_before: float | None = None
@@ -209,19 +219,19 @@ class MPGEnv(gym.Env):
         occlusion, visibility and its gain over ``visible_before``, change); the reward and
         the episode's end are read off it."""
         obs, world, target = self._obs, self.world, self.target
-        target_grasped = bool(result.grasp_success and (self.stage.mask_all_objects or result.grasped_object == target))
+        target_grasped = bool(result.lifted and (self.stage.mask_all_objects or result.grasped_object == target))
         target_out = target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
         occluded_before = bool(before["occluded"][0])
         occluded = bool(obs["occluded"][0])
-        changed = change_detected(before["depth"], obs["depth"], before["mask"], result.grasp_success, self.config.change)
+        changed = change_detected(before["depth"], obs["depth"], before["mask"], result.lifted, self.config.change)
         cleared = occluded_before and not occluded and not target_grasped and not target_out
         move_success = primitive == "move" and cleared
         gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
-        wrong = bool(primitive == "grasp" and result.grasp_success and not target_grasped)
+        wrong = bool(primitive == "grasp" and result.lifted and not target_grasped)
         is_success = self.world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
         seen = 0.0 if self._visible is None or visible_before is None else self._visible - visible_before
         return StepEvaluation(
-            outcome=StepOutcome(primitive, result.grasp_success, target_grasped, move_success, changed, gain, seen,
+            outcome=StepOutcome(primitive, result.lifted, target_grasped, move_success, changed, gain, seen,
                                 covered_before=occluded_before, cleared=cleared),
             wrong_grasp=wrong,
             ends_wrong_object=wrong and self.wrong_grasp == "fail",
@@ -250,13 +260,12 @@ class MPGEnv(gym.Env):
         """
         if self._ended is not None:
             raise RuntimeError(self._ended.replace("step()", "try_step()"))
-        checkpoint = WorldCheckpoint(self.world)
-        saved = (self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state, self._ended)
-        try:
-            return self.step(action)
-        finally:
-            checkpoint.restore()
-            self.num_motions, self._obs, self._score, self._visible, self.np_random.bit_generator.state, self._ended = saved
+        saved = (self.num_motions, self._obs, self._score, self._visible, self._ended)
+        with self.sim.trial():  # the world and the generator
+            try:
+                return self.step(action)
+            finally:
+                self.num_motions, self._obs, self._score, self._visible, self._ended = saved
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -276,10 +285,7 @@ class MPGEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-        for name in ("_raycaster", "_camera"):
-            if getattr(self, name) is not None:
-                getattr(self, name).close()
-                setattr(self, name, None)
+        self.sim.close()
 
     # ------------------------------------------------------------ helpers
     @property
@@ -287,34 +293,33 @@ class MPGEnv(gym.Env):
         """Index of the target object in ``world`` (``None`` in Stage I)."""
         return self.target
 
-    def _build_world(self, assets: Sequence[ObjectAsset]) -> World:
-        hook = None
-        if self.obs_mode == "camera":
-            from mpg_envs.perception.camera import CameraConfig, add_cameras
+    @property
+    def scene_request(self) -> SceneRequest:
+        """What this env's resets ask of a scene (stage, object count and set, visible band,
+        settings): what :mod:`mpg_envs.tasks.scene_source` drops or looks up."""
+        return SceneRequest(
+            self.stage, self.num_objects, self.object_set, self._object_set_name, self.visible_range, self.config, self.use_test_set
+        )
 
-            cam_cfg = self.camera_config or CameraConfig()
-            hook = lambda spec: add_cameras(spec, cam_cfg)  # noqa: E731
-        # The arm's visual meshes matter only to pictures: leave them out unless something renders.
-        visual = self.render_mode is not None or self.obs_mode == "camera"
-        world = World(assets, self.config.workspace, self.config.robot, self.config.physics, extra_spec_hook=hook, robot_visual=visual)
-        self.world = world
-        self._primitives = Primitives(world, self.config.primitives, self._ik)
-        # Heightmappers are bound to one compiled model.
-        threads = self.config.raycast_threads or (self._raycaster.num_threads if self._raycaster else None)
-        for name in ("_raycaster", "_camera"):
-            if getattr(self, name) is not None:
-                getattr(self, name).close()
-            setattr(self, name, None)
-        if self.obs_mode == "raycast":
-            from mpg_envs.perception.heightmap import RaycastHeightmapper
+    @property
+    def world(self) -> World | None:
+        """The current episode's world (``sim.world``; ``None`` before the first reset)."""
+        return self.sim.world
 
-            # The thread count is chosen once per env (choosing samples the machine's load).
-            self._raycaster = RaycastHeightmapper(world.model, self.config.workspace, num_threads=threads)
-        return world
+    @property
+    def visuals(self) -> EpisodeVisuals | None:
+        """This episode's drawn visual randomization (``sim.visuals``; ``None`` when off)."""
+        return self.sim.visuals
 
-    def _apply_scene(self, scene: SceneFile, drop_outside: bool) -> None:
-        """Build the world of a scene file (:func:`mpg_envs.scenes.scene_loading.apply_scene`)."""
-        _, self.target = apply_scene(self._build_world, scene, self.config.workspace, drop_outside)
+    @property
+    def last_observation(self) -> dict[str, np.ndarray] | None:
+        """A copy of the last observation returned by ``reset`` or ``step`` (``None`` before
+        the first reset)."""
+        return None if self._obs is None else self._copy_obs(self._obs)
+
+    def _load_scene_file(self, scene: SceneFile, drop_outside: bool) -> None:
+        """Build the world of a scene file in ``sim`` (:func:`mpg_envs.scenes.scene_loading.load_scene`)."""
+        _, self.target = load_scene(self.sim.build, scene, self.config.workspace, drop_outside)
         if self.target is None and not self.stage.mask_all_objects:
             raise SceneFileError(f"scene {scene.source!r} has no target; {self.stage.env_id} needs one")
 
@@ -325,53 +330,9 @@ class MPGEnv(gym.Env):
             raise RuntimeError("call reset() before current_scene()")
         return scene_of(self.world, self.target, self.stage.name, self.config.object_set_seed)
 
-    def _heightmaps(self):
-        """Colour and depth heightmaps of the current state (ray-cast or camera)."""
-        rng = self.np_random if self.visuals is None else self.visuals.noise_rng(self.num_motions)  # depth noise
-        if self.obs_mode == "camera":
-            if self._camera is None:
-                from mpg_envs.perception.camera import CameraConfig, CameraHeightmapper
-
-                self._camera = CameraHeightmapper(self.world.model, self.camera_config or CameraConfig(), self.config.workspace)
-            return self._camera.heightmaps(self.world.data, rng, self.visuals)
-        if self.visuals is not None:
-            return randomized_raycast(self._raycaster, self.world.data, self.visuals, rng)
-        return self._raycaster(self.world.data)
-
-    def _target_view(self, depth: np.ndarray, target: int | None) -> tuple[np.ndarray, bool]:
-        """The mask heightmap for ``target`` (every object in Stage 1) and whether it is occluded."""
-        from mpg_envs.perception.footprint import footprint_mask
-
-        world = self.world
-        ws = self.config.workspace
-        if self.stage.mask_all_objects or target is None:
-            ids = [world.object_geom_ids[i] for i in world.active_objects()]
-        else:
-            ids = [world.object_geom_ids[target]] if world.active[target] else []
-        geoms = np.concatenate(ids) if ids else np.zeros(0, dtype=int)
-        mask = footprint_mask(ws, world.model, world.data, geoms) if geoms.size else np.zeros(ws.shape, np.uint8)
-        occluded = False
-        if target is not None and not self.stage.mask_all_objects and world.active[target]:
-            occluded = is_occluded(depth, mask, world.object_top(target), self.config.occlusion)
-        return (mask > 0).astype(np.uint8), bool(occluded)
-
-    def _visible_fraction(self, maps, mask: np.ndarray, target: int | None) -> float | None:
-        """Share of ``target``'s footprint ``mask`` where the target is the top surface, from
-        the geom seen at each pixel (ray casts, or the camera mode's segmentation render)."""
-        if target is None or self.stage.mask_all_objects or not self.world.active[target] or maps.geom_id is None:
-            return None
-        return visible_fraction(mask, maps.geom_id, self.world.object_geom_ids[target])
-
     def _observe(self) -> dict[str, np.ndarray]:
-        hm = self._heightmaps()
-        mask, occluded = self._target_view(hm.depth, self.target)
-        self._visible = self._visible_fraction(hm, mask, self.target)
-        return {
-            "color": hm.color,
-            "depth": hm.depth.astype(np.float32),
-            "mask": mask,
-            "occluded": np.array([int(occluded)], dtype=np.int8),
-        }
+        obs, self._visible = self.sim.observe(self.target, self.num_motions)
+        return obs
 
     def _grasp_score(self, obs: dict[str, np.ndarray]) -> float:
         """The scorer's value for ``obs``, computed once per observation."""

@@ -82,7 +82,7 @@ class GraspBench:
             result = self.primitives.execute("grasp", angle_to_rotation(short_dir), row, col, depth, target=0)
         except RuntimeError:
             return "ik"
-        if result.grasp_success and result.grasped_object == 0:
+        if result.lifted and result.grasped_object == 0:
             return None
         return result.grasp_failure or "other"
 

@@ -10,7 +10,7 @@ class StepOutcome:
     """The facts a reward needs about one step."""
 
     primitive: str
-    grasp_success: bool = False  # any object came up in the fingers
+    lifted: bool = False  # any object came up in the fingers (grasp or move)
     target_grasped: bool = False  # ... and it was the target
     move_success: bool = False  # occlusion removed, target not picked up by the move
     change_detected: bool = False
@@ -55,7 +55,7 @@ class RewardConfig:
 
 def reward_grasp_any(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
     """R_g1 (Stage I): 1 for grasping any object."""
-    return c.success if o.grasp_success else 0.0
+    return c.success if o.lifted else 0.0
 
 
 def reward_grasp_target(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
@@ -68,7 +68,7 @@ def reward_move(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
     ``c.move_visible_gain``, also a visible-fraction gain of at least that); -0.5 target
     picked up by the move or no change (with ``c.move_needs_lift``, also a move that lifted
     nothing); 0 otherwise."""
-    if o.target_grasped or not o.change_detected or (c.move_needs_lift and not o.grasp_success):
+    if o.target_grasped or not o.change_detected or (c.move_needs_lift and not o.lifted):
         return c.penalty
     return _uncovering(o, o.move_success, c)
 

@@ -1,6 +1,6 @@
 """Where a reset's scene comes from: a shipped test set, or objects dropped afresh.
 
-:func:`draw_scene` drops objects with the stage's generator (:mod:`mpg_envs.scenes.generators`) until a
+:func:`drop_scene` drops objects with the stage's generator (:mod:`mpg_envs.scenes.generators`) until a
 scene meets the episode's start condition: every object resting inside the workspace, and a
 candidate target that is occluded or surrounded as the stage asks and whose visible fraction
 lies in the asked band. A band that asks for a mostly hidden target (upper bound at most
@@ -9,101 +9,179 @@ occluders onto the target by construction, so such scenes are not found by slow 
 A reset never returns a scene outside its band: :class:`~mpg_envs.scenes.generators.InvalidSceneError`
 when none is made in ``EnvConfig.scene_tries`` draws.
 
-:func:`shipped_scene` looks a seed up in the stage's shipped test set
-(:mod:`mpg_envs.scenes.test_sets`), used only with the settings the set was generated with.
+:func:`scene_from_test_set` looks a seed up in the stage's shipped test set
+(:mod:`mpg_envs.scenes.test_sets`), used only with the settings the set was generated with, and
+only if the set was made by this code: :func:`generator_digest` (the code that drops scenes and
+its parameters) must be the one the set records, else
+:class:`~mpg_envs.scenes.test_sets.StaleTestSetError` says how to regenerate it.
+
+Both work on the episode's simulation (:class:`~mpg_envs.tasks.episode_sim.EpisodeSim`) and a
+:class:`SceneRequest` (what the reset asks for), never on the env itself.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+import ast
+import functools
+import hashlib
+import inspect
+import json
+from dataclasses import asdict, dataclass
+from typing import Sequence
+
+from mpg_envs.scenes import generators
 
 from mpg_envs.perception.occlusion import in_band, surrounded_sectors
+from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, GeneratorConfig, keep_inside
 from mpg_envs.scenes.scene_io import SceneFile
-from mpg_envs.scenes.generators import BURIED, SCENES, InvalidSceneError, SceneConfig, keep_inside
-
-if TYPE_CHECKING:  # the env imports this module
-    from mpg_envs.tasks.env import MPGEnv
+from mpg_envs.simulation.assets import ObjectAsset
+from mpg_envs.tasks.config import EnvConfig
+from mpg_envs.tasks.episode_sim import EpisodeSim
+from mpg_envs.tasks.stages import StageSpec
 
 BURY_BELOW = 0.5
 """A visible-fraction band whose upper bound is at most this uses the buried generator."""
 
 
-def generator_name(scene: str, band: tuple[float, float] | None) -> str:
-    """The generator that makes the stage's ``scene`` for a visible-fraction ``band``."""
-    if band is not None and band[1] <= BURY_BELOW and scene in BURIED:
-        return BURIED[scene]
-    return scene
+@dataclass(frozen=True)
+class SceneRequest:
+    """What a reset asks of its scene (the env's settings for this episode).
+
+    Attributes:
+        stage: the env's stage (generator, start condition, test set).
+        num_objects: objects in the scene.
+        object_set: the assets objects are drawn from.
+        object_set_name: the set's name (``"custom"`` for a list of assets).
+        visible_range: the band of the target's visible fraction at reset, or ``None``.
+        config: the env's settings.
+        use_test_set: whether a test seed loads its shipped scene.
+    """
+
+    stage: StageSpec
+    num_objects: int
+    object_set: Sequence[ObjectAsset]
+    object_set_name: str
+    visible_range: tuple[float, float] | None
+    config: EnvConfig
+    use_test_set: bool = True
 
 
-def draw_scene(env: MPGEnv) -> None:
-    """Drop a scene for ``env`` (sets ``env.world`` and ``env.target``); see the module
-    docstring. Raises :class:`InvalidSceneError` naming why no draw was valid."""
-    rng = env.np_random
-    stage = env.stage
-    name = generator_name(stage.scene, env.visible_range)
-    scene_fn = SCENES[name]
+def generator_name(generator: str, band: tuple[float, float] | None) -> str:
+    """The generator that makes the stage's ``generator``'s scenes for a visible-fraction ``band``."""
+    if band is not None and band[1] <= BURY_BELOW and generator in BURIED:
+        return BURIED[generator]
+    return generator
+
+
+def drop_scene(sim: EpisodeSim, request: SceneRequest) -> int | None:
+    """Drop a scene into ``sim`` (drawing from ``sim.random``) and return its target (``None``
+    when the mask shows every object); see the module docstring. Raises
+    :class:`InvalidSceneError` naming why no draw was valid."""
+    rng, stage, config = sim.random, request.stage, request.config
+    name = generator_name(stage.generator, request.visible_range)
+    scene_fn = GENERATORS[name]
     astray_draws = 0
-    for _ in range(env.config.scene_tries):
-        picks = rng.integers(len(env.object_set), size=env.num_objects)
-        world = env._build_world([env.object_set[int(k)] for k in picks])
-        layout = scene_fn(world, rng, env.config.scene)
-        redropped = keep_inside(world, rng, layout, env.config.scene)
+    for _ in range(config.scene_tries):
+        picks = rng.integers(len(request.object_set), size=request.num_objects)
+        world = sim.build([request.object_set[int(k)] for k in picks])
+        layout = scene_fn(world, rng, config.generator)
+        redropped = keep_inside(world, rng, layout, config.generator)
         if redropped is None:
             astray_draws += 1
             continue
         if not layout.targets:
-            env.target = None
-            return
+            return None
         # Re-dropped objects landed on the pile afterwards: no longer "the n-th dropped".
-        target = acceptable_target(env, [t for t in layout.targets if t not in redropped])
+        target = acceptable_target(sim, stage, request.visible_range, [t for t in layout.targets if t not in redropped])
         if target is not None:
-            env.target = target
-            return
+            return target
     raise InvalidSceneError(
-        f"{stage.env_id}: no valid scene of {env.num_objects} objects in {env.config.scene_tries} draws "
+        f"{stage.env_id}: no valid scene of {request.num_objects} objects in {config.scene_tries} draws "
         f"({astray_draws} with objects left outside the workspace or not at rest after "
-        f"{env.config.scene.redrop_rounds} re-drop rounds, the others with no candidate target meeting the "
+        f"{config.generator.redrop_rounds} re-drop rounds, the others with no candidate target meeting the "
         f"start condition: occluded={stage.start_occluded}, surrounded sectors>={stage.start_surrounded}, "
-        f"visible fraction in {env.visible_range}). Raise EnvConfig.scene_tries, widen visible_range or use "
+        f"visible fraction in {request.visible_range}). Raise EnvConfig.scene_tries, widen visible_range or use "
         f"fewer objects."
     )
 
 
-def acceptable_target(env: MPGEnv, candidates: Sequence[int]) -> int | None:
+def acceptable_target(
+    sim: EpisodeSim, stage: StageSpec, band: tuple[float, float] | None, candidates: Sequence[int]
+) -> int | None:
     """The first candidate meeting the stage's start condition (occlusion, surround) and the
-    env's visible-fraction band, or ``None``."""
-    stage = env.stage
-    band = env.visible_range
+    visible-fraction ``band`` in ``sim``'s current world, or ``None``."""
     if stage.start_occluded is None and not stage.start_surrounded and band is None:
         return candidates[0] if candidates else None
-    maps = env._heightmaps()
+    maps = sim.heightmaps()
     for target in candidates:
-        mask, occluded = env._target_view(maps.depth, target)
+        mask, occluded = sim.target_view(maps.depth, target)
         if stage.start_occluded is not None and occluded != stage.start_occluded:
             continue
-        if band is not None and not in_band(env._visible_fraction(maps, mask, target), band):
+        if band is not None and not in_band(sim.visible_fraction(maps, mask, target), band):
             continue
         if surrounded_sectors(maps.depth, mask) >= stage.start_surrounded:
             return target
     return None
 
 
-def shipped_scene(env: MPGEnv, seed: int | None) -> SceneFile | None:
-    """The shipped test-set scene of ``seed`` for ``env``, or ``None`` when the env has no
-    test set for its object count, the seed is not in it, or the env's settings differ from
-    those the set was generated with (its scenes would not be the env's)."""
-    if seed is None or not env.use_test_set or env.stage.test_set is None:
+def scene_from_test_set(request: SceneRequest, seed: int | None) -> SceneFile | None:
+    """The shipped test-set scene of ``seed`` for ``request``, or ``None`` when the stage has
+    no test set for its object count, the seed is not in it, or the request's settings differ
+    from those the set was generated with (its scenes would not be the env's)."""
+    stage, config = request.stage, request.config
+    if seed is None or not request.use_test_set or stage.test_set is None:
         return None
-    if env.config.scene != SceneConfig() or env.config.object_set_seed != 0:
+    if config.generator != GeneratorConfig() or config.object_set_seed != 0:
         return None
-    if env.visible_range != env.stage.visible_range:
+    if request.visible_range != stage.visible_range:
         return None
     from mpg_envs.scenes.test_sets import TEST_SET_WORKSPACE, find_test_set, test_set_name
 
-    name = test_set_name(env.stage.test_set, env._object_set_name)  # the object set's own sets
-    if env.config.workspace != TEST_SET_WORKSPACE or name is None:
+    name = test_set_name(stage.test_set, request.object_set_name)  # the object set's own sets
+    if config.workspace != TEST_SET_WORKSPACE or name is None:
         return None
-    test_set = find_test_set(name, env.num_objects)
+    test_set = find_test_set(name, request.num_objects)
     if test_set is None or not test_set.has_seed(seed):
         return None
-    return test_set.scene(seed, env.object_set)
+    test_set.check_made_by(generator_digest(request))
+    return test_set.scene(seed, request.object_set)
+
+
+def generator_digest(request: SceneRequest) -> str:
+    """SHA-256 of what makes ``request``'s dropped scenes: the code (the generators module and
+    this module's drop loop, docstrings and comments left out) and the parameters (generator,
+    object count, start condition, generator, physics and workspace settings, draws, object
+    set). A test set records it; a set whose digest differs was made by other code."""
+    stage, config = request.stage, request.config
+    params = {
+        "generator": generator_name(stage.generator, request.visible_range),
+        "num_objects": request.num_objects,
+        "start_occluded": stage.start_occluded,
+        "start_surrounded": stage.start_surrounded,
+        "visible_range": request.visible_range,
+        "bury_below": BURY_BELOW,
+        "generator_config": asdict(config.generator),
+        "physics": asdict(config.physics),
+        "workspace": asdict(config.workspace),
+        "scene_tries": config.scene_tries,
+        "object_set": [request.object_set_name, config.object_set_seed],
+    }
+    text = _code_digest() + json.dumps(params, sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@functools.cache
+def _code_digest() -> str:
+    parts = [inspect.getsource(generators)] + [inspect.getsource(f) for f in (drop_scene, acceptable_target, generator_name)]
+    return hashlib.sha256("\n".join(code_fingerprint(part) for part in parts).encode()).hexdigest()
+
+
+def code_fingerprint(source: str) -> str:
+    """``source``'s syntax tree without docstrings (comments are not in it): what runs."""
+    tree = ast.parse(source)
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        first = body[0] if isinstance(body, list) and body else None
+        if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree)

@@ -49,7 +49,7 @@ class StageSpec:
 
     name: str
     primitives: tuple[str, ...]
-    scene: str  # key of mpg_envs.scenes.generators.SCENES
+    generator: str  # key of mpg_envs.scenes.generators.GENERATORS: how a reset drops its objects
     num_objects: int
     max_motions: int  # truncation cap
     reward: RewardFn
@@ -76,9 +76,9 @@ STAGES: dict[str, StageSpec] = {
         StageSpec("Stage3", ("move",), "occluded_target", 2, 5, reward_move, start_occluded=True, end_on_move_success=True, min_objects=2),
         StageSpec("Stage4", ("push", "grasp"), "surrounded_target", 7, 6, reward_per_primitive, start_occluded=False, start_surrounded=6, end_after_grasp=True, min_objects=2),
         StageSpec("Stage5", ("move", "push", "grasp"), "clustered", 10, 10, reward_per_primitive),
-        StageSpec("Occluded", ("move", "push", "grasp"), "test_scene", 15, 10, reward_per_primitive, start_occluded=True, min_objects=5, test_set="occluded"),
+        StageSpec("Occluded", ("move", "push", "grasp"), "test_cluster", 15, 10, reward_per_primitive, start_occluded=True, min_objects=5, test_set="occluded"),
         StageSpec(
-            "OccludedHard", ("move", "push", "grasp"), "test_scene", 15, 10, reward_per_primitive, start_occluded=True,
+            "OccludedHard", ("move", "push", "grasp"), "test_cluster", 15, 10, reward_per_primitive, start_occluded=True,
             min_objects=5, wrong_grasp="fail", visible_range=(0.0, 0.3), test_set="occluded_hard",
         ),
     )

@@ -41,7 +41,7 @@ def test_the_sb3_policy_decides_as_its_agent(rng):
     scene = random_scene(rng, occluded=False)
     calibrate_bn(policy.q_net.mpgnet, {k: torch.as_tensor(v)[None] for k, v in scene.items()})
     agent = MPGAgent(policy.q_net, policy.coordination, policy.threshold)  # the same parts, without SB3
-    for q_star in (float("-inf"), float("inf"), float("nan")):
+    for q_star in (float("-inf"), float("inf"), None):
         policy.set_q_star(q_star)
         assert agent.decide(scene).action == policy.decide(scene).action == int(policy.predict(scene, deterministic=True)[0])
     assert set(dict(policy.state_dict())) >= {"threshold.value"}  # SB3's save keeps Q*_g

@@ -36,8 +36,8 @@ def test_workflow_grasps_at_or_above_q_star_else_pushes(grasp_q, expected, neede
 
 
 def test_workflow_uncalibrated_takes_the_larger_of_grasp_and_push():
-    assert choose_primitive("workflow", ALL, False, math.nan, asked({"push": 0.3, "grasp": 0.2})[0]) == "push"
-    assert choose_primitive("workflow", ALL, False, math.nan, asked({"push": 0.2, "grasp": 0.2})[0]) == "grasp"
+    assert choose_primitive("workflow", ALL, False, None, asked({"push": 0.3, "grasp": 0.2})[0]) == "push"
+    assert choose_primitive("workflow", ALL, False, None, asked({"push": 0.2, "grasp": 0.2})[0]) == "grasp"
 
 
 def test_max_q_takes_the_largest_even_when_occluded():
@@ -83,7 +83,7 @@ def test_grasp_first_asks_the_grasp_before_the_occlusion(occluded, grasp_q, expe
 
 def test_grasp_first_is_the_workflow_until_q_star_is_calibrated_or_without_a_grasp_branch():
     best_q, calls = asked({"move": -1.0, "push": 5.0, "grasp": 5.0})
-    assert choose_primitive("grasp_first", ALL, True, math.nan, best_q) == "move"
+    assert choose_primitive("grasp_first", ALL, True, None, best_q) == "move"
     assert calls == []
     assert choose_primitive("grasp_first", ("move", "push"), True, 0.75, asked({})[0]) == "move"
 
@@ -108,3 +108,16 @@ def test_uncover_max_q_without_a_push_branch_moves_while_covered():
     best_q, calls = asked({"move": 0.1, "grasp": 5.0})
     assert choose_primitive("uncover_max_q", ("move", "grasp"), True, 0.75, best_q) == "move"
     assert calls == []
+
+
+def test_nan_is_no_way_to_say_no_q_star():
+    from mpg_agents.acting.grasp_threshold import GraspThreshold
+
+    with pytest.raises(ValueError, match="None"):
+        choose_primitive("workflow", ALL, False, math.nan, asked({"push": 0.3, "grasp": 0.2})[0])
+    held = GraspThreshold()
+    assert held.get() is None and not held.calibrated
+    with pytest.raises(ValueError, match="None"):
+        held.set(float("nan"))
+    held.set(1.85)
+    assert held.get() == 1.85 and held.calibrated

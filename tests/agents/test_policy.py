@@ -83,8 +83,8 @@ def test_workflow_coordination(stage5_policy, rng):
         policy.set_q_star(math.inf)
         d = policy.decide(clear)
         assert d.primitive == "push" and set(d.q_maps) == {"grasp", "push"}
-        # Uncalibrated (NaN): the larger of the best grasp Q and the best push Q.
-        policy.set_q_star(float("nan"))
+        # No Q*_g (None): the larger of the best grasp Q and the best push Q.
+        policy.set_q_star(None)
         d = policy.decide(clear)
         best = {
             "grasp": float(region_max(d.q_maps["grasp"][None], _region(clear))[0]),
@@ -98,7 +98,7 @@ def test_workflow_coordination(stage5_policy, rng):
         rows, cols = np.nonzero(clear["mask"])
         assert a.primitive == "grasp" and rows.min() <= a.row <= rows.max() and cols.min() <= a.col <= cols.max()
     finally:
-        policy.set_q_star(float("nan"))
+        policy.set_q_star(None)
 
 
 def _region(scene):
@@ -137,7 +137,7 @@ def test_safetensors_weights_roundtrip_and_mismatch(tmp_path, stage5_policy, rng
     try:
         stage5_policy.save_weights(path)
     finally:
-        stage5_policy.set_q_star(float("nan"))
+        stage5_policy.set_q_star(None)
     other = make_policy()
     header = other.load_weights(path)
     assert other.q_star == 1.85 and header["primitives"] == ["move", "push", "grasp"]
@@ -146,7 +146,7 @@ def test_safetensors_weights_roundtrip_and_mismatch(tmp_path, stage5_policy, rng
     obs, _ = other.obs_to_tensor(scene)
     with torch.inference_mode():
         assert torch.equal(other.q_net(obs), stage5_policy.q_net(obs))  # same weights and BN statistics
-    other.set_q_star(float("nan"))
+    other.set_q_star(None)
     assert other.predict(scene, deterministic=True)[0] == stage5_policy.predict(scene, deterministic=True)[0]
     other.set_q_star(1.85)
     for a, b in zip(other.q_net_target.parameters(), other.q_net.parameters(), strict=True):

@@ -1,4 +1,5 @@
-"""Compact prioritised replay: exact round trips, frame sharing, size, lazy allocation, priorities."""
+"""Compact prioritised replay: exact round trips, frame sharing, size, lazy allocation, priorities;
+the core buffer without Stable-Baselines3, the SB3 adapter's buffer as SB3's."""
 
 from __future__ import annotations
 
@@ -8,14 +9,15 @@ import torch
 from stable_baselines3.common.buffers import DictReplayBuffer
 from stable_baselines3.common.type_aliases import DictReplayBufferSamples
 
-from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer, sb3_dict_buffer_nbytes
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer, ReplaySamples, sb3_dict_buffer_nbytes
+from mpg_agents.sb3.replay import SB3HeightmapReplayBuffer
 from mpg_envs.grid.actions import PixelActionSpace
 
 from .fake_env import observation_space, random_scene
 
 
-def make_buffer(size=50, n_envs=1, **kwargs) -> PrioritizedHeightmapReplayBuffer:
-    return PrioritizedHeightmapReplayBuffer(
+def make_buffer(size=50, n_envs=1, kind=PrioritizedHeightmapReplayBuffer, **kwargs) -> PrioritizedHeightmapReplayBuffer:
+    return kind(
         size, observation_space(), PixelActionSpace(("grasp",)), device="cpu", n_envs=n_envs, **kwargs
     )
 
@@ -44,11 +46,16 @@ def fill(buffer, rng, steps, episode=4):
     return added
 
 
-def test_samples_round_trip_exactly(rng):
-    buffer = make_buffer(40)
+@pytest.mark.parametrize("kind", [PrioritizedHeightmapReplayBuffer, SB3HeightmapReplayBuffer])
+def test_samples_round_trip_exactly(rng, kind):
+    buffer = make_buffer(40, kind=kind)
     added = fill(buffer, rng, 30)
     samples = buffer.sample(16)
-    assert isinstance(samples, DictReplayBufferSamples)
+    if kind is SB3HeightmapReplayBuffer:
+        assert isinstance(buffer, DictReplayBuffer)
+        assert isinstance(samples, DictReplayBufferSamples)
+    else:
+        assert isinstance(samples, ReplaySamples)
     assert samples.actions.shape == (16, 1) and samples.rewards.shape == (16, 1) and samples.dones.shape == (16, 1)
     for i, idx in enumerate(samples.indices):
         obs, nxt, action, reward, done = added[idx]
@@ -130,3 +137,15 @@ def test_multiple_envs(rng):
         expected = scenes[pos + env]["color"]
         assert np.array_equal(s.observations["color"][i].numpy(), expected)
     assert isinstance(s.observations["color"], torch.Tensor)
+
+
+def test_the_core_buffer_and_the_learner_import_no_stable_baselines3():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, mpg_agents.learning.replay, mpg_agents.learning.learner; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'stable_baselines3'))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout

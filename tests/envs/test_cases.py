@@ -30,15 +30,7 @@ from mpg_envs.scenes.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, 
 from mpg_envs.scenes.vpg_scenes import GTI_COLOURS
 from mpg_envs.grid.workspace import Workspace
 
-PEERS = Path(__file__).resolve().parents[2] / ".." / "shared" / "peers"
-
-
-@pytest.fixture(scope="module")
-def peers_dir() -> Path:
-    """The peers' published files (beside the repository, never copied into it)."""
-    if not (PEERS / "vpg" / "test-cases").is_dir() or not (PEERS / "gti").is_dir():
-        pytest.skip(f"the peers' files (vpg/test-cases, vpg/blocks, gti) are not at {PEERS.resolve()}")
-    return PEERS
+from conftest import peers_or_stop
 
 
 @pytest.fixture(scope="module")
@@ -285,3 +277,10 @@ def test_the_oracle_solves_every_challenge_case_in_strict_retrieval():
             failed.append((case.name, info.get("end_reason")))
     env.close()
     assert not failed
+
+
+def test_the_peers_folder_skips_when_absent_and_fails_under_ci(tmp_path):
+    with pytest.raises(pytest.fail.Exception, match="vpg/test-cases, vpg/blocks, gti"):
+        peers_or_stop(tmp_path, ci=True)
+    with pytest.raises(pytest.skip.Exception, match="MPG_PEERS_DIR"):
+        peers_or_stop(tmp_path, ci=False)

@@ -200,10 +200,10 @@ def test_bad_scene_files_raise(tmp_path, make_env):
 # --------------------------------------------------------------------------- rewards
 def test_reward_equations_on_constructed_cases():
     o = StepOutcome
-    assert reward_grasp_any(o("grasp", grasp_success=True)) == 1.0
+    assert reward_grasp_any(o("grasp", lifted=True)) == 1.0
     assert reward_grasp_any(o("grasp")) == 0.0
-    assert reward_grasp_target(o("grasp", grasp_success=True, target_grasped=False)) == 0.0  # wrong grasp
-    assert reward_grasp_target(o("grasp", grasp_success=True, target_grasped=True)) == 1.0
+    assert reward_grasp_target(o("grasp", lifted=True, target_grasped=False)) == 0.0  # wrong grasp
+    assert reward_grasp_target(o("grasp", lifted=True, target_grasped=True)) == 1.0
     assert reward_move(o("move", move_success=True, change_detected=True)) == 1.0
     assert reward_move(o("move", change_detected=True, grasp_q_gain=0.6)) == 0.5
     assert reward_move(o("move", change_detected=True, grasp_q_gain=0.4)) == 0.0
@@ -213,8 +213,8 @@ def test_reward_equations_on_constructed_cases():
     lift = RewardConfig(move_needs_lift=True)
     assert reward_move(o("move", move_success=True, change_detected=True), lift) == -0.5
     assert reward_move(o("move", change_detected=True, grasp_q_gain=0.6), lift) == -0.5
-    assert reward_move(o("move", grasp_success=True, move_success=True, change_detected=True), lift) == 1.0
-    assert reward_move(o("move", grasp_success=True, change_detected=True, grasp_q_gain=0.6), lift) == 0.5
+    assert reward_move(o("move", lifted=True, move_success=True, change_detected=True), lift) == 1.0
+    assert reward_move(o("move", lifted=True, change_detected=True, grasp_q_gain=0.6), lift) == 0.5
     # With move_visible_gain, a move that uncovers part of the target pays as a grasp-Q gain does.
     seen = RewardConfig(move_visible_gain=0.1)
     assert reward_move(o("move", change_detected=True, visible_gain=0.1), seen) == 0.5
@@ -269,7 +269,7 @@ def test_push_rewards_no_change_and_scorer_gain(make_env):
     # A push in an empty corner changes nothing.
     _, r, *_, info = env.step(env.action_space.encode("push", 0, 5, 5))
     assert not info["change_detected"] and abs(info["grasp_q_gain"]) < 0.01 and r == -0.5
-    before = scorer(env._obs)
+    before = scorer(env.last_observation)
     oracle = OraclePolicy(env)
     primitive, *rest = env.action_space.decode(oracle.act())
     assert primitive == "push"  # the target is boxed in
@@ -295,7 +295,7 @@ def test_occlusion_and_change_detection_on_hand_made_maps():
     assert not change_detected(before, after, tmask)
     after[95:105, 95:105] = 0.05  # 100 pixels near the target
     assert change_detected(before, after, tmask)
-    assert change_detected(before, before, tmask, grasp_success=True)
+    assert change_detected(before, before, tmask, lifted=True)
 
 
 # --------------------------------------------------------------------------- robustness
@@ -380,7 +380,7 @@ def test_an_unreachable_pose_is_a_motion_that_did_nothing():
 
     env = gym.make("MPG-Stage2-v0")
     obs, _ = env.reset(seed=3)
-    ik = env.unwrapped._primitives.ik
+    ik = env.unwrapped.sim.executor.ik
     solve, calls = ik.solve, []
 
     def failing_midway(*args, **kwargs):  # the arm is already moving when the pose fails
@@ -406,19 +406,18 @@ def test_an_unreachable_trial_of_the_oracle_returns_instead_of_raising():
     import gymnasium as gym
 
     from mpg_envs.simulation.robot import UnreachablePoseError
-    from mpg_envs.policies.oracle import try_primitive
 
     env = gym.make("MPG-Stage2-v0")
     obs, _ = env.reset(seed=3)
-    primitives = env.unwrapped._primitives
+    primitives = env.unwrapped.sim.executor
 
     def unreachable(*args, **kwargs):
         raise UnreachablePoseError("IK failed (test)")
 
     primitives.ik.solve = unreachable
     rows, cols = np.nonzero(obs["mask"])
-    result = try_primitive(primitives, "grasp", 0, int(rows.mean()), int(cols.mean()), obs["depth"], env.unwrapped.target)
-    assert result.unreachable and result.grasp_failure == "unreachable" and not result.grasp_success
+    result = env.unwrapped.sim.try_primitive("grasp", 0, int(rows.mean()), int(cols.mean()), obs["depth"], env.unwrapped.target)
+    assert result.unreachable and result.grasp_failure == "unreachable" and not result.lifted
     env.close()
 
 

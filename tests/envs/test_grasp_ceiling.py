@@ -44,7 +44,7 @@ def test_a_grasp_beside_the_object_fails_as_closed_empty(ceiling, ik) -> None:
         result = bench.primitives.execute("grasp", 0, row, col, np.asarray(depth), target=0)
     finally:
         bench.close()
-    assert not result.grasp_success
+    assert not result.lifted
     assert result.grasp_failure == "closed_empty"
 
 

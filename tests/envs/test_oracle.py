@@ -21,7 +21,6 @@ from mpg_envs.grid.grasp_geometry import (
     region_max,
 )
 from mpg_envs.policies.oracle import ActionMemory, OracleConfig, OraclePolicy, Policy
-from mpg_envs.policies.oracle import try_primitive
 from mpg_envs.grid.workspace import Workspace
 
 # ----------------------------------------------------------------- geometry (hand-checked)
@@ -168,7 +167,7 @@ def test_a_trial_leaves_the_world_as_it_was(occluded_env) -> None:
     qpos, active, steps = world.data.qpos.copy(), world.active.copy(), world.counter.steps
     target = occluded_env.target
     row, col = np.argwhere(obs["mask"] > 0).mean(axis=0).astype(int)
-    result = try_primitive(occluded_env._primitives, "grasp", 0, int(row), int(col), obs["depth"], target)
+    result = occluded_env.sim.try_primitive("grasp", 0, int(row), int(col), obs["depth"], target)
     assert result.physics_steps > 0
     np.testing.assert_array_equal(world.data.qpos, qpos)
     np.testing.assert_array_equal(world.active, active)

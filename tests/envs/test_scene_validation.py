@@ -11,7 +11,7 @@ import pytest
 from mpg_envs.scenes.scene_io import (
     MAX_OBJECTS, PENETRATION_TOLERANCE_M, SceneFile, SceneFileError, SceneObject, read_scene, save_scene,
 )
-from mpg_envs.scenes.scene_loading import apply_scene, interpenetrations
+from mpg_envs.scenes.scene_loading import load_scene, interpenetrations
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.world import World
 
@@ -117,10 +117,10 @@ def test_a_scene_file_object_is_checked_too(blocks):
     cube = next(iter(blocks.values()))
     bad = SceneFile((SceneObject(cube, np.array([0.5, 0.0, 0.05]), np.zeros(4), label="object 0 ('x')"),), 0, "made")
     with pytest.raises(SceneFileError, match=r"'made': object 0 \('x'\) has orientation .*valid: a unit quaternion"):
-        apply_scene(lambda assets: World(assets, robot_visual=False), bad, Workspace(), drop_outside=False)
+        load_scene(lambda assets: World(assets, robot_visual=False), bad, Workspace(), drop_outside=False)
     many = SceneFile(tuple(SceneObject(cube, np.array([0.5, 0.0, 0.05]), np.array([1.0, 0, 0, 0])) for _ in range(MAX_OBJECTS + 1)), 0, "many")
     with pytest.raises(SceneFileError, match=rf"'many' has {MAX_OBJECTS + 1} objects; a scene holds at most {MAX_OBJECTS}"):
-        apply_scene(lambda assets: World(assets, robot_visual=False), many, Workspace(), drop_outside=False)
+        load_scene(lambda assets: World(assets, robot_visual=False), many, Workspace(), drop_outside=False)
 
 
 def test_interpenetrations_measures_the_overlap(blocks):

@@ -12,7 +12,7 @@ import pytest
 from conftest import flat_quat
 from mpg_envs.tasks.env import END_REASONS, EnvConfig, MPGEnv
 from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, objects_outside, read_scene, save_scene
-from mpg_envs.scenes.generators import InvalidSceneError, SceneConfig, SceneLayout, keep_inside
+from mpg_envs.scenes.generators import InvalidSceneError, GeneratorConfig, SceneLayout, keep_inside
 from mpg_envs.tasks.stages import STAGES, episode_end
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.world import World
@@ -60,7 +60,7 @@ def test_keep_inside_redrops_an_object_that_left_the_workspace(blocks):
     world.settle()
     rng = np.random.default_rng(0)
     layout = SceneLayout((0, 1), lambda: np.array([0.5, 0.05]))
-    assert keep_inside(world, rng, layout, SceneConfig()) == (1,)
+    assert keep_inside(world, rng, layout, GeneratorConfig()) == (1,)
     assert world.objects_outside_workspace().size == 0 and world.active.all()
     assert abs(world.object_position(1)[0] - 0.5) < 0.05
 

@@ -117,7 +117,7 @@ def test_calibration_needs_a_grasp_branch():
 def test_calibration_json_keeps_the_stage_history_only_when_asked(tmp_path):
     path = tmp_path / "calibration.json"
     first = Calibration(0.5, 0.25, 2, 4, (0.4, 0.7))
-    write_calibration(path, first, iteration=0, q_star_before=float("nan"), continue_history=False)
+    write_calibration(path, first, iteration=0, q_star_before=None, continue_history=False)
     record = json.loads(path.read_text())
     assert record["q_star_before"] is None and record["target_grasps"] == 2 and record["target_grasp_q"] == [0.4, 0.7]
     write_calibration(path, Calibration(0.6, 0.25, 2, 3, (0.6,)), iteration=300, q_star_before=0.5, continue_history=True)
@@ -173,7 +173,7 @@ def test_a_calibrates_q_star_stage_estimates_from_its_own_greedy_grasps_into_its
     assert stage.calibrates_q_star
     tiny = dict(steps=1, batch_size=1, replay_capacity=8, net_config={"trunk_depth": 2}, torch_threads=1)
     learner = Learner(TrainConfig(**tiny), stage, tmp_path, log=lambda s: None)
-    assert math.isnan(learner.calibrate_from_own_grasps())  # no greedy grasp took the target: still uncalibrated
+    assert learner.calibrate_from_own_grasps() is None  # no greedy grasp took the target: still uncalibrated
     learner.counters.successful_grasp_q = [0.3, 0.9, 0.5]
     assert learner.calibrate_from_own_grasps() == pytest.approx(estimate_q_star([0.3, 0.9, 0.5], stage.calibration_quantile))
     assert read_checkpoint_header(tmp_path / "weights.safetensors")["q_star"] == pytest.approx(0.5)

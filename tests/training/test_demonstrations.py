@@ -94,7 +94,7 @@ def test_a_fresh_run_starts_from_the_oracles_transitions_and_a_resumed_one_colle
 
     # The collection saved the state: a resumed run keeps the transitions and collects none.
     resumed_logs: list[str] = []
-    resumed = Learner(replace(cfg, steps=1), "MPG-Stage2-v0", tmp_path, log=resumed_logs.append)
+    resumed = Learner(replace(cfg, steps=1), "MPG-Stage2-v0", tmp_path, log=resumed_logs.append, resume_anyway=True)  # more steps: a changed setting
     assert resumed.resumed and resumed.replay.size() == n
     assert resumed.replay.actions[:n, 0, 0].tolist() == [c[2] for c in expected]
     resumed.run()

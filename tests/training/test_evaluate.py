@@ -186,5 +186,10 @@ def test_an_episode_records_its_visual_randomization():
             assert records[option].visuals == info["visual_randomization"]
         env.close()
     assert "visuals" not in records[None].to_dict()
+    # mpg-eval records a track's own keywords (it makes the env by its id).
+    from mpg_agents.evaluation.evaluate import registered_options
+
+    assert registered_options("MPG-OccludedHardCamera-v0") == {"obs_mode": "camera", "visual_randomization": True}
+    assert registered_options("MPG-OccludedHard-v0") == {}
     data = json.loads(json.dumps(records[True].to_dict()))
     assert data["visuals"]["seed"] == 3 and len(data["visuals"]["object_gains"]) == 2

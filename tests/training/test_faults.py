@@ -172,7 +172,7 @@ def test_bad_training_settings_are_named(tmp_path, capsys, setting, message):
 
 
 @pytest.mark.parametrize("flag, message", [
-    (["--steps", "-1"], "training setting steps must be an integer >= 1 or None, got -1"),
+    (["--steps", "-1"], "training setting steps must be an integer >= 0 or None, got -1"),
     (["--seed", "-5"], "training setting seed must be an integer >= 0, got -5"),
     (["--num-objects", "0"], "training setting num_objects must be an integer >= 1 or None, got 0"),
 ])

@@ -323,7 +323,7 @@ def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):
     assert record["episodes"] == 3 and record["target_grasps"] == len(record["target_grasp_q"]) >= 1
     values = sorted(record["target_grasp_q"])
     assert record["q_star"] == pytest.approx((values[(len(values) - 1) // 2] + values[len(values) // 2]) / 2)
-    assert record["q_star_before"] is None  # nothing calibrated before: NaN in, None on disk
+    assert record["q_star_before"] is None  # nothing calibrated before
     assert summary["q_star"] == pytest.approx(record["q_star"])
     assert read_checkpoint_header(tmp_path / "Stage2" / "weights.safetensors")["q_star"] == pytest.approx(record["q_star"])
     assert sum("in its scenes" in line for line in logged) == 1

@@ -1,0 +1,137 @@
+"""Seconds per TD step (``mpg_agents.learning.td_step.td_step``) at given batch sizes, on recorded
+Stage V transitions, with the shipped training configuration's network (small, grasp region on
+the target, 8 px off its rim, zero-initialised heads, Q bounds).
+
+First record transitions once (env steps: the heuristic grasp, or a random move/push):
+
+    python benchmarks/td_step_speed.py --record /tmp/stage5_transitions.npz --transitions 24
+
+then time the step (the same file gives the same batches to any version of the code):
+
+    python benchmarks/td_step_speed.py --transitions-file /tmp/stage5_transitions.npz --batch-sizes 2,16 --repeats 5
+
+Each batch holds the first ``B`` transitions; the first repeat of each size is a warm-up (not
+counted). The networks start from ``--seed``; every step trains them (Adam), so repeats see
+slightly different weights, as training does. ``--device`` puts the networks and the batches
+on ``cpu`` or ``cuda`` (where the code has a device option). The last output line is one JSON
+object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import torch
+
+DEFAULT_NET = {"grasp_region": "target", "target_margin_px": -8, "head_init": "zero"}
+
+
+def record(path: str, transitions: int, seed: int) -> None:
+    """Step MPG-Stage5-v0 and save ``transitions`` transitions to ``path`` (npz)."""
+    import gymnasium as gym
+
+    import mpg_envs  # noqa: F401
+    from mpg_agents.acting.heuristics import heuristic_grasp_action
+
+    env = gym.make("MPG-Stage5-v0")
+    space = env.unwrapped.action_space
+    rng = np.random.default_rng(seed)
+    rows: dict[str, list] = {"actions": [], "rewards": [], "dones": []}
+    obs_list, next_list = [], []
+    obs, _ = env.reset(seed=seed)
+    while len(rows["actions"]) < transitions:
+        if rng.random() < 0.5 and obs["mask"].any():
+            action = heuristic_grasp_action(obs, space.primitives)
+        else:
+            prim = str(rng.choice(("move", "push")))
+            rows_, cols = np.nonzero(obs["mask"]) if obs["mask"].any() else (np.array([112]), np.array([112]))
+            k = int(rng.integers(len(rows_)))
+            action = space.encode(prim, int(rng.integers(16)), int(rows_[k]), int(cols[k]))
+        next_obs, reward, terminated, truncated, _ = env.step(action)
+        obs_list.append(obs)
+        next_list.append(next_obs)
+        rows["actions"].append(action)
+        rows["rewards"].append(reward)
+        rows["dones"].append(float(terminated))
+        obs = env.reset(seed=seed + len(rows["actions"]))[0] if terminated or truncated else next_obs
+    data = {f"obs_{k}": np.stack([o[k] for o in obs_list]) for k in obs_list[0]}
+    data.update({f"next_{k}": np.stack([o[k] for o in next_list]) for k in next_list[0]})
+    data.update({k: np.asarray(v) for k, v in rows.items()})
+    np.savez_compressed(path, **data)
+    print(f"recorded {transitions} transitions to {path} ({int(sum(rows['dones']))} terminal)")
+
+
+def batch_of(data: dict[str, np.ndarray], size: int, device: torch.device) -> SimpleNamespace:
+    """The first ``size`` recorded transitions as a replay batch on ``device``."""
+    keys = [k[4:] for k in data if k.startswith("obs_")]
+    if size > len(data["actions"]):
+        raise ValueError(f"batch {size} needs {size} recorded transitions; the file has {len(data['actions'])}")
+    return SimpleNamespace(
+        observations={k: torch.as_tensor(data[f"obs_{k}"][:size]).to(device) for k in keys},
+        next_observations={k: torch.as_tensor(data[f"next_{k}"][:size]).to(device) for k in keys},
+        actions=torch.as_tensor(data["actions"][:size]).reshape(-1, 1).to(device),
+        rewards=torch.as_tensor(data["rewards"][:size], dtype=torch.float32).reshape(-1, 1).to(device),
+        dones=torch.as_tensor(data["dones"][:size], dtype=torch.float32).reshape(-1, 1).to(device),
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--record", help="record transitions to this npz file and stop")
+    parser.add_argument("--transitions", type=int, default=24)
+    parser.add_argument("--transitions-file", help="the npz file --record wrote")
+    parser.add_argument("--batch-sizes", default="2,16")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--device", default="cpu")
+    args = parser.parse_args()
+    if args.record:
+        record(args.record, args.transitions, args.seed)
+        return
+    if not args.transitions_file:
+        parser.error("give --transitions-file (written by --record)")
+    from mpg_agents.acting.agent import MPGAgent
+    from mpg_agents.acting.q_function import MPGQFunction
+    from mpg_agents.learning.td_step import TDStepConfig, td_step
+    from mpg_envs.grid.actions import PixelActionSpace
+    from mpg_envs.tasks.config import observation_space
+
+    torch.set_num_threads(args.threads)
+    torch.set_flush_denormal(True)
+    device = torch.device(args.device)
+    data = dict(np.load(args.transitions_file))
+    space = PixelActionSpace(("move", "push", "grasp"))
+    torch.manual_seed(args.seed)
+    agent = MPGAgent.build(observation_space(), space, variant="small", net_config=DEFAULT_NET)
+    target = MPGQFunction(agent.net_config, agent.action_primitives)
+    target.load_state_dict(agent.q_net.state_dict())
+    agent.q_net.to(device)
+    target.to(device)
+    target.set_training_mode(False)
+    optimizer = torch.optim.Adam(agent.q_net.parameters(), lr=1e-4, weight_decay=2**-5, betas=(0.9, 0.99))
+    config = TDStepConfig(gamma=0.5, target_bounds=(-1.0, 2.0))
+    seconds: dict[int, float] = {}
+    for size in (int(b) for b in args.batch_sizes.split(",")):
+        batch = batch_of(data, size, device)
+        times = []
+        for _ in range(args.repeats + 1):
+            if device.type == "cuda":
+                torch.cuda.synchronize()
+            start = time.perf_counter()
+            td_step(agent.q_net, target, optimizer, batch, config)
+            if device.type == "cuda":
+                torch.cuda.synchronize()
+            times.append(time.perf_counter() - start)
+        seconds[size] = statistics.median(times[1:])
+        print(f"batch {size:3d}: {seconds[size]:.3f} s per TD step (median of {args.repeats}; {args.threads} thread(s), {device})")
+    print(json.dumps({"td_step_s": {str(k): round(v, 4) for k, v in seconds.items()}, "device": str(device), "threads": args.threads}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,75 @@
+"""What the command lines check before any work: the config file, the env id, output paths and
+checkpoints; bad input is a :class:`UsageError`, reported on one line with exit status 2."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any
+
+__all__ = ["UsageError", "check_checkpoint", "check_env_id", "check_output", "fail", "read_config"]
+
+
+class UsageError(Exception):
+    """Bad command-line input: reported on one line, exit status 2."""
+
+
+def fail(exc: BaseException) -> int:
+    """Report ``exc`` on stderr as one line; the exit status of bad input (2)."""
+    print(f"error: {exc}", file=sys.stderr)
+    return 2
+
+
+def read_config(path: str | None) -> dict[str, Any]:
+    """The settings of a TOML or JSON config file (none without a path)."""
+    if path is None:
+        return {}
+    p = Path(path)
+    if not p.is_file():
+        raise UsageError(f"config file {path!r} does not exist")
+    try:
+        if p.suffix == ".toml":
+            return tomllib.loads(p.read_text())
+        return json.loads(p.read_text())
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise UsageError(f"config file {path!r} is not valid {p.suffix[1:] or 'JSON'}: {exc}") from exc
+
+
+def check_env_id(env_id: str) -> None:
+    """A registered env id, else a :class:`UsageError` listing the valid ones."""
+    import gymnasium as gym
+
+    import mpg_envs
+
+    if env_id not in gym.registry:
+        raise UsageError(f"unknown env id {env_id!r}; valid: {', '.join(mpg_envs.ENV_IDS)}")
+
+
+def check_output(path: str | None, flag: str) -> None:
+    """An output file's path, checked before any work: a file in a folder that exists and may be written."""
+    if path is None:
+        return
+    p, parent = Path(path), Path(path).parent
+    if p.is_dir():
+        raise UsageError(f"{flag} {path!r} is a folder; give a file path")
+    if not parent.is_dir():
+        raise UsageError(f"{flag} {path!r}: the folder {str(parent)!r} does not exist; create it first")
+    if not os.access(parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise UsageError(f"{flag} {path!r} cannot be written (permission denied)")
+
+
+def check_checkpoint(path: str | None) -> None:
+    """An existing MPGNet safetensors checkpoint (its header readable), else a :class:`UsageError`."""
+    if path is None:
+        return
+    if not Path(path).is_file():
+        raise UsageError(f"checkpoint {path!r} does not exist")
+    from mpg_agents.acting.weights import read_checkpoint_header
+
+    try:
+        read_checkpoint_header(path)
+    except Exception as exc:  # safetensors raises its own types for foreign files
+        raise UsageError(f"{path!r} is not an MPGNet safetensors checkpoint: {exc}") from exc
