@@ -27,7 +27,7 @@ from mpg_envs.tasks.episode_sim import EpisodeSim
 from mpg_envs.tasks.rewards import StepOutcome
 from mpg_envs.tasks.scene_source import SceneRequest, drop_scene, scene_from_test_set
 from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
-from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, read_scene
+from mpg_envs.scenes.scene_io import MAX_OBJECTS, SceneFile, SceneFileError, read_scene
 from mpg_envs.scenes.scene_loading import load_scene, scene_of
 from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.tasks.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
@@ -353,8 +353,8 @@ class MPGEnv(gym.Env):
 
     def _checked_num_objects(self, n: Any) -> int:
         stage = self.stage
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not stage.min_objects <= n <= 60:
-            raise ValueError(f"num_objects must be an integer in {stage.min_objects}..60 for {stage.env_id}, got {n!r}")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not stage.min_objects <= n <= MAX_OBJECTS:
+            raise ValueError(f"num_objects must be an integer in {stage.min_objects}..{MAX_OBJECTS} for {stage.env_id}, got {n!r}")
         return int(n)
 
     def _reset_info(self) -> dict[str, Any]:
