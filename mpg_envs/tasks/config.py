@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -48,3 +49,17 @@ def observation_space(workspace: Workspace = Workspace()) -> spaces.Dict:
             "occluded": spaces.MultiBinary(1),
         }
     )
+
+
+def config_of(config: EnvConfig | dict[str, Any]) -> EnvConfig:
+    """``config`` as an :class:`EnvConfig`: itself, or a dict of field overrides (how a
+    registered track names its settings without importing the simulator at registration)."""
+    if isinstance(config, EnvConfig):
+        return config
+    if isinstance(config, dict):
+        valid = {f.name for f in fields(EnvConfig)}
+        unknown = sorted(set(config) - valid)
+        if unknown:
+            raise ValueError(f"config has unknown EnvConfig fields {unknown}; valid: {sorted(valid)}")
+        return replace(EnvConfig(), **config)
+    raise TypeError(f"config must be an EnvConfig or a dict of its fields, got {type(config).__name__}")

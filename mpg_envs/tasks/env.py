@@ -18,7 +18,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.actions import PixelActionSpace
-from mpg_envs.tasks.config import OBS_MODES, EnvConfig, observation_space
+from mpg_envs.tasks.config import OBS_MODES, EnvConfig, config_of, observation_space
 from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 from mpg_envs.perception.occlusion import change_detected, check_band
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
@@ -88,13 +88,14 @@ class MPGEnv(gym.Env):
         max_motions: int | None = None,
         grasp_scorer: GraspScorer | None = None,
         render_mode: str | None = None,
-        config: EnvConfig = EnvConfig(),
+        config: EnvConfig | dict[str, Any] = EnvConfig(),
         camera_config: Any = None,
         wrong_grasp: str | None = None,
         visible_range: tuple[float, float] | None = None,
         use_test_set: bool = True,
         visual_randomization: Any = None,
     ):
+        config = config_of(config)  # a dict of EnvConfig fields too (a registered track's)
         self.stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
         if not isinstance(self.stage, StageSpec):
             raise ValueError(f"unknown stage {stage!r}; valid: {sorted(STAGES)}")

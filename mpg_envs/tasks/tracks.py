@@ -6,7 +6,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.tasks.stages import STAGES
 
 NOVEL_SCENE_TRIES = 100
@@ -51,7 +50,7 @@ TRACKS: dict[str, TrackSpec] = {
         TrackSpec(
             "MPG-OccludedHardNovel-v0",
             "OccludedHard",
-            {"object_set": "random_urdfs_test", "config": EnvConfig(scene_tries=NOVEL_SCENE_TRIES)},
+            {"object_set": "random_urdfs_test", "config": {"scene_tries": NOVEL_SCENE_TRIES}},
             "the hard track on objects no training uses: pybullet's random_urdfs test split (numbers "
             "ending in 0) fitted to the gripper, shipped as convex parts with the test scenes "
             "(no pybullet needed)",

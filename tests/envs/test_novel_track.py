@@ -22,7 +22,7 @@ from mpg_envs.simulation.object_packs import load_object_pack, read_pack_meta, s
 from mpg_envs.simulation.objects import (
     HELD_OUT_OBJECT_SETS, HeldOutObjectsError, check_not_held_out, held_out_objects, load_object_set,
 )  # fmt: skip
-from mpg_envs.tasks.config import EnvConfig
+from mpg_envs.tasks.config import EnvConfig, config_of
 from mpg_envs.tasks.tracks import NOVEL_SCENE_TRIES, TRACKS
 
 TRACK = "MPG-OccludedHardNovel-v0"
@@ -36,7 +36,7 @@ def pack():
 def test_the_track_is_registered_as_the_hard_stage_on_the_held_out_objects():
     spec = TRACKS[TRACK]
     assert spec.stage == "OccludedHard" and spec.options["object_set"] == "random_urdfs_test"
-    assert spec.options["config"] == EnvConfig(scene_tries=NOVEL_SCENE_TRIES)  # only the scene draws differ from the defaults
+    assert config_of(spec.options["config"]) == EnvConfig(scene_tries=NOVEL_SCENE_TRIES)  # only the scene draws differ from the defaults
     assert gym.spec(TRACK).kwargs == {"stage": "OccludedHard", **spec.options}
     assert gym.spec(TRACK).max_episode_steps == 10
     assert "random_urdfs_test" in HELD_OUT_OBJECT_SETS
