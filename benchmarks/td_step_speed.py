@@ -8,13 +8,14 @@ First record transitions once (env steps: the heuristic grasp, or a random move/
 
 then time the step (the same file gives the same batches to any version of the code):
 
-    python benchmarks/td_step_speed.py --transitions-file /tmp/stage5_transitions.npz --batch-sizes 2,16 --repeats 5
+    python benchmarks/td_step_speed.py --transitions-file /tmp/stage5_transitions.npz --batch-sizes 2,16 --repeats 5 [--decisions 20]
 
 Each batch holds the first ``B`` transitions; the first repeat of each size is a warm-up (not
 counted). The networks start from ``--seed``; every step trains them (Adam), so repeats see
 slightly different weights, as training does. ``--device`` puts the networks and the batches
-on ``cpu`` or ``cuda`` (where the code has a device option). The last output line is one JSON
-object.
+on ``cpu`` or ``cuda`` (where the code has a device option). ``--decisions N`` also times the
+full coordinated decision (``agent.decide``, Q*_g 0.6) on the recorded observations. The last
+output line is one JSON object.
 """
 
 from __future__ import annotations
@@ -90,6 +91,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--decisions", type=int, default=0, help="also time this many coordinated decisions (agent.decide) on the recorded observations")
     args = parser.parse_args()
     if args.record:
         record(args.record, args.transitions, args.seed)
@@ -130,7 +132,29 @@ def main() -> None:
             times.append(time.perf_counter() - start)
         seconds[size] = statistics.median(times[1:])
         print(f"batch {size:3d}: {seconds[size]:.3f} s per TD step (median of {args.repeats}; {args.threads} thread(s), {device})")
-    print(json.dumps({"td_step_s": {str(k): round(v, 4) for k, v in seconds.items()}, "device": str(device), "threads": args.threads}))
+    result = {"td_step_s": {str(k): round(v, 4) for k, v in seconds.items()}, "device": str(device), "threads": args.threads}
+    if args.decisions:
+        result["decision_s"] = round(time_decisions(agent, data, args.decisions, device), 4)
+        print(f"decision: {result['decision_s']:.3f} s (median of {args.decisions}; the full coordinated decision, {device})")
+    print(json.dumps(result))
+
+
+def time_decisions(agent, data: dict[str, np.ndarray], count: int, device: torch.device) -> float:
+    """Median seconds of one coordinated decision (``agent.decide``) over the recorded observations, after a warm-up."""
+    keys = [k[4:] for k in data if k.startswith("obs_")]
+    agent.to(device)
+    agent.set_q_star(0.6)  # a calibrated threshold, so the workflow runs the grasp, mask and push nets as it does when acting
+    times = []
+    for i in range(count + 1):
+        obs = {k: data[f"obs_{k}"][i % len(data["actions"])] for k in keys}
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        start = time.perf_counter()
+        agent.decide(obs)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times[1:])
 
 
 if __name__ == "__main__":
