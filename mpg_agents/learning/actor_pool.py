@@ -178,14 +178,17 @@ class ProcessActorPool(ActorPool):
         return value
 
     def close(self) -> None:
-        for conn in self._conns:
+        for i, (conn, proc) in enumerate(zip(self._conns, self._procs)):
+            if i in self._busy:  # mid-step: its result would be dropped anyway, and it would block sending it
+                proc.terminate()
+                continue
             try:
                 conn.send(None)
             except (BrokenPipeError, OSError):
                 pass
         for proc in self._procs:
             proc.join(timeout=10)
-            if proc.is_alive():  # busy in a long step: its result would be dropped anyway
+            if proc.is_alive():
                 proc.terminate()
                 proc.join(timeout=10)
         for conn in self._conns:
