@@ -3,7 +3,9 @@
 For each actor count a fresh Stage V run (small network, the default settings, checkpoints
 off while it is measured) trains for ``--seconds`` after ``--warmup`` iterations (the actors'
 start-up, PyTorch picking its kernels) and is stopped; the rates are counted between the
-two. One actor acts in the learner's process (no Ray, no actor process); more actors step
+two. Gradient steps are the learner's TD steps (``trained_steps``: those
+whose batch held a sample of a branch learning then, the count the target sync and the
+weights refresh follow). One actor acts in the learner's process (no Ray, no actor process); more actors step
 their own envs in their own processes on the chosen backend, the learner learning in this one
 at ``--replay-ratio`` gradient steps per env step. The machine (CPU count, model, load when
 each run began) is printed; nothing else should run beside it for quiet numbers.
@@ -48,16 +50,21 @@ class TimedLearner(Learner):
     def __init__(self, *args: Any, warmup: int, seconds: float, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self.warmup, self.seconds = warmup, seconds
-        self.mark: tuple[float, int, int] | None = None  # (time, iteration, gradient steps) after the warm-up
-        self.last: tuple[float, int, int] | None = None
+        self.mark: tuple[float, int, int, int] | None = None  # (time, iteration, TD steps, trained steps) after the warm-up
+        self.last: tuple[float, int, int, int] | None = None
+        self.td_steps = 0  # every TD step taken (one whose batch holds no sample of a branch learning now trains nothing)
+
+    def learn(self) -> float:
+        self.td_steps += 1
+        return super().learn()
 
     def record(self, *args: Any) -> None:
         super().record(*args)
         c, now = self.counters, time.perf_counter()
         if c.iteration == self.warmup:
-            self.mark = (now, c.iteration, c.gradient_steps)
+            self.mark = (now, c.iteration, self.td_steps, c.gradient_steps)
         if self.mark is not None:
-            self.last = (now, c.iteration, c.gradient_steps)
+            self.last = (now, c.iteration, self.td_steps, c.gradient_steps)
             if now - self.mark[0] >= self.seconds:
                 self.steps = c.iteration
 
@@ -75,10 +82,10 @@ def measure(actors: int, args: argparse.Namespace) -> dict[str, Any]:
         total = time.perf_counter() - start
     if learner.mark is None or learner.last is None or learner.last[1] == learner.mark[1]:
         raise RuntimeError(f"{actors} actors: fewer than {args.warmup + 1} iterations; give more --seconds")
-    (t0, i0, g0), (t1, i1, g1) = learner.mark, learner.last
+    (t0, i0, g0, k0), (t1, i1, g1, k1) = learner.mark, learner.last
     return {
         "actors": actors, "backend": "in-process" if actors == 1 else args.backend, "env_steps": i1 - i0, "gradient_steps": g1 - g0,
-        "seconds": round(t1 - t0, 2), "env_steps_per_s": round((i1 - i0) / (t1 - t0), 3),
+        "trained_steps": k1 - k0, "seconds": round(t1 - t0, 2), "env_steps_per_s": round((i1 - i0) / (t1 - t0), 3),
         "gradient_steps_per_s": round((g1 - g0) / (t1 - t0), 3), "wall_s_with_startup": round(total, 1), "load_at_start": round(load, 2),
     }
 

@@ -9,8 +9,8 @@ their envs while it learns, and an actor never runs ahead of the learner by more
 
 - :class:`RayActorPool`: Ray actors on a local Ray (one CPU each), or on the cluster at
   ``ray_address`` (every node needs this package installed and the run's checkpoint paths).
-- :class:`ProcessActorPool`: stdlib ``multiprocessing`` processes (spawned), for machines
-  without Ray; each talks to the learner through a pipe.
+- :class:`ProcessActorPool`: stdlib ``multiprocessing`` processes (forked from a fresh server
+  process, ``forkserver``), for machines without Ray; each talks to the learner through a pipe.
 
 :func:`open_actor_pool` picks one (``TrainConfig.actor_backend``; ``auto``: Ray when it is
 installed); :func:`check_actor_backend` says before any work whether the one asked for can run.
@@ -122,12 +122,15 @@ def _actor_process(spec: ActorSpec, conn: Any) -> None:
 
 
 class ProcessActorPool(ActorPool):
-    """Actors in spawned local processes (no Ray), one torch/OpenMP thread each."""
+    """Actors in local processes (no Ray), one torch/OpenMP thread each."""
 
     def __init__(self, specs: Sequence[ActorSpec]) -> None:
         import multiprocessing as mp
 
-        context = mp.get_context("spawn")  # a fresh interpreter: no forked torch or MuJoCo state
+        # Forked from a fresh server process that has imported the actor's modules once (not from
+        # the learner: no forked torch or MuJoCo state), so a second pool in this process starts fast.
+        context = mp.get_context("forkserver")
+        context.set_forkserver_preload(["mpg_agents.learning.actors"])
         self.size = len(specs)
         self._conns: list[Any] = []
         self._procs: list[Any] = []

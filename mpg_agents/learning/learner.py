@@ -319,6 +319,7 @@ class Learner:
             c.failed_grasps_in_a_row = 0 if info["grasp_success"] else c.failed_grasps_in_a_row + 1
         if choice.primitive == "push":
             c.pushes_in_episode += 1
+        c.episode_motions += 1  # this process's episode (unused with actors: their envs count)
         self.record(choice, step.reward, info, loss, step.choose_seconds, step.step_seconds, learning, c.episode, step.done)
         if step.done:
             c.episode += 1
@@ -329,7 +330,6 @@ class Learner:
         """Count and log an iteration of episode ``episode`` (``learning``: when its learning began)."""
         c = self.counters
         c.iteration += 1
-        c.episode_motions += 1
         if choice.primitive == "grasp":
             c.window_grasps += 1
             c.window_target_grasps += int(info["target_grasped"])
