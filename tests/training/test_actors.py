@@ -131,3 +131,27 @@ def _tiny_config(tmp_path):
     path = tmp_path / "tiny.json"
     path.write_text(json.dumps(TINY))
     return path
+
+
+def test_an_actor_steps_its_env_with_the_weights_and_trials_it_is_given():
+    from mpg_agents.learning.actors import Actor, ActorSpec, ActRequest, Weights, weights_of
+    from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
+
+    stage = with_overrides(TRAINING_STAGES, {"Stage5": {
+        "env_id": "MPG-Occluded-v0", "objects": [6, 6], "coordination": "grasp_first", "grasp_trials": 2, "alternate_every": 1,
+    }})[-1]
+    actor = Actor(ActorSpec(TrainConfig(**TINY), stage, index=1, start_iteration=0, num_objects=6))
+    try:
+        with pytest.raises(RuntimeError, match="before it was given weights"):
+            actor.step(ActRequest(0.0, 6, 0))
+        weights = Weights(1, weights_of(actor.policy), -10.0)  # Q*_g -10: every decision a grasp
+        step = actor.step(ActRequest(0.0, 6, 7, weights))
+        assert actor.policy.q_star == -10.0 and step.episode == 7 and step.skipped is None
+        assert step.choice.primitive == "grasp" and step.choice.how == "greedy"
+        assert len(step.trials) == step.trial_counts.grasp_trials == 2  # its two other orientations, tried and undone
+        assert step.info["num_motions"] == 1
+        if not step.done:  # the episode goes on: no new index is needed
+            again = actor.step(ActRequest(1.0, 6, None))
+            assert again.episode == 7 and again.info["num_motions"] == 2
+    finally:
+        actor.close()
