@@ -73,6 +73,12 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--q-star", type=float, help="the grasp threshold Q*_g (default: from --init or calibrated)")
     parser.add_argument("--device", choices=DEVICES, help="networks and batches: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument("--discriminator", help="the discriminator: a fixed grasp-net checkpoint scoring states (Stages III-V)")
+    parser.add_argument("--replay-ratio", type=float, help="gradient steps per env step (default 1.0: one per iteration, the paper's)")
+    parser.add_argument("--actors", type=int, help="env-stepping actor processes (default 1: in this process, no Ray)")
+    parser.add_argument("--actor-backend", choices=("auto", "ray", "processes"),
+                        help="with --actors > 1: Ray actors (auto, the default, when Ray is installed) or local processes")
+    parser.add_argument("--ray-address", help="with --actors > 1: run the actors on this Ray cluster (e.g. auto or HOST:6379)")
+    parser.add_argument("--weights-refresh", type=int, help="with --actors > 1: actors get the learner's weights every this many gradient steps (default 10)")
     parser.add_argument("--stages", help="pipeline: which stages, by name or position, e.g. 1,2")
     parser.add_argument("--no-multistage", action="store_true", help="pipeline ablation: only Stage V, from scratch")
     parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")

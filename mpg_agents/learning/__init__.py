@@ -5,7 +5,8 @@ settings (:mod:`~mpg_agents.learning.train_config`), the one gradient step
 (:mod:`~mpg_agents.learning.td_step`), the replay buffer (:mod:`~mpg_agents.learning.replay`),
 exploration (:mod:`~mpg_agents.learning.exploration`), oracle demonstrations
 (:mod:`~mpg_agents.learning.demonstrations`), the learner of one stage
-(:mod:`~mpg_agents.learning.learner`), its resumable state and log
+(:mod:`~mpg_agents.learning.learner`) and its parallel actors (:mod:`~mpg_agents.learning.actors`,
+:mod:`~mpg_agents.learning.actor_pool`, :mod:`~mpg_agents.learning.actor_feed`), its resumable state and log
 (:mod:`~mpg_agents.learning.run_state`, :mod:`~mpg_agents.learning.train_log`), its run folder's
 lock and resume check (:mod:`~mpg_agents.learning.run_folder`), learning curves
 (:mod:`~mpg_agents.learning.plotting`), the multi-stage pipeline

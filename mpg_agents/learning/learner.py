@@ -2,8 +2,11 @@
 
 Episodes run through the one episode loop (:func:`mpg_agents.acting.episode_loop.episode_steps`).
 One iteration: decide (:class:`~mpg_agents.acting.agent.MPGAgent`; Stage IV's forced grasp after
-its push budget), explore (:mod:`mpg_agents.learning.exploration`), act, store, and one gradient
-step (:func:`mpg_agents.learning.td_step.td_step`) with the stage's frozen branches left out.
+its push budget), explore (:mod:`mpg_agents.learning.exploration`), act, store, and
+``replay_ratio`` gradient steps (:func:`mpg_agents.learning.td_step.td_step`; 1: one per
+iteration) with the stage's frozen branches left out. With ``actors > 1`` parallel actors
+(:mod:`mpg_agents.learning.actors`, :mod:`mpg_agents.learning.actor_pool`) do the deciding and
+acting, each in its own env; an iteration is then one step of any of them.
 The stage is a :class:`~mpg_agents.learning.training_stages.TrainingStage`, the settings a
 :class:`~mpg_agents.learning.train_config.TrainConfig`.
 
@@ -38,12 +41,13 @@ import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.acting.agent import MPGAgent
+from mpg_agents.learning.actor_feed import train_with_actors
+from mpg_agents.learning.actor_pool import check_actor_backend
+from mpg_agents.learning.actors import build_agent, choose_action, make_explorer, make_training_env
 from mpg_agents.learning.demonstrations import collect_demonstrations
 from mpg_agents.acting.device import resolve_device
-from mpg_agents.acting.discriminator import Discriminator
 from mpg_agents.acting.episode_loop import Step, episode_steps
-from mpg_agents.learning.exploration import Choice, Explorer, linear_epsilon
+from mpg_agents.learning.exploration import Choice, linear_epsilon
 from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, format_q_star, from_header
 from mpg_agents.acting.grasp_threshold import starting_q_star, write_calibration
 from mpg_agents.acting.q_function import MPGQFunction
@@ -51,16 +55,13 @@ from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
 from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
-from mpg_agents.acting.spaces import finger_geometry, geometry_of_config
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
 from mpg_agents.learning.trials import try_alternatives
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.acting.weights import load_mpgnet_weights
-from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.simulation.objects import check_not_held_out
-from mpg_envs.tasks.config import EnvConfig
 
 
 class StopRequested(Exception):
@@ -95,6 +96,8 @@ class Learner:
         self.steps = config.steps if config.steps is not None else self.stage.iterations
         # Before the run folder exists: a held-out object set is refused with nothing written.
         check_not_held_out(gym.spec(self.stage.env_id).kwargs.get("object_set", "blocks"), what=f"training on {self.stage.env_id}")
+        if config.actors > 1:
+            check_actor_backend(config)  # Ray asked for and missing: refused before anything is written
         self.out = prepare_run_folder(out)
         self.lock = RunLock(self.out)  # before anything in the folder is read or written
         self.resume_anyway, self.log = resume_anyway, log
@@ -103,14 +106,11 @@ class Learner:
         torch.set_flush_denormal(True)
         self.device = resolve_device(config.device)  # networks and batches; the replay and the env stay on the host
         torch.manual_seed(config.seed)  # before the networks are built: the seed fixes their initial weights
-        self.env = self._make_env(self._objects_now(0))
+        self.env = make_training_env(self.stage, config, self.objects_now(0), self.device)
         env = self.env.unwrapped
         self.primitives: tuple[str, ...] = tuple(env.primitives)
         # The online agent, then the target network: their initial weights come from the seed in this order.
-        self.policy = MPGAgent.build(
-            env.observation_space, env.action_space, variant=config.variant, branches=self.stage.branches or PRIMITIVES,
-            coordination=self.stage.coordination, net_config=config.net_config, geometry=finger_geometry(self.env),
-        ).to(self.device)
+        self.policy = build_agent(self.stage, config, self.env).to(self.device)
         self.target_q = MPGQFunction(self.policy.net_config, self.policy.action_primitives, self.policy.q_net.mpgnet.geometry)
         self.target_q.to(self.device)
         self.target_q.set_training_mode(False)
@@ -128,12 +128,7 @@ class Learner:
             config.replay_capacity, env.observation_space, env.action_space, device=self.device, alpha=config.priority_alpha, seed=config.seed
         )
         self.rng = np.random.default_rng(config.seed)
-        net_cfg = self.policy.net_config
-        self.explorer = Explorer(
-            self.primitives, self.rng, config.heuristic_after_failed_grasps, random_primitive=self.stage.coordination == "max_q",
-            grasp_on_target=net_cfg.grasp_region in ("target", "visible"), usable=self.policy.usable_primitives,
-            target_margin_px=net_cfg.target_margin_px, move_band_m=net_cfg.move_band_m if net_cfg.move_region == "top" else None,
-            visible_band_m=net_cfg.visible_band_m if net_cfg.grasp_region == "visible" else None)
+        self.explorer = make_explorer(self.policy, self.stage, self.primitives, self.rng, config)
         self.counters = Counters()
         self._calibration_env: gym.Env | None = None
         self._stop = False
@@ -141,21 +136,7 @@ class Learner:
         self.resumed = False
         self._resume()
 
-    def _make_env(self, num_objects: int | None) -> gym.Env:
-        """The training env; refuses objects held out for testing (:func:`~mpg_envs.simulation.objects.check_not_held_out`)."""
-        kwargs: dict[str, Any] = {}
-        if num_objects is not None:
-            kwargs["num_objects"] = num_objects
-        env_config = EnvConfig(reward=self.stage.reward_config()) if self.stage.reward else EnvConfig()
-        if self.config.discriminator is not None:
-            kwargs["grasp_scorer"] = Discriminator.from_weights(self.config.discriminator, geometry_of_config(env_config), self.device)
-        if self.stage.reward:
-            kwargs["config"] = env_config
-        env = gym.make(self.stage.env_id, **kwargs)
-        check_not_held_out("custom", env.unwrapped.object_set, f"training on {self.stage.env_id}")  # however they got there
-        return env
-
-    def _objects_now(self, iteration: int) -> int | None:
+    def objects_now(self, iteration: int) -> int | None:
         """The scene's object count at ``iteration``: the fixed count, else the curriculum's."""
         if self.config.num_objects is not None:
             return self.config.num_objects
@@ -203,14 +184,13 @@ class Learner:
         bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)
         try:
             with TrainingLog(self.out, self.counters.iteration) as self._log:
-                while self.counters.iteration < self.steps:
+                if self.config.actors > 1:
+                    train_with_actors(self, bar)
+                while self.counters.iteration < self.steps:  # one actor: this process decides and acts
                     for step in episode_steps(self.env, self._reset_episode(), self.choose, lambda chosen: chosen[0].action):
                         self.iteration(step)
                         bar.update(1)
-                        if self.counters.iteration % self.config.checkpoint_every == 0 or self.counters.iteration == self.steps or self._stop:
-                            self.save_state()
-                        if self._stop:
-                            raise StopRequested()
+                        self.save_or_stop()
                         if self.counters.iteration >= self.steps:
                             break
         finally:
@@ -233,6 +213,13 @@ class Learner:
         self.lock.release()
         return summary
 
+    def save_or_stop(self) -> None:
+        """Save every ``checkpoint_every`` iterations and at the end; on SIGINT/SIGTERM save and stop."""
+        if self.counters.iteration % self.config.checkpoint_every == 0 or self.counters.iteration == self.steps or self._stop:
+            self.save_state()
+        if self._stop:
+            raise StopRequested()
+
     def calibrate_in_scenes(self, episodes: int) -> float:
         """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.acting.grasp_threshold.calibrate_q_star`,
         at the stage's ``calibration_quantile``) and save the state (a resumed run keeps it);
@@ -242,7 +229,7 @@ class Learner:
             RuntimeError: no grasp took the target.
         """
         if self._calibration_env is None:  # its own env: a training episode in progress is left as it is
-            self._calibration_env = self._make_env(self.env.unwrapped.num_objects)
+            self._calibration_env = make_training_env(self.stage, self.config, self.env.unwrapped.num_objects, self.device)
         try:
             measured = calibrate_q_star(
                 self.policy, self._calibration_env, episodes, self.config.seed, self.stage.calibration_quantile,
@@ -292,15 +279,15 @@ class Learner:
 
     def _reset_episode(self) -> dict[str, np.ndarray]:
         c = self.counters
-        n = self._objects_now(c.iteration)
+        n = self.objects_now(c.iteration)
         options = None if n is None else {"num_objects": n}  # the curriculum's count, without rebuilding the env
         obs, _, c.episode = reset_first_valid(
-            self.env, lambda k: episode_seed(self.config.seed, k), c.episode, options, self._skipped_scene
+            self.env, lambda k: episode_seed(self.config.seed, k), c.episode, options, self.skipped_scene
         )
         c.episode_motions = c.failed_grasps_in_a_row = c.pushes_in_episode = 0
         return obs
 
-    def _skipped_scene(self, k: int, error: Exception) -> None:
+    def skipped_scene(self, k: int, error: Exception) -> None:
         self.counters.skipped_scenes += 1
         self.log(f"{self.stage.name}: episode {k} skipped, its seed gave no valid scene ({error})")
 
@@ -327,35 +314,44 @@ class Learner:
         c = self.counters
         (choice, trials), info = step.choice, step.info
         self.store(step.obs, step.next_obs, choice.action, step.reward, step.terminated)
-        loss = self.learn()
-        if trials:
-            self.learn()  # the replay grew by 1 + len(trials) transitions
+        loss = self.learn_owed(2 if trials else 1)  # the replay grew by 1 + len(trials) transitions
+        if choice.primitive == "grasp":
+            c.failed_grasps_in_a_row = 0 if info["grasp_success"] else c.failed_grasps_in_a_row + 1
+        if choice.primitive == "push":
+            c.pushes_in_episode += 1
+        c.episode_motions += 1  # this process's episode (unused with actors: their envs count)
+        self.record(choice, step.reward, info, loss, step.choose_seconds, step.step_seconds, learning, c.episode, step.done)
+        if step.done:
+            c.episode += 1
+            self.calibrate_if_due()
+
+    def record(self, choice: Choice, reward: float, info: dict[str, Any], loss: float, t_decide: float, t_act: float,
+               learning: float, episode: int, done: bool) -> None:
+        """Count and log an iteration of episode ``episode`` (``learning``: when its learning began)."""
+        c = self.counters
         c.iteration += 1
-        c.episode_motions += 1
         if choice.primitive == "grasp":
             c.window_grasps += 1
             c.window_target_grasps += int(info["target_grasped"])
-            c.failed_grasps_in_a_row = 0 if info["grasp_success"] else c.failed_grasps_in_a_row + 1
             if info["target_grasped"] and choice.how == "greedy" and math.isfinite(choice.q_value):
                 c.successful_grasp_q = (c.successful_grasp_q + [choice.q_value])[-200:]
-        if choice.primitive == "push":
-            c.pushes_in_episode += 1
         rate = None
         if c.iteration % self.config.window == 0 and c.window_grasps:
             rate = c.window_target_grasps / c.window_grasps
             c.window_grasps = c.window_target_grasps = 0
         assert self._log is not None
-        t_decide, t_act = step.choose_seconds, step.step_seconds
         self._log.record(
-            IterationRecord(c.iteration, c.episode, choice.primitive, choice.how, step.reward, loss, self.epsilon(), info,
+            IterationRecord(c.iteration, episode, choice.primitive, choice.how, reward, loss, self.epsilon(), info,
                             t_decide, t_act, t_decide + t_act + time.perf_counter() - learning, rate)
         )
-        if step.done:
+        if done:
             self._log.episode_end(c.iteration, info)
-            c.episode += 1
-            every = self.stage.calibrate_every
-            if every and c.iteration < self.steps and c.iteration // every > max(c.calibrated_at, 0) // every:
-                self.calibrate_in_scenes(self.stage.calibration_episodes)
+
+    def calibrate_if_due(self) -> None:
+        """At an episode's end: the stage's periodic Q*_g calibration, once every ``calibrate_every`` iterations."""
+        c, every = self.counters, self.stage.calibrate_every
+        if every and c.iteration < self.steps and c.iteration // every > max(c.calibrated_at, 0) // every:
+            self.calibrate_in_scenes(self.stage.calibration_episodes)
 
     def store(self, obs: dict[str, np.ndarray], next_obs: dict[str, np.ndarray], action: int, reward: float, terminated: bool) -> None:
         """Add one transition to the replay (batch of one; a truncation is no terminal state)."""
@@ -375,10 +371,18 @@ class Learner:
 
     def act(self, obs: dict[str, np.ndarray]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""
-        c, budget = self.counters, self.stage.push_budget
-        forced = "grasp" if budget is not None and c.pushes_in_episode >= budget and "grasp" in self.primitives else None
-        decision = self.policy.decide(obs, forced)
-        return self.explorer.choose(obs, decision, self.epsilon(), c.failed_grasps_in_a_row)
+        c = self.counters
+        return choose_action(self.policy, self.explorer, self.stage, obs, self.epsilon(), c.pushes_in_episode, c.failed_grasps_in_a_row)
+
+    def learn_owed(self, units: int) -> float:
+        """The gradient steps ``units`` env steps earn at ``replay_ratio`` (the fraction carried
+        over in the counters); returns the first step's loss (NaN when none was taken)."""
+        c = self.counters
+        c.replay_credit += self.config.replay_ratio * units
+        owed = int(c.replay_credit + 1e-9)
+        c.replay_credit = max(0.0, c.replay_credit - owed)
+        losses = [self.learn() for _ in range(owed)]
+        return losses[0] if losses else float("nan")
 
     def learn(self) -> float:
         """One gradient step on a prioritised batch; returns the loss (NaN when nothing learnt)."""

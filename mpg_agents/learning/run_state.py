@@ -35,7 +35,7 @@ class Counters:
     """Progress of a run (saved with the state)."""
 
     iteration: int = 0
-    episode: int = 0
+    episode: int = 0  # one actor: the running (or next) episode's index; with actors: the episodes handed out
     episode_motions: int = 0
     failed_grasps_in_a_row: int = 0
     pushes_in_episode: int = 0
@@ -52,6 +52,7 @@ class Counters:
     rival_trials: int = 0  # covered-target moves and pushes tried as the other (TrainingStage.rival_trials)
     rival_trial_clears: int = 0  # of those, the ones that uncovered the target
     skipped_scenes: int = 0  # training episodes whose seed gave no valid scene (logged, see seeds.reset_first_valid)
+    replay_credit: float = 0.0  # gradient steps earned at TrainConfig.replay_ratio and not yet taken (a fraction)
 
 
 def save_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:

@@ -17,12 +17,15 @@ from mpg_agents.acting.grasp_threshold import UNCALIBRATED
 from mpg_agents.learning.td_step import TDStepConfig
 from mpg_agents.learning.training_stages import check_fields
 
+ACTOR_BACKENDS = ("auto", "ray", "processes")
+"""Where parallel actors run: Ray when it is installed (``auto``), Ray, or local processes (stdlib)."""
+
 
 @dataclass
 class TrainConfig:
     """The algorithm's settings for a stage; defaults are the paper's where it gives them."""
 
-    steps: int | None = None  # training iterations (one env step + one gradient step); None: the stage's
+    steps: int | None = None  # training iterations (env steps taken, each learnt from per replay_ratio); None: the stage's
     seed: int = 0
     variant: str = "small"
     num_objects: int | None = None  # a fixed object count; None: the stage's curriculum or the env's count
@@ -39,6 +42,9 @@ class TrainConfig:
     replay_capacity: int = 5000
     priority_alpha: float = 1.0
     target_update_every: int = 100
+    # Gradient steps per env step (an iteration's stored trials count as one more step): 1.0 is
+    # the paper's one gradient step per iteration; below 1 the learner keeps up with more actors.
+    replay_ratio: float = 1.0
     grasp_symmetry: bool = True
     max_grad_norm: float | None = None  # the paper clips nothing (see td_step.TDStepConfig)
     q_bounds: tuple[float, float] | None = None  # clamp TD targets to the feasible returns (see td_step.TDStepConfig)
@@ -57,6 +63,15 @@ class TrainConfig:
     torch_threads: int = 2
     device: str = "auto"  # networks and batches: auto (CUDA when available) | cpu | cuda; replay and envs stay on the host
     net_config: dict[str, Any] = field(default_factory=dict)
+    # Parallel actors (mpg_agents.learning.actors): 1 acts in the learner's process, as always;
+    # N > 1 step N envs in their own processes and send their transitions to the learner's replay.
+    actors: int = 1
+    # Actors act with the learner's weights of at most this many gradient steps ago (and its Q*_g):
+    # well inside the target net's lag (target_update_every), and the small net's weights
+    # (0.4 MB) cost a few milliseconds per actor and refresh.
+    weights_refresh: int = 10
+    actor_backend: str = "auto"  # auto (Ray when installed, else processes) | ray | processes
+    ray_address: str | None = None  # with the ray backend: join this cluster (e.g. "auto", "HOST:6379"); None: a local Ray
 
     def __post_init__(self) -> None:
         check_train_config(self)
@@ -141,6 +156,9 @@ def check_train_config(cfg: TrainConfig) -> None:
     _integer("replay_capacity", cfg.replay_capacity, 1)
     _number("priority_alpha", cfg.priority_alpha, 0.0, inf, "a finite number >= 0")
     _integer("target_update_every", cfg.target_update_every, 1)
+    _number("replay_ratio", cfg.replay_ratio, 0.0, inf, "a positive finite number (gradient steps per env step)")
+    if cfg.replay_ratio == 0:  # not a bound of ulp(0): a process that flushes denormals reads that as 0
+        raise ValueError("training setting replay_ratio must be a positive finite number (gradient steps per env step), got 0")
     if not isinstance(cfg.grasp_symmetry, bool):
         raise ValueError(f"training setting grasp_symmetry must be true or false, got {cfg.grasp_symmetry!r}")
     _number("max_grad_norm", cfg.max_grad_norm, math.ulp(0.0), inf, "a positive finite number", optional=True)
@@ -156,6 +174,13 @@ def check_train_config(cfg: TrainConfig) -> None:
     _integer("checkpoint_every", cfg.checkpoint_every, 1)
     _integer("window", cfg.window, 1)
     _integer("torch_threads", cfg.torch_threads, 1)
+    _integer("actors", cfg.actors, 1)
+    _integer("weights_refresh", cfg.weights_refresh, 1)
+    if cfg.actor_backend not in ACTOR_BACKENDS:
+        raise ValueError(f"training setting actor_backend must be one of {', '.join(ACTOR_BACKENDS)}, got {cfg.actor_backend!r}")
+    if cfg.ray_address is not None and (not isinstance(cfg.ray_address, str) or cfg.actors == 1 or cfg.actor_backend == "processes"):
+        raise ValueError(f"training setting ray_address is the Ray cluster the actors run on: a string with actors > 1 and "
+                         f"actor_backend 'ray' or 'auto', got {cfg.ray_address!r} with actors={cfg.actors}, actor_backend={cfg.actor_backend!r}")
     if not isinstance(cfg.net_config, dict):
         raise ValueError(f"training setting net_config must be a table of MPGNetConfig fields, got {cfg.net_config!r}")
 

@@ -1,0 +1,147 @@
+"""The learner's side of parallel actors (Ape-X): what it asks them for and what it does with their steps.
+
+:func:`train_with_actors` runs a :class:`~mpg_agents.learning.learner.Learner`'s iterations with
+``TrainConfig.actors`` actors (:mod:`mpg_agents.learning.actors`) in an
+:class:`~mpg_agents.learning.actor_pool.ActorPool`. Each step an actor returns is stored in the
+learner's replay (its trials first), learnt from at the replay ratio, counted, logged and saved
+by the learner as its own steps are (:func:`learn_from_step`); before that the actor is asked
+for its next step, so it acts while the learner learns. An iteration is one env step of any
+actor: the curriculum, the exploration schedule, the alternation and the periodic Q*_g
+calibration follow the global count, as with one actor. Steps in flight when the run stops
+(the budget reached, a signal) are dropped; the saved state holds the steps learnt from, and a
+resumed run's actors start episodes the run has not handed out.
+
+:class:`ActorLedger` is the learner's record of its actors: the weights each holds (new ones
+are published every ``weights_refresh`` gradient steps, and at once when Q*_g changes), whether
+its episode runs, and the seeds in a row that gave it no valid scene.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+from typing import TYPE_CHECKING, Any, Callable
+
+import numpy as np
+
+from mpg_agents.acting.seeds import MAX_SKIPPED_SEEDS
+from mpg_agents.learning.actor_pool import open_actor_pool
+from mpg_agents.learning.actors import ActorSpec, ActorStep, ActRequest, Weights, weights_of
+
+if TYPE_CHECKING:
+    from mpg_agents.learning.learner import Learner
+
+
+def train_with_actors(learner: "Learner", bar: Any = None) -> None:
+    """Run ``learner``'s remaining iterations with its config's actors (``bar``: a progress bar)."""
+    c, cfg = learner.counters, learner.config
+    specs = [ActorSpec(cfg, learner.stage, a, c.iteration, learner.objects_now(c.iteration)) for a in range(cfg.actors)]
+    ledger = ActorLedger(cfg.actors, cfg.weights_refresh)
+    with open_actor_pool(cfg, specs) as pool:
+        for actor in range(min(cfg.actors, learner.steps - c.iteration)):
+            pool.submit(actor, next_request(learner, ledger, actor))
+        while pool.in_flight:
+            step = pool.next_step()
+            ledger.received(step, MAX_SKIPPED_SEEDS)
+            if step.skipped is not None:
+                learner.skipped_scene(step.episode, RuntimeError(step.skipped))
+            if c.iteration + (step.skipped is None) + pool.in_flight < learner.steps:
+                pool.submit(step.actor, next_request(learner, ledger, step.actor))
+            if step.skipped is None:
+                learn_from_step(learner, step)
+                if bar is not None:
+                    bar.update(1)
+                learner.save_or_stop()
+
+
+def next_request(learner: "Learner", ledger: "ActorLedger", actor: int) -> ActRequest:
+    """``actor``'s next request: the global epsilon and object count, the learner's weights when due."""
+    c, policy = learner.counters, learner.policy
+    if ledger.stale(c.gradient_steps, policy.q_star):
+        ledger.publish(weights_of(policy), policy.q_star, c.gradient_steps)
+
+    def next_episode() -> int:
+        c.episode += 1  # with actors: the episodes handed out (each index once, across resumes)
+        return c.episode - 1
+
+    return ledger.request(actor, learner.epsilon(), learner.objects_now(c.iteration), next_episode)
+
+
+def learn_from_step(learner: "Learner", step: ActorStep) -> None:
+    """The learner's iteration for an actor's step: its trials and the step stored, learnt from
+    (:meth:`~mpg_agents.learning.learner.Learner.learn_owed`), counted and logged; at its
+    episode's end, the stage's periodic Q*_g calibration."""
+    learning = time.perf_counter()
+    c, choice = learner.counters, step.choice
+    if choice is None:
+        raise ValueError(f"actor {step.actor} sent no step (episode {step.episode} skipped)")
+    for next_obs, action, reward, terminated in step.trials:
+        learner.store(step.obs, next_obs, action, reward, terminated)
+    for name, value in asdict(step.trial_counts).items():
+        setattr(c, name, getattr(c, name) + value)
+    learner.store(step.obs, step.next_obs, choice.action, step.reward, step.terminated)
+    loss = learner.learn_owed(2 if step.trials else 1)
+    learner.record(choice, step.reward, step.info, loss, step.choose_seconds, step.step_seconds, learning, step.episode, step.done)
+    if step.done:
+        learner.calibrate_if_due()
+
+
+
+class ActorLedger:
+    """The learner's record of its actors: which weights each holds, whether its episode runs,
+    how many seeds in a row gave it no scene; it writes their :class:`ActRequest` s.
+
+    Args:
+        actors: how many.
+        refresh: publish new weights after this many gradient steps (``TrainConfig.weights_refresh``);
+            a changed Q*_g is published at once.
+    """
+
+    def __init__(self, actors: int, refresh: int) -> None:
+        self.refresh = refresh
+        self.weights: Weights | None = None
+        self.published_at = 0  # gradient steps when ``weights`` were published
+        self.held = [0] * actors  # weight version each actor holds
+        self.running = [False] * actors  # an episode runs in the actor
+        self.skips = [0] * actors  # seeds in a row that gave the actor no valid scene
+
+    def stale(self, gradient_steps: int, q_star: float | None) -> bool:
+        """Whether the learner should :meth:`publish` before its next request."""
+        w = self.weights
+        return w is None or gradient_steps - self.published_at >= self.refresh or not _same_q_star(w.q_star, q_star)
+
+    def publish(self, state: dict[str, np.ndarray], q_star: float | None, gradient_steps: int) -> None:
+        """The weights (and Q*_g) the next requests carry to every actor that has older ones."""
+        version = 1 if self.weights is None else self.weights.version + 1
+        self.weights, self.published_at = Weights(version, state, q_star), gradient_steps
+
+    def request(self, actor: int, epsilon: float, num_objects: int | None, next_episode: Callable[[], int]) -> ActRequest:
+        """The request for ``actor``'s next step; ``next_episode()`` hands out an episode index
+        when the actor has no episode running."""
+        if self.weights is None:
+            raise RuntimeError("publish weights before the first request")
+        fresh = self.weights if self.held[actor] != self.weights.version else None
+        self.held[actor] = self.weights.version
+        return ActRequest(epsilon, num_objects, None if self.running[actor] else next_episode(), fresh)
+
+    def received(self, step: ActorStep, most_skips: int) -> None:
+        """Note what ``step`` says of its actor's episode.
+
+        Raises:
+            InvalidSceneError: more than ``most_skips`` seeds in a row gave the actor no valid scene.
+        """
+        from mpg_envs.scenes.generators import InvalidSceneError
+
+        a = step.actor
+        if step.skipped is not None:
+            self.running[a] = False
+            self.skips[a] += 1
+            if self.skips[a] > most_skips:
+                raise InvalidSceneError(f"{self.skips[a]} seeds in a row up to episode {step.episode} gave no valid scene: {step.skipped}")
+            return
+        self.skips[a] = 0
+        self.running[a] = not step.done
+
+
+def _same_q_star(a: float | None, b: float | None) -> bool:
+    return a == b or (a is not None and b is not None and np.isnan(a) and np.isnan(b))

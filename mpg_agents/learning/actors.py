@@ -1,0 +1,235 @@
+"""The acting side of training: what chooses an action, and the actor that steps its own env.
+
+The learner (:mod:`mpg_agents.learning.learner`) acts in its own process with ``TrainConfig.actors
+= 1``; with ``actors = N > 1`` (Ape-X style) N :class:`Actor` objects, each in its own process
+(:mod:`mpg_agents.learning.actor_pool`), step their own envs and send each step to the learner,
+which owns the replay, the counters, the weights, Q*_g and the checkpoints. Both sides decide
+with :func:`choose_action` and try a stage's trials with
+:func:`~mpg_agents.learning.trials.try_alternatives`, so every stage trains the same way.
+
+What the learner keeps global, it sends with each :class:`ActRequest`: epsilon of the global
+env-step counter (the exploration schedule), the curriculum's object count and the index of the
+episode to start (so every episode seed of a run is used once, and a resumed run goes on with
+new ones), and its weights with Q*_g when they are newer than the actor's. What is an episode's
+own stays with the actor: the push budget, the failed grasps before the heuristic grasp.
+An actor's generator (exploration, trials) is seeded with (run seed, actor index, the iteration
+its pool started at): a resumed run draws afresh. Each actor computes on one torch thread.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+import mpg_envs  # noqa: F401  (registers the envs in a fresh actor process)
+from mpg_agents.acting.agent import MPGAgent
+from mpg_agents.acting.discriminator import Discriminator
+from mpg_agents.acting.seeds import episode_seed
+from mpg_agents.acting.spaces import finger_geometry, geometry_of_config
+from mpg_agents.learning.exploration import Choice, Explorer
+from mpg_agents.learning.train_config import TrainConfig
+from mpg_agents.learning.training_stages import TrainingStage
+from mpg_agents.learning.trials import try_alternatives
+from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.simulation.objects import check_not_held_out
+from mpg_envs.tasks.config import EnvConfig
+
+
+# ------------------------------------------------------------------ shared by learner and actors
+def make_training_env(stage: TrainingStage, config: TrainConfig, num_objects: int | None, device: torch.device | str) -> gym.Env:
+    """The stage's training env (its rewards, the discriminator on ``device`` that scores states);
+    refuses objects held out for testing (:func:`~mpg_envs.simulation.objects.check_not_held_out`)."""
+    kwargs: dict[str, Any] = {}
+    if num_objects is not None:
+        kwargs["num_objects"] = num_objects
+    env_config = EnvConfig(reward=stage.reward_config()) if stage.reward else EnvConfig()
+    if config.discriminator is not None:
+        kwargs["grasp_scorer"] = Discriminator.from_weights(config.discriminator, geometry_of_config(env_config), device)
+    if stage.reward:
+        kwargs["config"] = env_config
+    env = gym.make(stage.env_id, **kwargs)
+    check_not_held_out("custom", env.unwrapped.object_set, f"training on {stage.env_id}")  # however they got there
+    return env
+
+
+def build_agent(stage: TrainingStage, config: TrainConfig, env: gym.Env) -> MPGAgent:
+    """A fresh agent with the stage's branches and coordination and the config's network."""
+    space = env.unwrapped
+    return MPGAgent.build(
+        space.observation_space, space.action_space, variant=config.variant, branches=stage.branches or PRIMITIVES,
+        coordination=stage.coordination, net_config=config.net_config, geometry=finger_geometry(env),
+    )
+
+
+def make_explorer(policy: MPGAgent, stage: TrainingStage, primitives: tuple[str, ...], rng: np.random.Generator, config: TrainConfig) -> Explorer:
+    """The exploration of ``policy``'s network settings (where a greedy action may act) on ``rng``."""
+    net_cfg = policy.net_config
+    return Explorer(
+        primitives, rng, config.heuristic_after_failed_grasps, random_primitive=stage.coordination == "max_q",
+        grasp_on_target=net_cfg.grasp_region in ("target", "visible"), usable=policy.usable_primitives,
+        target_margin_px=net_cfg.target_margin_px, move_band_m=net_cfg.move_band_m if net_cfg.move_region == "top" else None,
+        visible_band_m=net_cfg.visible_band_m if net_cfg.grasp_region == "visible" else None)
+
+
+def choose_action(
+    policy: MPGAgent, explorer: Explorer, stage: TrainingStage, obs: Mapping[str, np.ndarray], epsilon: float,
+    pushes_in_episode: int, failed_grasps_in_a_row: int,
+) -> Choice:
+    """The action to take: the policy's decision (a grasp forced after the stage's push budget),
+    then exploration and the training aids."""
+    budget = stage.push_budget
+    forced = "grasp" if budget is not None and pushes_in_episode >= budget and "grasp" in explorer.primitives else None
+    return explorer.choose(obs, policy.decide(obs, forced), epsilon, failed_grasps_in_a_row)
+
+
+def weights_of(policy: MPGAgent) -> dict[str, np.ndarray]:
+    """The network's weights as host arrays (what goes to the actors)."""
+    return {k: v.detach().cpu().numpy() for k, v in policy.q_net.mpgnet.state_dict().items()}
+
+
+# ------------------------------------------------------------------------------- messages
+@dataclass(frozen=True)
+class ActorSpec:
+    """What an actor builds itself from, in its own process."""
+
+    config: TrainConfig
+    stage: TrainingStage
+    index: int  # 0..actors-1
+    start_iteration: int  # the learner's iteration when the pool started (seeds the generator)
+    num_objects: int | None  # the env's object count when built (a reset asks for the curriculum's)
+
+
+@dataclass(frozen=True)
+class Weights:
+    """The learner's weights and the Q*_g they decide with, numbered."""
+
+    version: int
+    state: dict[str, np.ndarray]
+    q_star: float | None
+
+
+@dataclass(frozen=True)
+class ActRequest:
+    """One step asked of an actor, with what the learner holds global."""
+
+    epsilon: float
+    num_objects: int | None  # the curriculum's count, for a reset
+    episode: int | None  # the index of the episode to start when the actor runs none
+    weights: Weights | None = None  # newer weights than the actor's (None: keep its own)
+
+
+@dataclass
+class TrialCounts:
+    """A step's trials, counted as the learner's :class:`~mpg_agents.learning.run_state.Counters` count them."""
+
+    grasp_trials: int = 0
+    grasp_trial_targets: int = 0
+    move_trials: int = 0
+    move_trial_successes: int = 0
+    rival_trials: int = 0
+    rival_trial_clears: int = 0
+
+
+@dataclass
+class ActorStep:
+    """What an actor did for one :class:`ActRequest`: a step of episode ``episode``, or
+    ``skipped`` (why that episode's seed gave no valid scene; no step)."""
+
+    actor: int
+    episode: int
+    skipped: str | None = None
+    obs: dict[str, np.ndarray] = field(default_factory=dict)
+    choice: Choice | None = None
+    next_obs: dict[str, np.ndarray] = field(default_factory=dict)
+    reward: float = 0.0
+    terminated: bool = False
+    truncated: bool = False
+    info: dict[str, Any] = field(default_factory=dict)
+    # The stage's trials from ``obs``, stored before the step: (next_obs, action, reward, terminated).
+    trials: list[tuple[dict[str, np.ndarray], int, float, bool]] = field(default_factory=list)
+    trial_counts: TrialCounts = field(default_factory=TrialCounts)
+    choose_seconds: float = 0.0
+    step_seconds: float = 0.0
+
+    @property
+    def done(self) -> bool:
+        """The episode ended with this step."""
+        return self.terminated or self.truncated
+
+
+# ---------------------------------------------------------------------------------- actor
+class Actor:
+    """Steps its own env of the stage with the learner's weights; one :meth:`step` per request."""
+
+    def __init__(self, spec: ActorSpec) -> None:
+        torch.set_num_threads(1)
+        torch.set_flush_denormal(True)  # as the learner: a young net's denormals slow the CPU down
+        self.spec, cfg = spec, spec.config
+        self.env = make_training_env(spec.stage, cfg, spec.num_objects, "cpu")
+        self.policy = build_agent(spec.stage, cfg, self.env)
+        self.rng = np.random.default_rng([cfg.seed, spec.index, spec.start_iteration])
+        self.explorer = make_explorer(self.policy, spec.stage, tuple(self.env.unwrapped.primitives), self.rng, cfg)
+        self.version = 0
+        self.episode = -1
+        self.obs: dict[str, np.ndarray] | None = None  # None: no episode running
+        self.pushes_in_episode = self.failed_grasps_in_a_row = 0
+
+    def load(self, weights: Weights) -> None:
+        """Act with ``weights`` (and their Q*_g) from now on."""
+        self.policy.q_net.mpgnet.load_state_dict({k: torch.from_numpy(np.asarray(v)) for k, v in weights.state.items()})
+        self.policy.set_q_star(weights.q_star)
+        self.version = weights.version
+
+    def step(self, request: ActRequest) -> ActorStep:
+        """One env step (a reset first when no episode runs)."""
+        if request.weights is not None:
+            self.load(request.weights)
+        if self.version == 0:
+            raise RuntimeError(f"actor {self.spec.index}: asked to act before it was given weights")
+        if self.obs is None:
+            skipped = self._reset(request)
+            if skipped is not None:
+                return ActorStep(self.spec.index, self.episode, skipped=skipped)
+        obs = self.obs
+        assert obs is not None
+        start = time.perf_counter()
+        choice = choose_action(self.policy, self.explorer, self.spec.stage, obs, request.epsilon,
+                               self.pushes_in_episode, self.failed_grasps_in_a_row)
+        trials: list[tuple[dict[str, np.ndarray], int, float, bool]] = []
+        counts = TrialCounts()
+        try_alternatives(self.env.unwrapped, self.policy, self.spec.stage, counts, obs, choice, self.rng,
+                         lambda _, next_obs, action, reward, terminated: trials.append((next_obs, action, reward, terminated)))
+        chosen = time.perf_counter()
+        next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
+        stepped = time.perf_counter()
+        if choice.primitive == "grasp":
+            self.failed_grasps_in_a_row = 0 if info["grasp_success"] else self.failed_grasps_in_a_row + 1
+        if choice.primitive == "push":
+            self.pushes_in_episode += 1
+        self.obs = None if terminated or truncated else next_obs
+        return ActorStep(self.spec.index, self.episode, None, obs, choice, next_obs, float(reward), bool(terminated), bool(truncated),
+                         info, trials, counts, chosen - start, stepped - chosen)
+
+    def _reset(self, request: ActRequest) -> str | None:
+        """Start episode ``request.episode``; returns why its seed gave no valid scene, if it did not."""
+        from mpg_envs.scenes.generators import InvalidSceneError
+
+        if request.episode is None:
+            raise RuntimeError(f"actor {self.spec.index}: no episode runs and the request names none to start")
+        self.episode = request.episode
+        options = None if request.num_objects is None else {"num_objects": request.num_objects}
+        try:
+            self.obs, _ = self.env.reset(seed=episode_seed(self.spec.config.seed, self.episode), options=options)
+        except InvalidSceneError as exc:
+            return str(exc)
+        self.pushes_in_episode = self.failed_grasps_in_a_row = 0
+        return None
+
+    def close(self) -> None:
+        """Close the env."""
+        self.env.close()
