@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import time
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import mujoco
 import numpy as np
@@ -209,6 +210,22 @@ class World:
     def forward(self) -> None:
         mujoco.mj_forward(self.model, self.data)
 
+    @contextmanager
+    def stepping(self, timestep: float | None) -> Iterator[World]:
+        """Step with ``timestep`` (seconds; ``None``: the physics' own) inside the block, then
+        with the physics' own again: for motions only the end state of which matters (a drop)."""
+        if timestep is None or timestep == self.model.opt.timestep:
+            yield self
+            return
+        if not 0 < timestep <= 0.01:
+            raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
+        own = self.model.opt.timestep
+        self.model.opt.timestep = timestep
+        try:
+            yield self
+        finally:
+            self.model.opt.timestep = own
+
     def objects_at_rest(self) -> bool:
         """Whether every active object moves slower than the rest thresholds."""
         idx = self.active_objects()
@@ -237,8 +254,11 @@ class World:
         self.forward()
         return used
 
-    def drop_object(self, i: int, xy: Sequence[float], quat: Sequence[float], height: float | None = None) -> int:
-        """Drop object ``i`` from ``height`` above whatever is below ``xy`` and let it settle.
+    def drop_object(
+        self, i: int, xy: Sequence[float], quat: Sequence[float], height: float | None = None, max_steps: int | None = None
+    ) -> int:
+        """Drop object ``i`` from ``height`` above whatever is below ``xy`` and let it settle
+        (at most ``max_steps`` steps; ``None``: the physics' ``settle_max_steps``).
 
         The drop height is measured from the object's lowest point to the highest point of
         the scene under its footprint, so it never starts inside another object.
@@ -251,7 +271,7 @@ class World:
         lift = height + below - verts[:, 2].min()
         self.set_object_pose(i, (xy[0], xy[1], lift), quat)
         mujoco.mj_forward(self.model, self.data)
-        return self.settle()
+        return self.settle(max_steps)
 
     def _scene_top_near(self, xy: np.ndarray, exclude: int) -> float:
         lo, hi = xy.min(axis=0) - 0.01, xy.max(axis=0) + 0.01
