@@ -8,6 +8,7 @@ benchmarks can tell simulation from overhead.
 
 from __future__ import annotations
 
+import functools
 import time
 import warnings
 from contextlib import contextmanager
@@ -39,6 +40,17 @@ def arena_path() -> str:
     if not checkout.is_file():
         raise FileNotFoundError(f"arena MJCF not found in the package nor at {checkout}")
     return str(checkout)
+
+
+@functools.lru_cache(maxsize=4)
+def _arena_with_robot(robot: RobotConfig, visual: bool) -> mujoco.MjSpec:
+    """The arena with the robot attached (kept: :class:`World` adds its objects to a copy)."""
+    spec = mujoco.MjSpec.from_file(arena_path())
+    with warnings.catch_warnings():
+        # The arena already carries the gripper's impratio/cone; the attach only notices.
+        warnings.filterwarnings("ignore", message="Attach conflict")
+        spec.attach(robot_spec(robot, visual=visual), site=spec.site("robot_mount"), prefix=ROBOT_PREFIX)
+    return spec
 
 
 @dataclass(frozen=True)
@@ -96,12 +108,8 @@ class World:
         self.workspace = workspace
         self.physics = physics
         self.assets = list(objects)
-        spec = mujoco.MjSpec.from_file(arena_path())
+        spec = _arena_with_robot(robot, robot_visual).copy()  # a copy: parsing and attaching cost more than objects
         spec.option.timestep = physics.timestep
-        with warnings.catch_warnings():
-            # The arena already carries the gripper's impratio/cone; the attach only notices.
-            warnings.filterwarnings("ignore", message="Attach conflict")
-            spec.attach(robot_spec(robot, visual=robot_visual), site=spec.site("robot_mount"), prefix=ROBOT_PREFIX)
         for i, asset in enumerate(self.assets):
             pos = (self.workspace.center[0], self.workspace.center[1], self.PARK_DEPTH - i)
             body = add_object_body(spec, spec.worldbody, asset, name=f"object{i}", pos=pos)
