@@ -3,16 +3,22 @@
 Every seed's scene is dropped as a fresh reset does (``use_test_set=False``), then rebuilt
 from the saved poses in a second env and checked to give the identical observation (colour,
 depth, mask, occlusion flag) and visible fraction, so the file reproduces the generated
-start state exactly. Seeds run on a local process pool, one scene per task.
+start state exactly. Blocks of ``--block`` seeds run on a local process pool; each finished
+block is written to a shard file in ``--work`` (default ``build/test_set_work``), so a killed
+run started again with the same arguments makes only the blocks not yet done; a line per
+block gives the rate and the time left. The sets are written from the shards once all are
+made (``--partial``: now, from the finished blocks from the first seed on, making nothing).
 
     python benchmarks/make_test_sets.py --envs MPG-Occluded-v0 MPG-OccludedHard-v0 \\
-        --objects 15 30 --count 500 --workers 16 [--out mpg_envs/test_scenes]
+        --objects 15 30 --count 500 --workers 16 [--out mpg_envs/test_scenes] [--work DIR] [--partial]
 
 Each set records the digest of the code and parameters that dropped it
-(:func:`mpg_envs.tasks.scene_source.generator_digest`); a reset refuses a set whose digest is
-not the running code's. ``--stamp K`` records the running code's digest in existing sets
-without regenerating them, after checking that it drops their first ``K`` scenes identically
-(same assets, bit-identical poses, same target); the scenes themselves are not rewritten.
+(:func:`mpg_envs.tasks.scene_source.generator_digest`) and the generator settings
+(:func:`mpg_envs.scenes.test_sets.generator_meta`); a reset refuses a set whose digest is not
+the running code's, and a shard made by other code is refused too (delete it). ``--stamp K``
+records the running code's digest in existing sets without regenerating them, after checking
+that it drops their first ``K`` scenes identically (same assets, bit-identical poses, same
+target); the scenes themselves are not rewritten.
 
 A track on another object set (``MPG-OccludedHardNovel-v0``: ``object_set="random_urdfs_test"``)
 gets its own files (``occluded_hard_novel_<objects>.npz``), recording the digest of the object
@@ -23,9 +29,10 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import itertools
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -36,7 +43,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401
-from mpg_envs.scenes.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet, load_test_set, test_set_name  # noqa: E402
+from mpg_envs.scenes.test_sets import GENERATOR_VERSION, TEST_SEED_START, TestSet, generator_meta, load_test_set, test_set_name  # noqa: E402
 from mpg_envs.simulation.random_urdfs import TEST_SET_NAME, test_pack_path  # noqa: E402
 from mpg_envs.tasks.scene_source import generator_digest  # noqa: E402
 
@@ -119,6 +126,79 @@ def stamp(env_ids: list[str], counts: list[int], out: Path, check: int, workers:
     return 0
 
 
+def _shard_path(work: Path, name: str, n: int, seeds: list[int]) -> Path:
+    return work / f"{name}_{n}_{seeds[0]}-{seeds[-1]}.npz"
+
+
+def make_block(task: tuple[str, int, list[int], str, str]) -> tuple[str, int, list[int], float]:
+    """Make the scenes of a block of seeds and write them to a shard (atomically: a killed run
+    leaves whole shards only); returns the cell, the seeds and the seconds taken."""
+    env_id, n, seeds, path, digest = task
+    start = time.perf_counter()
+    rows = [make_scene((env_id, n, seed)) for seed in seeds]
+    tmp = Path(path).with_suffix(".tmp.npz")
+    np.savez_compressed(
+        tmp, digest=np.array(digest), seeds=np.array(seeds, np.int64), assets=np.array([r["assets"] for r in rows]),
+        positions=np.stack([r["positions"] for r in rows]), quats=np.stack([r["quats"] for r in rows]),
+        targets=np.array([r["target"] for r in rows], np.int16), visible_fraction=np.array([r["visible_fraction"] for r in rows], np.float64),
+        seconds=np.array([r["seconds"] for r in rows]),
+    )  # fmt: skip
+    os.replace(tmp, path)
+    return env_id, n, seeds, time.perf_counter() - start
+
+
+def read_shard(path: Path, digest: str, seeds: list[int]) -> dict[str, np.ndarray] | None:
+    """A finished shard's arrays; ``None`` when it does not exist. Raises naming the file when
+    it holds other seeds or was made by another generator (its scenes would not be this code's)."""
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as data:
+        rows = {k: data[k] for k in data.files}
+    if str(rows["digest"]) != digest or rows["seeds"].tolist() != seeds:
+        raise SystemExit(
+            f"{path}: made by another generator (digest {rows['digest']}, this code's {digest}) or for other seeds; "
+            f"delete it (or the whole work folder) to make its scenes again"
+        )
+    return rows
+
+
+def write_set(env_id: str, n: int, shards: list[dict[str, np.ndarray]], out: Path) -> Path:
+    """Merge a cell's shards (in seed order) into its test-set file and print its summary."""
+    object_set = gym.spec(env_id).kwargs.get("object_set", "blocks")
+    name = set_name(env_id)
+    env = _env(env_id, n, False)
+    test_set = TestSet(
+        name=name,
+        num_objects=n,
+        seeds=np.concatenate([r["seeds"] for r in shards]),
+        assets=np.concatenate([r["assets"] for r in shards]),
+        positions=np.concatenate([r["positions"] for r in shards]),
+        quats=np.concatenate([r["quats"] for r in shards]),
+        targets=np.concatenate([r["targets"] for r in shards]),
+        visible_fraction=np.concatenate([r["visible_fraction"] for r in shards]).astype(np.float32),
+        meta={
+            "env_id": env_id,
+            "object_set": object_set,
+            **_object_pack_meta(object_set),
+            "generator_version": str(GENERATOR_VERSION),
+            "generator_digest": generator_digest(env.scene_request),
+            **generator_meta(env.config.generator),
+            "package_version": getattr(mpg_envs, "__version__", "unknown"),
+            "mujoco_version": mujoco.__version__,
+        },
+    )
+    path = test_set.save(out / f"{name}_{n}.npz")
+    secs = np.concatenate([r["seconds"] for r in shards])
+    vis = test_set.visible_fraction
+    print(
+        f"{path}: {len(test_set)} scenes, generation median {np.median(secs):.2f} s/scene (mean {secs.mean():.2f}); visible "
+        f"fraction median {np.median(vis):.2f}, quartiles {np.quantile(vis, 0.25):.2f}-{np.quantile(vis, 0.75):.2f}, "
+        f"max {vis.max():.2f}; {path.stat().st_size / 1024:.0f} kB",
+        flush=True,
+    )
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", nargs="+", default=["MPG-Occluded-v0", "MPG-OccludedHard-v0"])
@@ -127,54 +207,50 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=TEST_SEED_START, help="first seed")
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--out", default=str(Path(mpg_envs.__file__).parent / "test_scenes"))
+    parser.add_argument("--work", default="build/test_set_work", help="folder of the finished blocks of seeds (a run resumes from them)")
+    parser.add_argument("--block", type=int, default=10, help="seeds per block (one shard file each)")
+    parser.add_argument("--partial", action="store_true", help="make nothing: write each set from its finished blocks (the seeds from the first on, up to the first missing block)")
     parser.add_argument("--stamp", type=int, metavar="K", help="record the digest in the existing sets after checking their first K scenes")
     args = parser.parse_args(argv)
     if args.stamp is not None:
         return stamp(args.envs, args.objects, Path(args.out), args.stamp, args.workers)
-    out = Path(args.out)
+    if args.count < 1 or args.block < 1 or args.workers < 1:
+        parser.error("--count, --block and --workers must be at least 1")
+    out, work = Path(args.out), Path(args.work)
     out.mkdir(parents=True, exist_ok=True)
-    tasks = [(e, n, args.seed + i) for e in args.envs for n in args.objects for i in range(args.count)]
-    start = time.perf_counter()
+    work.mkdir(parents=True, exist_ok=True)
+    cells = [(e, n) for e in args.envs for n in args.objects]
+    blocks: dict[tuple[str, int], list[tuple[list[int], Path, str]]] = {}
+    for e, n in cells:
+        digest = generator_digest(_env(e, n, False).scene_request)
+        seeds = list(range(args.seed, args.seed + args.count))
+        chunks = [seeds[k : k + args.block] for k in range(0, len(seeds), args.block)]
+        blocks[(e, n)] = [(c, _shard_path(work, set_name(e), n, c), digest) for c in chunks]
+    if args.partial:
+        for (e, n), bs in blocks.items():
+            shards = list(itertools.takewhile(lambda r: r is not None, (read_shard(p, d, c) for c, p, d in bs)))
+            if shards:
+                write_set(e, n, shards, out)
+            print(f"{e} {n} objects: {sum(len(r['seeds']) for r in shards)} of {args.count} scenes made", flush=True)
+        return 0
+    todo = [(e, n, c, str(p), d) for (e, n), bs in blocks.items() for c, p, d in bs if read_shard(p, d, c) is None]
+    total = len(cells) * args.count
+    remaining = sum(len(t[2]) for t in todo)
+    print(f"{total - remaining}/{total} scenes already made (in {work}); making {remaining} with {args.workers} workers", flush=True)
+    start, made = time.perf_counter(), 0
     with ProcessPoolExecutor(args.workers) as pool:
-        scenes = []
-        for scene in pool.map(make_scene, tasks, chunksize=1):
-            scenes.append(scene)
-            if len(scenes) % 50 == 0:  # progress of long runs, in task order
-                print(f"{len(scenes)}/{len(tasks)} scenes, {time.perf_counter() - start:.0f} s", flush=True)
-    for env_id in args.envs:
-        object_set = gym.spec(env_id).kwargs.get("object_set", "blocks")
-        name = set_name(env_id)
-        for n in args.objects:
-            rows = [s for (e, m, _), s in zip(tasks, scenes) if e == env_id and m == n]
-            test_set = TestSet(
-                name=name,
-                num_objects=n,
-                seeds=np.array([r["seed"] for r in rows]),
-                assets=np.array([r["assets"] for r in rows]),
-                positions=np.stack([r["positions"] for r in rows]),
-                quats=np.stack([r["quats"] for r in rows]),
-                targets=np.array([r["target"] for r in rows]),
-                visible_fraction=np.array([r["visible_fraction"] for r in rows], np.float32),
-                meta={
-                    "env_id": env_id,
-                    "object_set": object_set,
-                    **_object_pack_meta(object_set),
-                    "generator_version": str(GENERATOR_VERSION),
-                    "generator_digest": generator_digest(_env(env_id, n, False).scene_request),
-                    "package_version": getattr(mpg_envs, "__version__", "unknown"),
-                    "mujoco_version": mujoco.__version__,
-                },
-            )
-            path = test_set.save(out / f"{name}_{n}.npz")
-            secs = np.array([r["seconds"] for r in rows])
-            vis = test_set.visible_fraction
+        for env_id, n, seeds, seconds in (f.result() for f in as_completed([pool.submit(make_block, t) for t in todo])):
+            made += len(seeds)
+            elapsed = time.perf_counter() - start
+            rate = made / elapsed
             print(
-                f"{path}: {len(rows)} scenes, generation median {np.median(secs):.2f} s/scene; visible fraction "
-                f"median {np.median(vis):.2f}, quartiles {np.quantile(vis, 0.25):.2f}-{np.quantile(vis, 0.75):.2f}, "
-                f"max {vis.max():.2f}; {path.stat().st_size / 1024:.0f} kB",
+                f"{env_id} {n} objects seeds {seeds[0]}-{seeds[-1]}: {seconds / len(seeds):.1f} s/scene; {total - remaining + made}/{total} "
+                f"scenes, {rate * 60:.1f} scenes/min this run, ETA {(remaining - made) / rate / 60:.0f} min",
                 flush=True,
             )
-    print(f"{len(tasks)} scenes in {time.perf_counter() - start:.0f} s with {args.workers} workers")
+    for (e, n), bs in blocks.items():
+        write_set(e, n, [read_shard(p, d, c) for c, p, d in bs], out)
+    print(f"{remaining} scenes made in {time.perf_counter() - start:.0f} s with {args.workers} workers")
     return 0
 
 

@@ -31,9 +31,13 @@ import mujoco
 import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
+from mpg_envs.perception.ray_culling import pixels_under_boxes, world_boxes
 
 VISIBLE_GEOM_GROUPS: tuple[int, ...] = (0, 1)
 """Geom groups seen by the heightmaps: the table (0) and the objects (1)."""
+
+_STATIC_CASTS: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+"""The rays' results against the static geoms alone, per layout of those geoms (a few kept)."""
 
 DEFAULT_SOURCE_HEIGHT = 1000.0
 """Height (m) above the table of the common origin of all rays of
@@ -174,6 +178,12 @@ class RaycastHeightmapper:
     threads work on private copies of ``data`` (``mj_copyData``); ``data`` is never
     modified.
 
+    Only the rays under a moving geom's bounding box are cast
+    (:mod:`mpg_envs.perception.ray_culling`); every other ray sees only the geoms welded to
+    the world (the table), whose result is cast once per process and layout of those geoms
+    and kept (with the moving geoms hidden for that one cast). Each ray's result is MuJoCo's
+    own, so the heightmaps are the same, bit for bit, as casting every ray (:meth:`cast_all`).
+
     Bound to one compiled model: build a new one when the model is recompiled
     (construction is cheap; the ray directions are cached per workspace). One instance
     must not be called from several threads at once (it reuses its scratch data).
@@ -224,15 +234,16 @@ class RaycastHeightmapper:
         # The extra last row is the colour of geom id -1 (no hit): plain indexing does it.
         self._palette = np.concatenate([colors, background.astype(np.uint8)[None]])
 
-        self._origin, dirs = _ray_directions(self.workspace, self.source_height)
-        self._num_rays = dirs.shape[0]
-        # Thread k takes image rows k, k + n, k + 2n, ...: clutter is often bunched in one
-        # part of the workspace, and interleaved rows share it evenly.
-        row_of_ray = np.arange(self._num_rays) // self.workspace.shape[1]
-        self._ray_ids = [np.flatnonzero(row_of_ray % self.num_threads == k) for k in range(self.num_threads)]
-        # Writable contiguous copies, so the binding can pass them to C without copying.
-        self._vec = [dirs[ids].reshape(-1).copy() for ids in self._ray_ids]
-        self._vec_z = dirs[:, 2].copy()
+        self._origin, self._dirs = _ray_directions(self.workspace, self.source_height)
+        self._num_rays = self._dirs.shape[0]
+        self._vec_z = self._dirs[:, 2]
+        # The largest horizontal-to-vertical ratio of the rays: how far they slant.
+        self._slant = float(np.max(np.hypot(self._dirs[:, 0], self._dirs[:, 1]) / np.abs(self._dirs[:, 2])))
+        visible = self.geomgroup[model.geom_group] > 0
+        welded = (model.body_weldid[model.geom_bodyid] == 0) & (model.body_mocapid[model.geom_bodyid] < 0)
+        self._static_geoms = np.flatnonzero(visible & welded)
+        self._moving_geoms = np.flatnonzero(~welded)  # visible or not now: objects change group when removed
+        self._hidden_group = int(np.flatnonzero(self.geomgroup == 0)[0])
         self._scratch = [mujoco.MjData(model) for _ in range(self.num_threads - 1)]
         self._pool = ThreadPoolExecutor(self.num_threads - 1) if self.num_threads > 1 else None
 
@@ -246,52 +257,91 @@ class RaycastHeightmapper:
 
     def cast(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         """Raw ray results: ``(geom_id, world_z)``, both of heightmap shape; ``geom_id`` is
-        -1 and ``world_z`` is NaN where the ray hits nothing."""
+        -1 and ``world_z`` is NaN where the ray hits nothing. The rays no moving geom can
+        reach take the kept result of the static geoms (see the class docstring)."""
+        self._check_data(data)
+        moving = self._moving_geoms[self.geomgroup[self.model.geom_group[self._moving_geoms]] > 0]
+        lo, hi = world_boxes(self.model.geom_aabb[moving], data.geom_xpos[moving], data.geom_xmat[moving])
+        ids = np.flatnonzero(pixels_under_boxes(self.workspace, lo, hi, self._slant).ravel())
+        static_id, static_dist = self._static_cast(data)
+        geom_id, dist = static_id.copy(), static_dist.copy()
+        geom_id[ids], dist[ids] = self._cast_rays(data, ids)
+        return self._results(geom_id, dist)
+
+    def cast_all(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`cast` with every ray cast against every visible geom (no culling, nothing
+        kept): the reference :meth:`cast` equals, bit for bit."""
+        self._check_data(data)
+        return self._results(*self._cast_rays(data, np.arange(self._num_rays)))
+
+    def _check_data(self, data: mujoco.MjData) -> None:
         if data.geom_xpos.shape[0] != self.model.ngeom:
             raise ValueError(
                 f"data belongs to a model with {data.geom_xpos.shape[0]} geoms, this "
                 f"heightmapper's model has {self.model.ngeom}: build a new RaycastHeightmapper"
             )
-        geom_id = np.empty(self._num_rays, dtype=np.int32)
-        dist = np.empty(self._num_rays, dtype=np.float64)
+
+    def _results(self, geom_id: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        world_z = np.where(geom_id >= 0, self._origin[2] + dist * self._vec_z, np.nan)
+        return geom_id.reshape(self.workspace.shape), world_z.reshape(self.workspace.shape)
+
+    def _static_cast(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        """Every ray against the static geoms alone, kept per process for their layout (ids,
+        types, groups, sizes, meshes and height fields, poses, colours' alpha) and the rays."""
+        m, g = self.model, self._static_geoms
+        shapes = [m.mesh_vert[m.mesh_vertadr[k] : m.mesh_vertadr[k] + m.mesh_vertnum[k]] for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]]
+        shapes += [m.mesh_face[m.mesh_faceadr[k] : m.mesh_faceadr[k] + m.mesh_facenum[k]] for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]]
+        shapes += [m.hfield_data[m.hfield_adr[k] : m.hfield_adr[k] + m.hfield_nrow[k] * m.hfield_ncol[k]] for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_HFIELD]]
+        ray_setup = np.array([self.source_height, *self.workspace.shape, self.workspace.resolution, self.workspace.x_min, self.workspace.y_min, self.workspace.z_min])
+        key = b"".join(
+            np.ascontiguousarray(a).tobytes()
+            for a in (g, m.geom_type[g], m.geom_group[g], m.geom_size[g], m.geom_aabb[g], m.geom_rgba[g, 3], data.geom_xpos[g], data.geom_xmat[g],
+                      *shapes, self._origin, self.geomgroup, ray_setup)
+        )  # fmt: skip
+        kept = _STATIC_CASTS.get(key)
+        if kept is None:
+            groups = m.geom_group[self._moving_geoms].copy()
+            m.geom_group[self._moving_geoms] = self._hidden_group
+            try:
+                kept = self._cast_rays(data, np.arange(self._num_rays))
+            finally:
+                m.geom_group[self._moving_geoms] = groups
+            for a in kept:
+                a.setflags(write=False)
+            if len(_STATIC_CASTS) >= 8:
+                _STATIC_CASTS.pop(next(iter(_STATIC_CASTS)))
+            _STATIC_CASTS[key] = kept
+        return kept
+
+    def _cast_rays(self, data: mujoco.MjData, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(geom_id, dist)`` of the rays ``ids`` (MuJoCo's ``mj_multiRay``, split over the threads)."""
+        geom_id = np.empty(ids.size, dtype=np.int32)
+        dist = np.empty(ids.size, dtype=np.float64)
         # Cutoff is compared with geom distances from the origin (metres), not with dist.
         cutoff = float(mujoco.mjMAXVAL)
+        # Thread k takes every n-th of the rays (image rows come in order): clutter is often
+        # bunched in one part of the workspace, and interleaved rays share it evenly.
+        parts = [np.arange(k, ids.size, self.num_threads) for k in range(self.num_threads)]
 
         def run(k: int, d: mujoco.MjData) -> None:
-            ids = self._ray_ids[k]
-            ids_geom = np.empty(ids.size, dtype=np.int32)
-            ids_dist = np.empty(ids.size, dtype=np.float64)
-            mujoco.mj_multiRay(
-                self.model,
-                d,
-                self._origin,
-                self._vec[k],
-                self.geomgroup,
-                1,
-                -1,
-                ids_geom,
-                ids_dist,
-                None,
-                ids.size,
-                cutoff,
-            )
-            geom_id[ids] = ids_geom
-            dist[ids] = ids_dist
+            part = parts[k]
+            if part.size == 0:
+                return
+            vec = self._dirs[ids[part]].reshape(-1).copy()  # contiguous: passed to C without a copy
+            part_geom = np.empty(part.size, dtype=np.int32)
+            part_dist = np.empty(part.size, dtype=np.float64)
+            mujoco.mj_multiRay(self.model, d, self._origin, vec, self.geomgroup, 1, -1, part_geom, part_dist, None, part.size, cutoff)
+            geom_id[part] = part_geom
+            dist[part] = part_dist
 
         # Copy before any ray uses data's stack: mj_copyData refuses a busy stack.
         for scratch in self._scratch:
             mujoco.mj_copyData(scratch, self.model, data)
-        futures = (
-            [self._pool.submit(run, k, self._scratch[k - 1]) for k in range(1, self.num_threads)]
-            if self._pool
-            else []
-        )
+        futures = [self._pool.submit(run, k, self._scratch[k - 1]) for k in range(1, self.num_threads)] if self._pool else []
         run(0, data)
         for future in futures:
             future.result()
-        hit = geom_id >= 0
-        world_z = np.where(hit, self._origin[2] + dist * self._vec_z, np.nan)
-        return geom_id.reshape(self.workspace.shape), world_z.reshape(self.workspace.shape)
+        return geom_id, dist
 
     def heightmaps(self, data: mujoco.MjData, colors: np.ndarray | None = None) -> Heightmaps:
         """Heightmaps of the current state (``data`` after ``mj_forward`` or a step).

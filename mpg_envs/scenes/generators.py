@@ -58,6 +58,23 @@ class GeneratorConfig:
     redrop_rounds: int = 4  # rounds of re-dropping the objects that left the workspace
     buried_occluders: int = 3  # buried scenes: objects dropped right onto the target after it
     bury_offset: float = 0.015  # ... each landing within this of the target's centre
+    bury_height: float | None = None  # ... dropped from this height above the pile (None: PhysicsConfig.drop_height)
+    buried_candidates: int = 1  # buried scenes: the first k dropped may be the target (the buried one first)
+    drop_settle_steps: int | None = None  # settling cap after each drop (None: PhysicsConfig.settle_max_steps)
+    drop_timestep: float | None = None  # the physics' timestep while objects drop (None: PhysicsConfig.timestep)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.buried_candidates, bool) or not isinstance(self.buried_candidates, int) or self.buried_candidates < 1:
+            raise ValueError(f"GeneratorConfig.buried_candidates must be an integer >= 1, got {self.buried_candidates!r}")
+        steps = self.drop_settle_steps
+        if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or steps < 1):
+            raise ValueError(f"GeneratorConfig.drop_settle_steps must be None or an integer >= 1, got {steps!r}")
+
+
+def _drop(world: World, cfg: GeneratorConfig, i: int, xy: np.ndarray, quat: np.ndarray, height: float | None = None) -> int:
+    """Drop object ``i`` and let it settle for at most ``cfg.drop_settle_steps`` steps of ``cfg.drop_timestep``."""
+    with world.stepping(cfg.drop_timestep):
+        return world.drop_object(i, xy, quat, height=height, max_steps=cfg.drop_settle_steps)
 
 
 def random_quat(rng: np.random.Generator) -> np.ndarray:
@@ -100,7 +117,7 @@ def _cluster_point(center: np.ndarray, radius: float, rng: np.random.Generator) 
 def scattered(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage I: every object dropped apart from the others; the mask shows them all."""
     for i, p in enumerate(_points_apart(world, rng, world.num_objects, cfg.apart_distance, cfg)):
-        world.drop_object(i, p, random_quat(rng))
+        _drop(world, cfg, i, p, random_quat(rng))
     return SceneLayout((), lambda: _uniform_point(world, rng, cfg.edge_margin))
 
 
@@ -113,25 +130,25 @@ def isolated_target(world: World, rng: np.random.Generator, cfg: GeneratorConfig
     best = max(range(n), key=lambda k: min((np.linalg.norm(points[k] - q) for j, q in enumerate(points) if j != k), default=1.0))
     points[target], points[best] = points[best], points[target]
     for i, p in enumerate(points):
-        world.drop_object(i, p, random_quat(rng))
+        _drop(world, cfg, i, p, random_quat(rng))
     return SceneLayout((target,), lambda: _uniform_point(world, rng, cfg.edge_margin))
 
 
 def occluded_target(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage III: an occluder dropped onto the target, more objects nearby as they grow."""
     center = _uniform_point(world, rng, cfg.edge_margin + 0.03)
-    world.drop_object(0, center, yaw_quat(rng))
+    _drop(world, cfg, 0, center, yaw_quat(rng))
     offset = _cluster_point(np.zeros(2), cfg.occluder_offset, rng)
-    world.drop_object(1, center + offset, random_quat(rng), height=0.05)
+    _drop(world, cfg, 1, center + offset, random_quat(rng), height=0.05)
     for i in range(2, world.num_objects):
-        world.drop_object(i, _cluster_point(center, 2 * cfg.cluster_radius, rng), random_quat(rng))
+        _drop(world, cfg, i, _cluster_point(center, 2 * cfg.cluster_radius, rng), random_quat(rng))
     return SceneLayout((0,), lambda: _cluster_point(center, 2 * cfg.cluster_radius, rng))
 
 
 def surrounded_target(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
     """Stage IV: the target boxed in by neighbours on all sides, none on top of it."""
     center = _uniform_point(world, rng, cfg.edge_margin + 0.05)
-    world.drop_object(0, center, yaw_quat(rng), height=0.02)
+    _drop(world, cfg, 0, center, yaw_quat(rng), height=0.02)
     target_radius = 0.5 * float(np.max(world.assets[0].extents[:2]))
     n = world.num_objects - 1
     phase = rng.uniform(0, 2 * math.pi)
@@ -139,7 +156,7 @@ def surrounded_target(world: World, rng: np.random.Generator, cfg: GeneratorConf
         a = phase + 2 * math.pi * k / n
         radius = target_radius + 0.5 * float(np.min(world.assets[k + 1].extents[:2])) + cfg.surround_gap
         p = center + radius * np.array([math.cos(a), math.sin(a)])
-        world.drop_object(k + 1, p, yaw_quat(rng), height=0.02)
+        _drop(world, cfg, k + 1, p, yaw_quat(rng), height=0.02)
     # A neighbour that rolled away can't be put back in the ring: the stage's surround check decides.
     return SceneLayout((0,), lambda: _cluster_point(center, 3 * target_radius, rng))
 
@@ -148,7 +165,7 @@ def clustered(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> S
     """Stage V: all objects dropped close together; the target is the 1st or 2nd dropped."""
     center = _uniform_point(world, rng, cfg.edge_margin + cfg.cluster_radius)
     for i in range(world.num_objects):
-        world.drop_object(i, _cluster_point(center, cfg.cluster_radius, rng), random_quat(rng))
+        _drop(world, cfg, i, _cluster_point(center, cfg.cluster_radius, rng), random_quat(rng))
     return SceneLayout(tuple(int(k) for k in rng.permutation(2)), lambda: _cluster_point(center, cfg.cluster_radius, rng))
 
 
@@ -156,7 +173,7 @@ def test_cluster(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -
     """Test scenes: 15 or 30 objects close together; the target one of the first five."""
     center = _uniform_point(world, rng, cfg.edge_margin + cfg.test_cluster_radius)
     for i in range(world.num_objects):
-        world.drop_object(i, _cluster_point(center, cfg.test_cluster_radius, rng), random_quat(rng))
+        _drop(world, cfg, i, _cluster_point(center, cfg.test_cluster_radius, rng), random_quat(rng))
     first = rng.permutation(min(5, world.num_objects))
     return SceneLayout(tuple(int(k) for k in first), lambda: _cluster_point(center, cfg.test_cluster_radius, rng))
 
@@ -165,13 +182,16 @@ def _buried(world: World, rng: np.random.Generator, cfg: GeneratorConfig, radius
     """The target (object 0) dropped flat at a cluster's centre, ``cfg.buried_occluders``
     objects dropped onto it, the rest around it within ``radius``."""
     center = _uniform_point(world, rng, cfg.edge_margin + radius)
-    world.drop_object(0, center, yaw_quat(rng))
+    _drop(world, cfg, 0, center, yaw_quat(rng))
     for i in range(1, world.num_objects):
         if i <= cfg.buried_occluders:
-            world.drop_object(i, center + _cluster_point(np.zeros(2), cfg.bury_offset, rng), random_quat(rng))
+            _drop(world, cfg, i, center + _cluster_point(np.zeros(2), cfg.bury_offset, rng), random_quat(rng), cfg.bury_height)
         else:
-            world.drop_object(i, _cluster_point(center, radius, rng), random_quat(rng))
-    return SceneLayout((0,), lambda: _cluster_point(center, radius, rng))
+            _drop(world, cfg, i, _cluster_point(center, radius, rng), random_quat(rng))
+    # Later candidates (the occluders, then the next drop) are tried in random order after the buried one.
+    k = min(cfg.buried_candidates, world.num_objects)
+    others = tuple(int(j) for j in 1 + rng.permutation(k - 1)) if k > 1 else ()
+    return SceneLayout((0, *others), lambda: _cluster_point(center, radius, rng))
 
 
 def buried_cluster(world: World, rng: np.random.Generator, cfg: GeneratorConfig) -> SceneLayout:
@@ -213,7 +233,7 @@ def keep_inside(world: World, rng: np.random.Generator, layout: SceneLayout, cfg
         for i in astray:
             world.remove_object(int(i))
         for i in astray:
-            world.drop_object(int(i), layout.redrop(), random_quat(rng))
+            _drop(world, cfg, int(i), layout.redrop(), random_quat(rng))
         redropped.update(int(i) for i in astray)
     return None  # not reached: the last round returns
 

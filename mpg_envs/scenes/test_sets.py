@@ -21,13 +21,15 @@ set, when the code that drops scenes has changed since.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+import json
+from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from mpg_envs.scenes.generators import GeneratorConfig
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 from mpg_envs.grid.workspace import Workspace
@@ -119,6 +121,13 @@ class TestSet:
             objects.append(SceneObject(by_name[name], self.positions[k, i], self.quats[k, i], True, f"object {i} ({name!r})"))
         return SceneFile(tuple(objects), int(self.targets[k]), f"{self.name}_{self.num_objects}:{seed}", simulated=True)
 
+    @property
+    def generator_config(self) -> GeneratorConfig:
+        """The generator settings the set's scenes were dropped with (recorded by
+        :func:`generator_meta`; a set that records none was made with the defaults)."""
+        recorded = self.meta.get("generator_config")
+        return GeneratorConfig() if recorded is None else GeneratorConfig(**json.loads(recorded))
+
     def check_made_by(self, digest: str) -> None:
         """Raise :class:`StaleTestSetError` unless the set was made by generator version
         :data:`GENERATOR_VERSION` with code and parameters of ``digest``."""
@@ -149,6 +158,12 @@ class TestSet:
             meta_values=np.array([str(v) for v in meta.values()], dtype=str),
         )
         return path
+
+
+def generator_meta(generator: GeneratorConfig) -> dict[str, str]:
+    """The metadata entry recording the generator settings a set is made with (read back by
+    :attr:`TestSet.generator_config`): a reset asking for other settings drops its own scenes."""
+    return {"generator_config": json.dumps(asdict(generator), sort_keys=True)}
 
 
 def load_test_set(path: str | Path) -> TestSet:

@@ -32,6 +32,20 @@ def part_mesh_name(vertices: np.ndarray, faces: np.ndarray) -> str:
     return f"part/{digest.hexdigest()}"
 
 
+def mesh_file_name(mesh_name: str) -> str:
+    """The in-memory file name of the mesh ``mesh_name`` (:func:`part_mesh_name`) in a spec's assets."""
+    return mesh_name.replace("/", "_") + ".msh"
+
+
+def msh_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """A convex part as a MuJoCo binary ``.msh`` file: the counts of vertices, normals,
+    texture coordinates and faces (int32), then the vertices as float32 and the faces as int32
+    (MuJoCo keeps mesh vertices as float32, so this is the mesh it would be given otherwise)."""
+    vertices = np.ascontiguousarray(vertices, np.float32).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, np.int32).reshape(-1, 3)
+    return np.array([len(vertices), 0, 0, len(faces)], np.int32).tobytes() + vertices.tobytes() + faces.tobytes()
+
+
 def add_object_body(
     spec: mujoco.MjSpec,
     parent: mujoco.MjsBody,
@@ -44,7 +58,8 @@ def add_object_body(
 
     Uses one mesh asset per convex part of the asset, shared by every body of the same
     shape (named by a digest of the part's vertices and faces, so compiling a scene of 30
-    objects processes each distinct part once); a body ``name`` at
+    objects processes each distinct part once, and given as an in-memory ``.msh`` file, so
+    MuJoCo's asset cache keeps it processed for the next compile); a body ``name`` at
     ``pos``/``quat`` (relative to ``parent``) with a free joint ``f"{name}/joint"``; and one
     mesh geom ``f"{name}/geom{i}"`` per part: group :data:`OBJECT_GEOM_GROUP`,
     contype/conaffinity 1, condim :data:`OBJECT_CONDIM`, friction
@@ -67,11 +82,12 @@ def add_object_body(
     for i, ((vertices, faces), part_mass) in enumerate(zip(asset.parts, masses)):
         mesh_name = part_mesh_name(vertices, faces)
         if spec.mesh(mesh_name) is None:
-            mesh = spec.add_mesh(
-                name=mesh_name,
-                uservert=vertices.ravel().tolist(),
-                userface=faces.ravel().tolist(),
-            )
+            # An in-memory mesh file: MuJoCo's compiler keeps the processed mesh (hull,
+            # inertia) in its asset cache by file name, so a later world with the same part
+            # compiles it in microseconds; the name is a digest of the part, never reused.
+            file = mesh_file_name(mesh_name)
+            spec.assets[file] = msh_bytes(vertices, faces)
+            mesh = spec.add_mesh(name=mesh_name, file=file)
             mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
         body.add_geom(
             name=f"{name}/geom{i}",

@@ -8,12 +8,14 @@ benchmarks can tell simulation from overhead.
 
 from __future__ import annotations
 
+import functools
 import time
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import mujoco
 import numpy as np
@@ -38,6 +40,17 @@ def arena_path() -> str:
     if not checkout.is_file():
         raise FileNotFoundError(f"arena MJCF not found in the package nor at {checkout}")
     return str(checkout)
+
+
+@functools.lru_cache(maxsize=4)
+def _arena_with_robot(robot: RobotConfig, visual: bool) -> mujoco.MjSpec:
+    """The arena with the robot attached (kept: :class:`World` adds its objects to a copy)."""
+    spec = mujoco.MjSpec.from_file(arena_path())
+    with warnings.catch_warnings():
+        # The arena already carries the gripper's impratio/cone; the attach only notices.
+        warnings.filterwarnings("ignore", message="Attach conflict")
+        spec.attach(robot_spec(robot, visual=visual), site=spec.site("robot_mount"), prefix=ROBOT_PREFIX)
+    return spec
 
 
 @dataclass(frozen=True)
@@ -95,12 +108,8 @@ class World:
         self.workspace = workspace
         self.physics = physics
         self.assets = list(objects)
-        spec = mujoco.MjSpec.from_file(arena_path())
+        spec = _arena_with_robot(robot, robot_visual).copy()  # a copy: parsing and attaching cost more than objects
         spec.option.timestep = physics.timestep
-        with warnings.catch_warnings():
-            # The arena already carries the gripper's impratio/cone; the attach only notices.
-            warnings.filterwarnings("ignore", message="Attach conflict")
-            spec.attach(robot_spec(robot, visual=robot_visual), site=spec.site("robot_mount"), prefix=ROBOT_PREFIX)
         for i, asset in enumerate(self.assets):
             pos = (self.workspace.center[0], self.workspace.center[1], self.PARK_DEPTH - i)
             body = add_object_body(spec, spec.worldbody, asset, name=f"object{i}", pos=pos)
@@ -209,6 +218,22 @@ class World:
     def forward(self) -> None:
         mujoco.mj_forward(self.model, self.data)
 
+    @contextmanager
+    def stepping(self, timestep: float | None) -> Iterator[World]:
+        """Step with ``timestep`` (seconds; ``None``: the physics' own) inside the block, then
+        with the physics' own again: for motions only the end state of which matters (a drop)."""
+        if timestep is None or timestep == self.model.opt.timestep:
+            yield self
+            return
+        if not 0 < timestep <= 0.01:
+            raise ValueError(f"timestep must be in (0, 0.01] s, got {timestep!r}")
+        own = self.model.opt.timestep
+        self.model.opt.timestep = timestep
+        try:
+            yield self
+        finally:
+            self.model.opt.timestep = own
+
     def objects_at_rest(self) -> bool:
         """Whether every active object moves slower than the rest thresholds."""
         idx = self.active_objects()
@@ -237,8 +262,11 @@ class World:
         self.forward()
         return used
 
-    def drop_object(self, i: int, xy: Sequence[float], quat: Sequence[float], height: float | None = None) -> int:
-        """Drop object ``i`` from ``height`` above whatever is below ``xy`` and let it settle.
+    def drop_object(
+        self, i: int, xy: Sequence[float], quat: Sequence[float], height: float | None = None, max_steps: int | None = None
+    ) -> int:
+        """Drop object ``i`` from ``height`` above whatever is below ``xy`` and let it settle
+        (at most ``max_steps`` steps; ``None``: the physics' ``settle_max_steps``).
 
         The drop height is measured from the object's lowest point to the highest point of
         the scene under its footprint, so it never starts inside another object.
@@ -251,7 +279,7 @@ class World:
         lift = height + below - verts[:, 2].min()
         self.set_object_pose(i, (xy[0], xy[1], lift), quat)
         mujoco.mj_forward(self.model, self.data)
-        return self.settle()
+        return self.settle(max_steps)
 
     def _scene_top_near(self, xy: np.ndarray, exclude: int) -> float:
         lo, hi = xy.min(axis=0) - 0.01, xy.max(axis=0) + 0.01

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -53,7 +53,9 @@ def observation_space(workspace: Workspace = Workspace()) -> spaces.Dict:
 
 def config_of(config: EnvConfig | dict[str, Any]) -> EnvConfig:
     """``config`` as an :class:`EnvConfig`: itself, or a dict of field overrides (how a
-    registered track names its settings without importing the simulator at registration)."""
+    registered track names its settings without importing the simulator at registration);
+    a field that is a settings dataclass (``generator``, ``physics``, ...) may be a dict of
+    its own field overrides."""
     if isinstance(config, EnvConfig):
         return config
     if isinstance(config, dict):
@@ -61,5 +63,19 @@ def config_of(config: EnvConfig | dict[str, Any]) -> EnvConfig:
         unknown = sorted(set(config) - valid)
         if unknown:
             raise ValueError(f"config has unknown EnvConfig fields {unknown}; valid: {sorted(valid)}")
-        return replace(EnvConfig(), **config)
+        default = EnvConfig()
+        # A nested settings dataclass may be named as a dict of its fields too (``{"generator": {...}}``).
+        return replace(default, **{k: _fields_of(getattr(default, k), v, k) for k, v in config.items()})
     raise TypeError(f"config must be an EnvConfig or a dict of its fields, got {type(config).__name__}")
+
+
+def _fields_of(default: Any, value: Any, name: str) -> Any:
+    """``value`` for the field ``name`` whose default is ``default``: a dict becomes ``default``
+    with those fields replaced when ``default`` is a dataclass."""
+    if not (isinstance(value, dict) and is_dataclass(default)):
+        return value
+    valid = {f.name for f in fields(default)}
+    unknown = sorted(set(value) - valid)
+    if unknown:
+        raise ValueError(f"config[{name!r}] has unknown {type(default).__name__} fields {unknown}; valid: {sorted(valid)}")
+    return replace(default, **value)

@@ -32,7 +32,7 @@ from typing import Sequence
 from mpg_envs.scenes import generators
 
 from mpg_envs.perception.occlusion import in_band, surrounded_sectors
-from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, GeneratorConfig, keep_inside
+from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, keep_inside
 from mpg_envs.scenes.scene_io import SceneFile
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.tasks.config import EnvConfig
@@ -131,9 +131,7 @@ def scene_from_test_set(request: SceneRequest, seed: int | None) -> SceneFile | 
     stage, config = request.stage, request.config
     if seed is None or not request.use_test_set or stage.test_set is None:
         return None
-    if config.generator != GeneratorConfig() or config.object_set_seed != 0:
-        return None
-    if request.visible_range != stage.visible_range:
+    if config.object_set_seed != 0 or request.visible_range != stage.visible_range:
         return None
     from mpg_envs.scenes.test_sets import TEST_SET_WORKSPACE, find_test_set, test_set_name
 
@@ -141,7 +139,7 @@ def scene_from_test_set(request: SceneRequest, seed: int | None) -> SceneFile | 
     if config.workspace != TEST_SET_WORKSPACE or name is None:
         return None
     test_set = find_test_set(name, request.num_objects)
-    if test_set is None or not test_set.has_seed(seed):
+    if test_set is None or not test_set.has_seed(seed) or config.generator != test_set.generator_config:
         return None
     test_set.check_made_by(generator_digest(request))
     return test_set.scene(seed, request.object_set)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401  (registers the ids)
+from mpg_envs.scenes.generators import GeneratorConfig
 from mpg_envs.scenes.scene_io import read_scene, save_scene
 from mpg_envs.scenes.test_sets import TEST_SEED_START, find_test_set, test_set_name
 from mpg_envs.simulation import meshes, random_urdfs
@@ -23,7 +24,7 @@ from mpg_envs.simulation.objects import (
     HELD_OUT_OBJECT_SETS, HeldOutObjectsError, check_not_held_out, held_out_objects, load_object_set,
 )  # fmt: skip
 from mpg_envs.tasks.config import EnvConfig, config_of
-from mpg_envs.tasks.tracks import NOVEL_SCENE_TRIES, TRACKS
+from mpg_envs.tasks.tracks import NOVEL_GENERATOR, NOVEL_SCENE_TRIES, TRACKS
 
 TRACK = "MPG-OccludedHardNovel-v0"
 
@@ -36,7 +37,8 @@ def pack():
 def test_the_track_is_registered_as_the_hard_stage_on_the_held_out_objects():
     spec = TRACKS[TRACK]
     assert spec.stage == "OccludedHard" and spec.options["object_set"] == "random_urdfs_test"
-    assert config_of(spec.options["config"]) == EnvConfig(scene_tries=NOVEL_SCENE_TRIES)  # only the scene draws differ from the defaults
+    # Only the scene draws and the generator's settings differ from the defaults.
+    assert config_of(spec.options["config"]) == EnvConfig(scene_tries=NOVEL_SCENE_TRIES, generator=GeneratorConfig(**NOVEL_GENERATOR))
     assert gym.spec(TRACK).kwargs == {"stage": "OccludedHard", **spec.options}
     assert gym.spec(TRACK).max_episode_steps == 10
     assert "random_urdfs_test" in HELD_OUT_OBJECT_SETS
@@ -131,3 +133,32 @@ def test_training_refuses_the_held_out_objects(tmp_path, pack):
     check_not_held_out("blocks", load_object_set("blocks"))  # the blocks train as before
     assert random_urdfs.is_test_object("x", "/site-packages/pybullet_data/random_urdfs/230/230.obj")
     assert not random_urdfs.is_test_object("random_urdf_231", "/site-packages/pybullet_data/random_urdfs/231/231.obj")
+
+
+def test_its_generator_settings_are_checked_and_any_of_the_first_five_may_be_the_target():
+    from mpg_envs.scenes.generators import buried_test_cluster
+    from mpg_envs.simulation.world import World
+
+    for bad in ({"buried_candidates": 0}, {"drop_settle_steps": 0}, {"buried_candidates": 2.0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            GeneratorConfig(**bad)
+    blocks = load_object_set("blocks")
+    world = World(blocks[:6], robot_visual=False)
+    quick = {"drop_settle_steps": 20, "drop_timestep": 0.004}
+    layout = buried_test_cluster(world, np.random.default_rng(0), GeneratorConfig(buried_candidates=5, **quick))
+    assert layout.targets[0] == 0 and sorted(layout.targets[1:]) == [1, 2, 3, 4]  # the buried one first
+    assert world.model.opt.timestep == 0.002  # the drops' timestep is the drops' alone
+    world.reset()
+    assert buried_test_cluster(world, np.random.default_rng(0), GeneratorConfig(**quick)).targets == (0,)  # the blocks' rule
+
+
+def test_a_test_set_is_used_only_with_the_generator_settings_it_was_made_with():
+    from mpg_envs.tasks.scene_source import scene_from_test_set
+
+    blocks = gym.make("MPG-OccludedHard-v0").unwrapped
+    assert scene_from_test_set(blocks.scene_request, TEST_SEED_START) is not None
+    other = gym.make("MPG-OccludedHard-v0", config={"generator": {"buried_candidates": 5}}).unwrapped
+    assert scene_from_test_set(other.scene_request, TEST_SEED_START) is None  # dropped afresh: its scenes are not the set's
+    novel = gym.make(TRACK).unwrapped
+    assert find_test_set("occluded_hard_novel", 15).generator_config == novel.config.generator == GeneratorConfig(**NOVEL_GENERATOR)
+    assert scene_from_test_set(novel.scene_request, TEST_SEED_START) is not None
