@@ -181,7 +181,8 @@ class Actor:
 
     def load(self, weights: Weights) -> None:
         """Act with ``weights`` (and their Q*_g) from now on."""
-        self.policy.q_net.mpgnet.load_state_dict({k: torch.from_numpy(np.asarray(v)) for k, v in weights.state.items()})
+        # Copies: Ray hands over read-only arrays, which torch.from_numpy warns about.
+        self.policy.q_net.mpgnet.load_state_dict({k: torch.tensor(np.asarray(v)) for k, v in weights.state.items()})
         self.policy.set_q_star(weights.q_star)
         self.version = weights.version
 

@@ -41,9 +41,15 @@ def _window_means(at: np.ndarray, values: np.ndarray, last: int, window: int) ->
 
 
 def _episode_ends(data: dict[str, np.ndarray]) -> np.ndarray:
-    """Row indices where an episode ends: its last row before the episode number changes
-    (the run's last episode, maybe unfinished, has none)."""
-    return np.flatnonzero(np.diff(data["episode"]) > 0)
+    """Row indices where an episode ends: its last row (the episodes of parallel actors
+    interleave). The episode of the run's last row, maybe unfinished, has none; with N actors
+    the N - 1 others that may still run at the end count at their last rows."""
+    episodes = np.asarray(data["episode"])
+    if episodes.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    _, from_end = np.unique(episodes[::-1], return_index=True)
+    last = episodes.size - 1 - from_end
+    return np.sort(last[episodes[last] != episodes[-1]])
 
 
 def window_success(data: dict[str, np.ndarray], window: int) -> tuple[np.ndarray, np.ndarray]:

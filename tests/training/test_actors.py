@@ -155,3 +155,16 @@ def test_an_actor_steps_its_env_with_the_weights_and_trials_it_is_given():
             assert again.episode == 7 and again.info["num_motions"] == 2
     finally:
         actor.close()
+
+
+def test_interleaved_episodes_of_actors_end_at_their_last_rows():
+    import numpy as np
+
+    from mpg_agents.learning.plotting import window_episode_success
+
+    # Two actors: episodes 0 and 1 interleave; 0 ends (success) at row 3, 1 (failure) at row 4, 2 runs on.
+    data = {k: np.array(v, dtype=float) for k, v in {
+        "iteration": [1, 2, 3, 4, 5, 6], "episode": [0, 1, 0, 1, 2, 2], "is_success": [0, 0, 1, 0, 0, 0],
+    }.items()}
+    x, y = window_episode_success(data, 6)
+    assert x.tolist() == [6] and y.tolist() == [0.5]
