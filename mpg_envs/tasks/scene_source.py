@@ -175,11 +175,14 @@ def _code_digest() -> str:
 
 
 def code_fingerprint(source: str) -> str:
-    """``source``'s syntax tree without docstrings (comments are not in it): what runs."""
+    """``source``'s syntax tree without docstrings, written back as source (comments and
+    formatting are not in it): what runs. Written back rather than dumped, because
+    ``ast.dump`` changes between Python versions (3.12 added fields) while the written-back
+    source does not, so a test set made under one Python is this code's under another."""
     tree = ast.parse(source)
     for node in ast.walk(tree):
         body = getattr(node, "body", None)
         first = body[0] if isinstance(body, list) and body else None
         if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
             node.body = body[1:] or [ast.Pass()]
-    return ast.dump(tree)
+    return ast.unparse(tree)
