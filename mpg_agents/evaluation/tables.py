@@ -10,7 +10,8 @@ grasp attempts); ``hard-novel`` and ``hard-camera`` are the same rules on unseen
 (``MPG-OccludedHardCamera-v0``). A measured cell shows its 95% intervals: Wilson for rates,
 a seeded bootstrap for mean motions. :func:`rows_json` gives the same cells as data, keyed
 by the policy's label, each with the name the policy gave itself; :func:`tracks_rows` lays
-such cells of several tracks out as one table (track x policy x object count).
+such cells of several tracks out as one table (track x policy x object count), and
+:func:`tracks_success_rows` their success rates as a policy x (track, object count) grid.
 """
 
 from __future__ import annotations
@@ -114,6 +115,10 @@ def _motions_text(cell: Mapping[str, Any]) -> str:
     return f"{cell['motions']:.2f} [{lo:.2f}, {hi:.2f}]"
 
 
+def _success_motions_text(cell: Mapping[str, Any]) -> str:
+    return f"{_success_text(cell)} in {cell['motions']:.2f}"
+
+
 def _grasp_text(cell: Mapping[str, Any]) -> str:
     if cell["grasp_success_rate"] is None:
         return "n/a"
@@ -191,6 +196,25 @@ def tracks_rows(
             mine = {n: cells[(name, policy, n)] for n in objects if (name, policy, n) in cells}
             if mine:
                 body.append([f"{track.scenes} ({track.env_id})", policy] + _cells_text(objects, mine, True))
+    return header, body
+
+
+def tracks_success_rows(
+    tracks: Sequence[str],
+    policies: Sequence[str],
+    objects: Sequence[int],
+    cells: Mapping[tuple[str, str, int], Mapping[str, Any]],
+) -> tuple[list[str], list[list[str]]]:
+    """The same cells as :func:`tracks_rows`, one row per policy with at least one cell and a
+    column per (track, object count): success rate [95% interval] in mean motions, ``-``
+    where a cell was not run. Tracks with no cell at all get no column."""
+    columns = [(name, n) for name in tracks for n in objects if any((name, p, n) in cells for p in policies)]
+    header = ["Method"] + [f"{TRACKS[name].scenes}, {n} obj." for name, n in columns]
+    body = []
+    for policy in policies:
+        row = [_success_motions_text(cells[(name, policy, n)]) if (name, policy, n) in cells else "-" for name, n in columns]
+        if any(c != "-" for c in row):
+            body.append([policy] + row)
     return header, body
 
 

@@ -37,7 +37,7 @@ from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
 from mpg_agents.evaluation.evaluate import EvalResult, registered_options
 from mpg_agents.evaluation.policy_zoo import BUILTIN
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json, format_markdown, tracks_rows
+from mpg_agents.evaluation.tables import TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows
 
 
 class CellMismatchError(ValueError):
@@ -208,7 +208,9 @@ def make_track_table(
     """The table of ``tracks`` x ``specs`` x ``objects``: every cell reused (``reused``),
     read from ``OUT/<track>/cells/``, or run there when ``run(request)`` says so; a cell neither recorded nor run is absent from the table.
     Returns the report (``rows``: ``{track: {label: {objects: cell}}}``, each cell's
-    ``source``, the cells ``missing``) and the Markdown table. ``on_cell(request, how,
+    ``source``, the cells ``missing``) and the Markdown: the success grid
+    (:func:`~mpg_agents.evaluation.tables.tracks_success_rows`), then every figure
+    (:func:`~mpg_agents.evaluation.tables.tracks_rows`). ``on_cell(request, how,
     seconds)`` hears of each cell: ``how`` is ``reused``, ``recorded`` or ``ran``."""
     labels = [s.label for s in specs]
     if len(set(labels)) != len(labels):
@@ -257,7 +259,11 @@ def make_track_table(
         "sources": sources,
         "missing": missing,
     }
-    markdown = format_markdown(header, body, text_columns=2)
+    grid_header, grid_body = tracks_success_rows(tracks, labels, objects, cells)
+    markdown = "\n\n".join([
+        "Success [95% interval] in mean motions:", format_markdown(grid_header, grid_body),
+        "Every figure:", format_markdown(header, body, text_columns=2),
+    ])
     if missing:
         counts = {name: sum(1 for m in missing if m[0] == name) for name in tracks}
         markdown += "\n\nNot run yet: " + "; ".join(f"{TRACKS[name].scenes} ({TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells" for name, k in counts.items() if k) + "."

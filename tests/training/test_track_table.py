@@ -11,7 +11,7 @@ import pytest
 
 from mpg_agents.evaluation.evaluate import EpisodeRecord, summarise
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs
-from mpg_agents.evaluation.tables import TRACKS, cell_json, tracks_rows
+from mpg_agents.evaluation.tables import TRACKS, cell_json, tracks_rows, tracks_success_rows
 from mpg_agents.evaluation.track_table import CellMismatchError, cell_file_name, make_track_table, read_reused
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -50,6 +50,9 @@ def test_tracks_rows_show_each_track_and_policy_with_a_cell_and_dash_for_a_cell_
     assert body[0][8] == "75% of 4"  # 3 target grasps of 4 attempts
     with pytest.raises(ValueError, match="strict tracks only"):
         tracks_rows(["table1"], ["Oracle"], [15], cells)
+    header, body = tracks_success_rows(["hard", "hard-novel", "hard-camera"], ["Oracle", "Random"], [15, 30], cells)
+    assert header == ["Method", "blocks, 15 obj.", "blocks, camera images, 30 obj."]  # no column without a cell
+    assert len(body) == 1 and body[0][0] == "Oracle" and body[0][1] == body[0][2] and body[0][1].endswith("] in 2.00")
 
 
 def test_a_cell_runs_once_is_written_and_is_read_back_then_a_changed_policy_entry_is_refused(tmp_path):
