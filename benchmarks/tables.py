@@ -137,9 +137,12 @@ def track_table_main(args: argparse.Namespace) -> dict:
         took = f" in {seconds:.0f} s wall on {args.workers} worker(s)" if how == "ran" else ""
         print(f"  {request.track}, {request.spec.label}, {request.objects} obj.: {how}{took}", flush=True)
 
+    def on_record(job, record) -> None:
+        print(f"    {record.describe()}", flush=True)
+
     report, markdown = make_track_table(
         args.tracks, args.specs, args.objects, args.episodes, args.seed, args.out, args.reused, args.env_options,
-        run, args.workers, args.ray_address, args.backend, on_cell,
+        run, args.workers, args.ray_address, args.backend, on_cell, None if args.quiet else on_record,
     )
     print()
     print(markdown)

@@ -204,6 +204,7 @@ def make_track_table(
     ray_address: str | None = None,
     backend: str = "ray",
     on_cell: Callable[[CellRequest, str, float], None] | None = None,
+    on_record: Callable[[EvalJob, Any], None] | None = None,
 ) -> tuple[dict[str, Any], str]:
     """The table of ``tracks`` x ``specs`` x ``objects``: every cell reused (``reused``),
     read from ``OUT/<track>/cells/``, or run there when ``run(request)`` says so; a cell neither recorded nor run is absent from the table.
@@ -211,7 +212,8 @@ def make_track_table(
     ``source``, the cells ``missing``) and the Markdown: the success grid
     (:func:`~mpg_agents.evaluation.tables.tracks_success_rows`), then every figure
     (:func:`~mpg_agents.evaluation.tables.tracks_rows`). ``on_cell(request, how,
-    seconds)`` hears of each cell: ``how`` is ``reused``, ``recorded`` or ``ran``."""
+    seconds)`` hears of each cell: ``how`` is ``reused``, ``recorded`` or ``ran``;
+    ``on_record(job, record)`` of each episode run."""
     labels = [s.label for s in specs]
     if len(set(labels)) != len(labels):
         raise ValueError(f"policy labels must differ, got {labels}")
@@ -234,7 +236,7 @@ def make_track_table(
                     cell, source, how, seconds = read_cell_file(request, path), str(path), "recorded", 0.0
                 elif run is not None and run(request):
                     job = EvalJob(spec.policy, request.env_id, episodes, seed, n, spec.settings, extra)
-                    (result,), timing = evaluate_jobs([job], workers, ray_address, backend=backend)
+                    (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
                     write_cell_file(request, result, path)
                     cell, source, how, seconds = cell_json(result), str(path), "ran", timing.wall_seconds
                 else:

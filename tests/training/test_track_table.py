@@ -60,7 +60,9 @@ def test_a_cell_runs_once_is_written_and_is_read_back_then_a_changed_policy_entr
     seen = []
     args = (["hard"], [spec], [15], 2, 500000, tmp_path)
     kwargs = {"env_options": {"max_motions": 1}, "on_cell": lambda request, how, seconds: seen.append(how)}
-    ran, markdown = make_track_table(*args, run=lambda request: True, workers=1, **kwargs)
+    episodes = []
+    ran, markdown = make_track_table(*args, run=lambda request: True, workers=1, on_record=lambda job, r: episodes.append(r.seed), **kwargs)
+    assert episodes == [500000, 500001]
     path = tmp_path / "hard" / "cells" / cell_file_name(spec.label, 15)
     assert path.is_file() and json.loads(path.read_text())["table_policy"] == {"label": spec.label, "policy": "random"}
     cell = ran["rows"]["hard"][spec.label]["15"]
