@@ -39,7 +39,7 @@ TRACKS: dict[str, Track] = {
     "table1": Track("table1", ENV_ID, paper_rows=True, strict_columns=False, scenes="blocks, Table I's rules"),
     "hard": Track("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True, scenes="blocks"),
     "hard-novel": Track("hard-novel", "MPG-OccludedHardNovel-v0", paper_rows=False, strict_columns=True, scenes="unseen shapes"),
-    "hard-camera": Track("hard-camera", "MPG-OccludedHardCamera-v0", paper_rows=False, strict_columns=True, scenes="blocks, camera images"),
+    "hard-camera": Track("hard-camera", "MPG-OccludedHardCamera-v0", paper_rows=False, strict_columns=True, scenes="camera images of blocks"),
 }
 """The tracks by name: the paper's Table I, the strict, hidden-target hard track, and the
 hard track on unseen objects and on camera observations."""

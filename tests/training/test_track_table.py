@@ -45,13 +45,13 @@ def test_tracks_rows_show_each_track_and_policy_with_a_cell_and_dash_for_a_cell_
     cells = {("hard", "Oracle", 15): cell, ("hard-camera", "Oracle", 30): cell}
     header, body = tracks_rows(["hard", "hard-novel", "hard-camera"], ["Oracle", "Random"], [15, 30], cells)
     assert header[:4] == ["Track", "Method", "success, 15 obj.", "success, 30 obj."] and "grasp success, 30 obj." in header
-    assert [row[:2] for row in body] == [["blocks (MPG-OccludedHard-v0)", "Oracle"], ["blocks, camera images (MPG-OccludedHardCamera-v0)", "Oracle"]]
+    assert [row[:2] for row in body] == [["blocks (MPG-OccludedHard-v0)", "Oracle"], ["camera images of blocks (MPG-OccludedHardCamera-v0)", "Oracle"]]
     assert body[0][2].startswith("75% [") and body[0][3] == "-" and body[1][2] == "-" and body[1][4] == "-"
     assert body[0][8] == "75% of 4"  # 3 target grasps of 4 attempts
     with pytest.raises(ValueError, match="strict tracks only"):
         tracks_rows(["table1"], ["Oracle"], [15], cells)
     header, body = tracks_success_rows(["hard", "hard-novel", "hard-camera"], ["Oracle", "Random"], [15, 30], cells)
-    assert header == ["Method", "blocks, 15 obj.", "blocks, camera images, 30 obj."]  # no column without a cell
+    assert header == ["Method", "blocks, 15 obj.", "camera images of blocks, 30 obj."]  # no column without a cell
     assert len(body) == 1 and body[0][0] == "Oracle" and body[0][1] == body[0][2] and body[0][1].endswith("] in 2.00")
 
 
@@ -82,7 +82,7 @@ def test_a_cell_not_run_is_absent_and_named(tmp_path):
     report, markdown = make_track_table(["hard", "hard-camera"], [PolicySpec("Oracle", "oracle")], [15, 30], 100, 500000, tmp_path)
     assert report["rows"] == {} and len(report["missing"]) == 4
     assert markdown.splitlines()[-1] == (
-        "Not run yet: blocks (MPG-OccludedHard-v0), 2 of 2 cells; blocks, camera images (MPG-OccludedHardCamera-v0), 2 of 2 cells."
+        "Not run yet: blocks (MPG-OccludedHard-v0), 2 of 2 cells; camera images of blocks (MPG-OccludedHardCamera-v0), 2 of 2 cells."
     )
 
 
