@@ -190,6 +190,30 @@ def write_cell_file(request: CellRequest, result: EvalResult, path: Path) -> Non
     tmp.replace(path)  # a stopped run leaves no half-written cell
 
 
+def _cell(
+    request: CellRequest,
+    path: Path,
+    reused: ReusedCell | None,
+    run: Callable[[CellRequest], bool] | None,
+    workers: int | None,
+    ray_address: str | None,
+    backend: str,
+    on_record: Callable[[EvalJob, Any], None] | None,
+) -> tuple[dict[str, Any], str, str, float] | None:
+    """(cell, source, how, wall seconds) of one cell: reused, read from ``path``, or run and
+    written there; ``None`` when it is none of these."""
+    if reused is not None:
+        return reused.load(request), reused.source(), "reused", 0.0
+    if path.is_file():
+        return read_cell_file(request, path), str(path), "recorded", 0.0
+    if run is None or not run(request):
+        return None
+    job = EvalJob(request.spec.policy, request.env_id, request.episodes, request.seed, request.objects, request.spec.settings, request.env_options)
+    (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
+    write_cell_file(request, result, path)
+    return cell_json(result), str(path), "ran", timing.wall_seconds
+
+
 def make_track_table(
     tracks: Sequence[str],
     specs: Sequence[PolicySpec],
@@ -207,8 +231,9 @@ def make_track_table(
     on_record: Callable[[EvalJob, Any], None] | None = None,
 ) -> tuple[dict[str, Any], str]:
     """The table of ``tracks`` x ``specs`` x ``objects``: every cell reused (``reused``),
-    read from ``OUT/<track>/cells/``, or run there when ``run(request)`` says so; a cell neither recorded nor run is absent from the table.
-    Returns the report (``rows``: ``{track: {label: {objects: cell}}}``, each cell's
+    read from ``OUT/<track>/cells/``, or run there when ``run(request)`` says so; a cell
+    neither recorded nor run is absent from the table. Reused cells must carry labels of
+    ``specs`` (``ValueError`` otherwise). Returns the report (``rows``: ``{track: {label: {objects: cell}}}``, each cell's
     ``source``, the cells ``missing``) and the Markdown: the success grid
     (:func:`~mpg_agents.evaluation.tables.tracks_success_rows`), then every figure
     (:func:`~mpg_agents.evaluation.tables.tracks_rows`). ``on_cell(request, how,
@@ -221,6 +246,9 @@ def make_track_table(
         if name not in TRACKS or not TRACKS[name].strict_columns:
             raise ValueError(f"unknown or non-strict track {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}")
     reused = dict(reused or {})
+    strangers = sorted({label for _, label, _ in reused} - set(labels))
+    if strangers:
+        raise ValueError(f"reused cells of labels the policy file does not have: {strangers}; its labels: {labels}")
     extra = tuple(sorted((env_options or {}).items()))
     cells: dict[tuple[str, str, int], dict[str, Any]] = {}
     sources: dict[str, dict[str, dict[str, str]]] = {}
@@ -230,19 +258,11 @@ def make_track_table(
             for n in objects:
                 request = CellRequest(name, spec, n, episodes, seed, extra)
                 path = Path(out) / name / "cells" / cell_file_name(spec.label, n)
-                if (name, spec.label, n) in reused:
-                    cell, source, how, seconds = reused[(name, spec.label, n)].load(request), reused[(name, spec.label, n)].source(), "reused", 0.0
-                elif path.is_file():
-                    cell, source, how, seconds = read_cell_file(request, path), str(path), "recorded", 0.0
-                elif run is not None and run(request):
-                    job = EvalJob(spec.policy, request.env_id, episodes, seed, n, spec.settings, extra)
-                    (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
-                    write_cell_file(request, result, path)
-                    cell, source, how, seconds = cell_json(result), str(path), "ran", timing.wall_seconds
-                else:
+                found = _cell(request, path, reused.get((name, spec.label, n)), run, workers, ray_address, backend, on_record)
+                if found is None:
                     missing.append([name, spec.label, n])
                     continue
-                cells[(name, spec.label, n)] = cell
+                cells[(name, spec.label, n)], source, how, seconds = found
                 sources.setdefault(name, {}).setdefault(spec.label, {})[str(n)] = source
                 if on_cell is not None:
                     on_cell(request, how, seconds)

@@ -100,6 +100,8 @@ def test_reused_cells_are_pooled_and_checked_against_the_table(tmp_path):
         make_track_table(["hard"], [PolicySpec("Oracle", "random")], [30], 4, 500000, out, cells)
     with pytest.raises(CellMismatchError, match="not 500000..500004"):
         make_track_table(["hard"], [PolicySpec("Oracle", "oracle")], [30], 5, 500000, out, cells)
+    with pytest.raises(ValueError, match=r"labels the policy file does not have: \['Oracle'\]"):
+        make_track_table(["hard"], [PolicySpec("Random", "random")], [30], 4, 500000, out, cells)
     with pytest.raises(CellMismatchError, match="not MPG-OccludedHardCamera-v0 with 30"):
         make_track_table(["hard-camera"], [PolicySpec("Oracle", "oracle")], [30], 4, 500000, out, {("hard-camera", "Oracle", 30): cells[("hard", "Oracle", 30)]})
 
