@@ -1,4 +1,4 @@
-"""The results tables (the paper's Table I, the hard track), distributed on Ray.
+"""The results tables (the paper's Table I, the hard tracks), distributed on Ray.
 
 Every (policy, object count) cell runs ``--episodes`` episodes (episode i reset with seed
 ``--seed + i``, so every policy meets the same scenes at a given object count) as Ray tasks:
@@ -21,6 +21,18 @@ time, and checks the two runs gave the same records.
 
 ``--from-evals LABEL=GLOB ...`` runs nothing: it makes the table of one object count from
 ``mpg-eval --json`` files run in seed blocks (one row per label, its blocks pooled).
+
+``--tracks TRACK ...`` makes the track table, one table over the hard tracks (blocks, unseen
+shapes, camera images; :mod:`mpg_agents.evaluation.track_table`): each cell that ``--out``
+lacks runs alone and is written to ``OUT/<track>/cells/`` as soon as it ends (run the command
+again to resume), cells of earlier runs are taken from ``--reuse``'s file, and
+``OUT/tracks.{json,md}`` hold the table. ``--run-policies`` runs only the cells of those
+policies (``oracle``, ``shipped``, a checkpoint path as the policy file gives it), ``--no-run``
+none: the table then shows the cells recorded so far, a cell not run is ``-``.
+
+    python benchmarks/tables.py --tracks hard hard-novel hard-camera --policy-file benchmarks/tracks.toml \
+        --reuse benchmarks/results/tracks/reused.toml --episodes 100 --objects 15 30 --seed 500000 \
+        --out benchmarks/results/tracks --workers 16 --backend processes
 """
 
 from __future__ import annotations
@@ -37,11 +49,18 @@ from mpg_agents.evaluation.env_options import parse_env_options  # noqa: E402
 from mpg_agents.evaluation.policy_zoo import BUILTIN  # noqa: E402
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
 from mpg_agents.evaluation.tables import TRACKS  # noqa: E402
+from mpg_agents.evaluation.track_table import CellRequest, cell_file_name, make_track_table, read_reused  # noqa: E402
+
+STRICT_TRACKS = tuple(name for name, track in TRACKS.items() if track.strict_columns)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--track", choices=tuple(TRACKS), default="table1", help="table1: MPG-Occluded-v0 (paper protocol); hard: MPG-OccludedHard-v0")
+    parser.add_argument("--track", choices=tuple(TRACKS), default="table1", help="; ".join(f"{name}: {t.env_id}" for name, t in TRACKS.items()))
+    parser.add_argument("--tracks", nargs="+", choices=STRICT_TRACKS, help="the track table over these tracks, cell by cell in OUT/<track>/cells/ (resumes)")
+    parser.add_argument("--reuse", help="with --tracks: a TOML file of [[cell]] entries recorded by earlier runs")
+    parser.add_argument("--run-policies", nargs="+", metavar="POLICY", help="with --tracks: run only these policies' missing cells")
+    parser.add_argument("--no-run", action="store_true", help="with --tracks: run nothing, make the table of the cells recorded")
     parser.add_argument("--policies", nargs="+", help=f"{' | '.join(BUILTIN)} or checkpoint paths (default: oracle grasp-only random shipped)")
     parser.add_argument("--policy-file", help="a TOML file of [[policy]] entries (label, policy, settings) instead of --policies")
     parser.add_argument("--episodes", type=int, default=100, help="per cell")
@@ -73,6 +92,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"--episodes and --workers must be >= 1, got {args.episodes} and {args.workers}")
     if args.policies and args.policy_file:
         parser.error("give --policies or --policy-file, not both")
+    if not args.tracks and (args.reuse or args.run_policies or args.no_run):
+        parser.error("--reuse, --run-policies and --no-run go with --tracks")
+    if args.tracks and args.speedup:
+        parser.error("--speedup measures a --track run, not --tracks")
     try:
         args.specs = read_policy_specs(args.policy_file) if args.policy_file else [
             PolicySpec(p, p) for p in (args.policies or ["oracle", "grasp-only", "random", "shipped"])
@@ -83,6 +106,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     for spec in args.specs:
         if spec.policy not in BUILTIN and not Path(spec.policy).is_file():
             parser.error(f"policy {spec.label!r}: {spec.policy!r} is neither one of {BUILTIN} nor a checkpoint file")
+    if args.run_policies:
+        unknown = set(args.run_policies) - {spec.policy for spec in args.specs}
+        if unknown:
+            parser.error(f"--run-policies {sorted(unknown)}: not a policy of the table; its policies: {[s.policy for s in args.specs]}")
+    try:
+        args.reused = read_reused(args.reuse) if args.reuse else {}
+    except ValueError as exc:
+        parser.error(str(exc))
     return args
 
 
@@ -93,8 +124,38 @@ def _write(out: Path, name: str, report: dict, markdown: str) -> None:
     print(f"written: {(out / f'{name}.json').resolve()} and {(out / f'{name}.md').resolve()}")
 
 
+def track_table_main(args: argparse.Namespace) -> dict:
+    """``--tracks``: the track table, cell by cell."""
+
+    def run(request: CellRequest) -> bool:
+        if args.no_run or (args.run_policies and request.spec.policy not in args.run_policies):
+            return False
+        print(f"running {request.track}, {request.spec.label}, {request.objects} obj.: {request.episodes} episodes from seed {request.seed} ...", flush=True)
+        return True
+
+    def on_cell(request: CellRequest, how: str, seconds: float) -> None:
+        took = f" in {seconds:.0f} s wall on {args.workers} worker(s)" if how == "ran" else ""
+        print(f"  {request.track}, {request.spec.label}, {request.objects} obj.: {how}{took}", flush=True)
+
+    def on_record(job, record) -> None:
+        print(f"    {record.describe()}", flush=True)
+
+    report, markdown = make_track_table(
+        args.tracks, args.specs, args.objects, args.episodes, args.seed, args.out, args.reused, args.env_options,
+        run, args.workers, args.ray_address, args.backend, on_cell, None if args.quiet else on_record,
+    )
+    print()
+    print(markdown)
+    if report["missing"]:
+        print(f"{len(report['missing'])} cell(s) not run (listed in tracks.json's 'missing')")
+    _write(Path(args.out), "tracks", report, markdown)
+    return report
+
+
 def main(argv: list[str] | None = None) -> dict:
     args = parse_args(argv)
+    if args.tracks:
+        return track_table_main(args)
     if args.from_evals:
         report, text, markdown = table_from_evals(args.track, args.cells, args.objects[0])
         print(text)
@@ -126,7 +187,7 @@ def main(argv: list[str] | None = None) -> dict:
     _write(Path(args.out), args.track, report, markdown)
     for key, cell in cells.items():  # every episode, as mpg-eval --json writes it (for compare_evals.py)
         label, n = key.rsplit("|", 1)
-        path = Path(args.out) / "cells" / f"{''.join(c if c.isalnum() else '_' for c in label).strip('_')}_{n}.json"
+        path = Path(args.out) / "cells" / cell_file_name(label, int(n))
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(cell))
     print(json.dumps(report))

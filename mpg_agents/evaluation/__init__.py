@@ -5,7 +5,8 @@ metrics (:mod:`~mpg_agents.evaluation.evaluate`, with ``--env-option`` parsing i
 :mod:`~mpg_agents.evaluation.env_options`), evaluation jobs on Ray or a process pool
 (:mod:`~mpg_agents.evaluation.eval_runner`), intervals (:mod:`~mpg_agents.evaluation.stats`),
 paired comparisons (:mod:`~mpg_agents.evaluation.comparison`), the results tables and their runs
-(:mod:`~mpg_agents.evaluation.tables`, :mod:`~mpg_agents.evaluation.table_runs`), case sets
+(:mod:`~mpg_agents.evaluation.tables`, :mod:`~mpg_agents.evaluation.table_runs`, the track table
+cell by cell: :mod:`~mpg_agents.evaluation.track_table`), case sets
 (:mod:`~mpg_agents.evaluation.case_runs`), and diagnostics: Q-map pictures
 (:mod:`~mpg_agents.evaluation.visualize`) and what a checkpoint's grasps and moves do
 (:mod:`~mpg_agents.evaluation.grasp_outcomes`, :mod:`~mpg_agents.evaluation.move_outcomes`).

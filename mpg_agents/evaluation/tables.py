@@ -5,9 +5,13 @@ Table I on ``MPG-Occluded-v0``: the paper's rows above the measured ones, task s
 per object count, then average motion number per object count. ``hard`` is the strict
 retrieval track ``MPG-OccludedHard-v0`` (target at most 30% visible, a mis-pick fails the
 episode), which adds mis-picks per episode and the grasp success rate (target grasps /
-grasp attempts). A measured cell shows its 95% intervals: Wilson for rates, a seeded
-bootstrap for mean motions. :func:`rows_json` gives the same cells as data, keyed by the
-policy's label, each with the name the policy gave itself.
+grasp attempts); ``hard-novel`` and ``hard-camera`` are the same rules on unseen objects
+(``MPG-OccludedHardNovel-v0``) and through rendered, visually randomized cameras
+(``MPG-OccludedHardCamera-v0``). A measured cell shows its 95% intervals: Wilson for rates,
+a seeded bootstrap for mean motions. :func:`rows_json` gives the same cells as data, keyed
+by the policy's label, each with the name the policy gave itself; :func:`tracks_rows` lays
+such cells of several tracks out as one table (track x policy x object count), and
+:func:`tracks_success_rows` their success rates as a policy x (track, object count) grid.
 """
 
 from __future__ import annotations
@@ -28,13 +32,17 @@ class Track:
     env_id: str
     paper_rows: bool
     strict_columns: bool  # mis-picks per episode and grasp success rate as columns
+    scenes: str = ""  # what the track's scenes and observations are, for a combined table
 
 
 TRACKS: dict[str, Track] = {
-    "table1": Track("table1", ENV_ID, paper_rows=True, strict_columns=False),
-    "hard": Track("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True),
+    "table1": Track("table1", ENV_ID, paper_rows=True, strict_columns=False, scenes="blocks, Table I's rules"),
+    "hard": Track("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True, scenes="blocks"),
+    "hard-novel": Track("hard-novel", "MPG-OccludedHardNovel-v0", paper_rows=False, strict_columns=True, scenes="unseen shapes"),
+    "hard-camera": Track("hard-camera", "MPG-OccludedHardCamera-v0", paper_rows=False, strict_columns=True, scenes="camera images of blocks"),
 }
-"""The tracks by name: the paper's Table I and the strict, hidden-target hard track."""
+"""The tracks by name: the paper's Table I, the strict, hidden-target hard track, and the
+hard track on unseen objects and on camera observations."""
 
 
 @dataclass(frozen=True)
@@ -95,16 +103,43 @@ def paper_json(objects: Sequence[int]) -> dict[str, dict[str, dict[str, float]]]
     }
 
 
-def _success_text(result: EvalResult) -> str:
-    lo, hi = result.success_interval
-    return f"{100 * result.task_success_rate:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
+def _success_text(cell: Mapping[str, Any]) -> str:
+    lo, hi = cell["success_ci"]
+    return f"{100 * cell['success']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}]"
 
 
-def _motions_text(result: EvalResult) -> str:
-    if result.motions_interval is None:
-        return f"{result.average_motions:.2f}"
-    lo, hi = result.motions_interval
-    return f"{result.average_motions:.2f} [{lo:.2f}, {hi:.2f}]"
+def _motions_text(cell: Mapping[str, Any]) -> str:
+    if cell["motions_ci"] is None:
+        return f"{cell['motions']:.2f}"
+    lo, hi = cell["motions_ci"]
+    return f"{cell['motions']:.2f} [{lo:.2f}, {hi:.2f}]"
+
+
+def _success_motions_text(cell: Mapping[str, Any]) -> str:
+    return f"{_success_text(cell)} in {cell['motions']:.2f}"
+
+
+def _grasp_text(cell: Mapping[str, Any]) -> str:
+    if cell["grasp_success_rate"] is None:
+        return "n/a"
+    return f"{100 * cell['grasp_success_rate']:.0f}% of {cell['grasp_attempts']}"
+
+
+def _header(objects: Sequence[int], strict_columns: bool) -> list[str]:
+    header = [f"success, {n} obj." for n in objects] + [f"motions, {n} obj." for n in objects]
+    if strict_columns:
+        header += [f"mis-picks/ep., {n} obj." for n in objects] + [f"grasp success, {n} obj." for n in objects]
+    return header
+
+
+def _cells_text(objects: Sequence[int], cells: Mapping[int, Mapping[str, Any]], strict_columns: bool) -> list[str]:
+    """One row's figures, ``-`` where a cell was not run."""
+    row = [_success_text(cells[n]) if n in cells else "-" for n in objects]
+    row += [_motions_text(cells[n]) if n in cells else "-" for n in objects]
+    if strict_columns:
+        row += [f"{cells[n]['mispicks_per_episode']:.2f}" if n in cells else "-" for n in objects]
+        row += [_grasp_text(cells[n]) if n in cells else "-" for n in objects]
+    return row
 
 
 def _row_label(policy: str, results: Sequence[EvalResult]) -> str:
@@ -123,9 +158,7 @@ def table_rows(
     """Header, body rows (the paper's first on a track that shows them, then the measured
     ones) and how many paper rows. A row is named ``labels[policy]`` where given, else by
     the name the policy gave itself."""
-    header = ["Method"] + [f"success, {n} obj." for n in objects] + [f"motions, {n} obj." for n in objects]
-    if track.strict_columns:
-        header += [f"mis-picks/ep., {n} obj." for n in objects] + [f"grasp success, {n} obj." for n in objects]
+    header = ["Method"] + _header(objects, track.strict_columns)
     body = []
     if track.paper_rows:
         for row in PAPER_ROWS:
@@ -136,19 +169,53 @@ def table_rows(
     for policy in policies:
         results = [cells[(policy, n)] for n in objects if (policy, n) in cells]
         row = [labels[policy] if labels and policy in labels else _row_label(policy, results)]
-        row += [_success_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
-        row += [_motions_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
-        if track.strict_columns:
-            row += [f"{cells[(policy, n)].mispicks_per_episode:.2f}" if (policy, n) in cells else "-" for n in objects]
-            row += [_grasp_text(cells[(policy, n)]) if (policy, n) in cells else "-" for n in objects]
+        row += _cells_text(objects, {n: cell_json(cells[(policy, n)]) for n in objects if (policy, n) in cells}, track.strict_columns)
         body.append(row)
     return header, body, paper_count
 
 
-def _grasp_text(result: EvalResult) -> str:
-    if result.grasp_success_rate is None:
-        return "n/a"
-    return f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
+def tracks_rows(
+    tracks: Sequence[str],
+    policies: Sequence[str],
+    objects: Sequence[int],
+    cells: Mapping[tuple[str, str, int], Mapping[str, Any]],
+) -> tuple[list[str], list[list[str]]]:
+    """Header and rows of one table over several strict tracks: a row per (track, policy)
+    with at least one cell, tracks in ``tracks``' order, policies in ``policies``' order;
+    ``cells`` maps (track, policy label, objects) to :func:`cell_json`'s data. A cell not
+    run is ``-``. Raises ``ValueError`` for a track without the strict columns (Table I's
+    rows have no mis-pick and grasp columns to share)."""
+    for name in tracks:
+        if name not in TRACKS or not TRACKS[name].strict_columns:
+            raise ValueError(f"tracks_rows lays out strict tracks only, got {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}")
+    header = ["Track", "Method"] + _header(objects, True)
+    body = []
+    for name in tracks:
+        track = TRACKS[name]
+        for policy in policies:
+            mine = {n: cells[(name, policy, n)] for n in objects if (name, policy, n) in cells}
+            if mine:
+                body.append([f"{track.scenes} ({track.env_id})", policy] + _cells_text(objects, mine, True))
+    return header, body
+
+
+def tracks_success_rows(
+    tracks: Sequence[str],
+    policies: Sequence[str],
+    objects: Sequence[int],
+    cells: Mapping[tuple[str, str, int], Mapping[str, Any]],
+) -> tuple[list[str], list[list[str]]]:
+    """The same cells as :func:`tracks_rows`, one row per policy with at least one cell and a
+    column per (track, object count): success rate [95% interval] in mean motions, ``-``
+    where a cell was not run. Tracks with no cell at all get no column."""
+    columns = [(name, n) for name in tracks for n in objects if any((name, p, n) in cells for p in policies)]
+    header = ["Method"] + [f"{TRACKS[name].scenes}, {n} obj." for name, n in columns]
+    body = []
+    for policy in policies:
+        row = [_success_motions_text(cells[(name, policy, n)]) if (name, policy, n) in cells else "-" for name, n in columns]
+        if any(c != "-" for c in row):
+            body.append([policy] + row)
+    return header, body
 
 
 def format_text(header: list[str], body: list[list[str]], paper_rows: int) -> str:
@@ -163,8 +230,9 @@ def format_text(header: list[str], body: list[list[str]], paper_rows: int) -> st
     return "\n".join([line(header), rule] + paper + [line(r) for r in body[paper_rows:]])
 
 
-def format_markdown(header: list[str], body: list[list[str]]) -> str:
-    """The same table as GitHub Markdown."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|"]
+def format_markdown(header: list[str], body: list[list[str]], text_columns: int = 1) -> str:
+    """The same table as GitHub Markdown: the first ``text_columns`` columns aligned left,
+    the figures right."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * text_columns + ["---:"] * (len(header) - text_columns)) + "|"]
     lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in body]
     return "\n".join(lines)
