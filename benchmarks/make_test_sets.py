@@ -7,7 +7,9 @@ start state exactly. Blocks of ``--block`` seeds run on a local process pool; ea
 block is written to a shard file in ``--work`` (default ``build/test_set_work``), so a killed
 run started again with the same arguments makes only the blocks not yet done; a line per
 block gives the rate and the time left. The sets are written from the shards once all are
-made (``--partial``: now, from the finished blocks from the first seed on, making nothing).
+made (``--partial``: now, from the finished blocks from the first seed on, making nothing); the
+scenes of an existing set in ``--out`` made by the same generator count as made, so a partial
+set that was shipped is resumed too.
 
     python benchmarks/make_test_sets.py --envs MPG-Occluded-v0 MPG-OccludedHard-v0 \\
         --objects 15 30 --count 500 --workers 16 [--out mpg_envs/test_scenes] [--work DIR] [--partial]
@@ -162,6 +164,25 @@ def read_shard(path: Path, digest: str, seeds: list[int]) -> dict[str, np.ndarra
     return rows
 
 
+def shards_from_set(path: Path, blocks: list[tuple[list[int], Path, str]]) -> None:
+    """Count the scenes of an existing set at ``path`` made by the same generator (a partial
+    set written with ``--partial``) as made: each block it holds whole, and has no shard of,
+    gets one from it, so a run resumes from a shipped partial set too."""
+    if not path.is_file():
+        return
+    made = load_test_set(path)
+    for seeds, shard, digest in blocks:
+        same = made.meta.get("generator_digest") == digest and made.meta.get("generator_version") == str(GENERATOR_VERSION)
+        if not same or shard.exists() or not all(made.has_seed(s) for s in seeds):
+            continue
+        k = [int(np.flatnonzero(made.seeds == s)[0]) for s in seeds]
+        np.savez_compressed(
+            shard, digest=np.array(digest), seeds=np.array(seeds, np.int64), assets=made.assets[k], positions=made.positions[k],
+            quats=made.quats[k], targets=made.targets[k], visible_fraction=made.visible_fraction[k].astype(np.float64),
+            seconds=np.full(len(seeds), np.nan),  # not recorded in a set
+        )  # fmt: skip
+
+
 def write_set(env_id: str, n: int, shards: list[dict[str, np.ndarray]], out: Path) -> Path:
     """Merge a cell's shards (in seed order) into its test-set file and print its summary."""
     object_set = gym.spec(env_id).kwargs.get("object_set", "blocks")
@@ -189,9 +210,11 @@ def write_set(env_id: str, n: int, shards: list[dict[str, np.ndarray]], out: Pat
     )
     path = test_set.save(out / f"{name}_{n}.npz")
     secs = np.concatenate([r["seconds"] for r in shards])
+    secs = secs[np.isfinite(secs)]  # scenes taken from an earlier set have no time
+    timing = f"generation median {np.median(secs):.2f} s/scene (mean {secs.mean():.2f})" if secs.size else "no generation times"
     vis = test_set.visible_fraction
     print(
-        f"{path}: {len(test_set)} scenes, generation median {np.median(secs):.2f} s/scene (mean {secs.mean():.2f}); visible "
+        f"{path}: {len(test_set)} scenes, {timing}; visible "
         f"fraction median {np.median(vis):.2f}, quartiles {np.quantile(vis, 0.25):.2f}-{np.quantile(vis, 0.75):.2f}, "
         f"max {vis.max():.2f}; {path.stat().st_size / 1024:.0f} kB",
         flush=True,
@@ -226,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
         seeds = list(range(args.seed, args.seed + args.count))
         chunks = [seeds[k : k + args.block] for k in range(0, len(seeds), args.block)]
         blocks[(e, n)] = [(c, _shard_path(work, set_name(e), n, c), digest) for c in chunks]
+        shards_from_set(out / f"{set_name(e)}_{n}.npz", blocks[(e, n)])
     if args.partial:
         for (e, n), bs in blocks.items():
             shards = list(itertools.takewhile(lambda r: r is not None, (read_shard(p, d, c) for c, p, d in bs)))

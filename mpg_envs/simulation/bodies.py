@@ -32,6 +32,21 @@ def part_mesh_name(vertices: np.ndarray, faces: np.ndarray) -> str:
     return f"part/{digest.hexdigest()}"
 
 
+_MESH_NAMES: dict[int, tuple[ObjectAsset, tuple[str, ...]]] = {}
+"""id of an asset -> the asset and its parts' mesh names (an asset is frozen; a world compiles
+the same assets again and again). Bounded: the oldest entries go first."""
+
+
+def _part_mesh_names(asset: ObjectAsset) -> tuple[str, ...]:
+    kept = _MESH_NAMES.get(id(asset))
+    if kept is None or kept[0] is not asset:
+        kept = (asset, tuple(part_mesh_name(v, f) for v, f in asset.parts))
+        if len(_MESH_NAMES) >= 4096:
+            _MESH_NAMES.pop(next(iter(_MESH_NAMES)))
+        _MESH_NAMES[id(asset)] = kept
+    return kept[1]
+
+
 def mesh_file_name(mesh_name: str) -> str:
     """The in-memory file name of the mesh ``mesh_name`` (:func:`part_mesh_name`) in a spec's assets."""
     return mesh_name.replace("/", "_") + ".msh"
@@ -79,8 +94,7 @@ def add_object_body(
     masses = asset.mass * volumes / volumes.sum()
     body = parent.add_body(name=name, pos=[float(x) for x in pos], quat=[float(x) for x in quat])
     body.add_freejoint(name=f"{name}/joint")
-    for i, ((vertices, faces), part_mass) in enumerate(zip(asset.parts, masses)):
-        mesh_name = part_mesh_name(vertices, faces)
+    for i, ((vertices, faces), part_mass, mesh_name) in enumerate(zip(asset.parts, masses, _part_mesh_names(asset))):
         if spec.mesh(mesh_name) is None:
             # An in-memory mesh file: MuJoCo's compiler keeps the processed mesh (hull,
             # inertia) in its asset cache by file name, so a later world with the same part

@@ -128,7 +128,8 @@ class World:
         self.object_body_ids = np.array([m.body(f"object{i}").id for i in range(len(self.assets))], dtype=int)
         self.object_qpos_adr = np.array([m.jnt_qposadr[m.body_jntadr[b]] for b in self.object_body_ids], dtype=int)
         self.object_dof_adr = np.array([m.jnt_dofadr[m.body_jntadr[b]] for b in self.object_body_ids], dtype=int)
-        self.object_geom_ids = [np.flatnonzero(m.geom_bodyid == b) for b in self.object_body_ids]
+        # A body's geoms are contiguous in a compiled model (body_geomadr, body_geomnum).
+        self.object_geom_ids = [np.arange(m.body_geomadr[b], m.body_geomadr[b] + m.body_geomnum[b]) for b in self.object_body_ids]
         self._geom_owner = np.full(m.ngeom, -1, dtype=int)
         for i, geoms in enumerate(self.object_geom_ids):
             self._geom_owner[geoms] = i

@@ -1,10 +1,11 @@
 """``benchmarks/make_test_sets.py`` resumes: finished blocks of seeds are kept as shards, a
-run started again makes only the rest, ``--partial`` writes the sets made so far, and a shard
-made by another generator is refused. The drops are stubbed (only the bookkeeping is tested)."""
+run started again makes only the rest (from the shards, or from a set it wrote), ``--partial``
+writes the sets made so far, and a shard made by another generator is refused. The drops are stubbed (only the bookkeeping is tested)."""
 
 from __future__ import annotations
 
 import importlib.util
+import shutil
 import sys
 from concurrent.futures import Future
 from pathlib import Path
@@ -85,6 +86,15 @@ def test_a_killed_run_resumes_from_its_finished_blocks(script, tmp_path, capsys)
     out = capsys.readouterr().out
     assert "3/5 scenes already made" in out and "ETA" in out and "scenes/min" in out
     assert full.meta["generator_digest"] and full.meta["generator_config"]
+
+    # Without the work folder, the written set itself is what was made (a shipped partial set resumes).
+    shutil.rmtree(tmp_path / "work")
+    script.made = []
+    assert run(script, tmp_path) == 0 and script.made == []
+    assert "5/5 scenes already made" in capsys.readouterr().out
+    again = load_test_set(tmp_path / "out" / "occluded_hard_5.npz")
+    for field in ("seeds", "assets", "positions", "quats", "targets", "visible_fraction"):
+        np.testing.assert_array_equal(getattr(again, field), getattr(full, field))
 
 
 def test_a_shard_of_another_generator_is_refused(script, tmp_path):
