@@ -91,3 +91,24 @@ def make_env():
 
 def flat_quat(yaw: float = 0.0) -> np.ndarray:
     return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+
+
+HEAVY_TESTS_FILE = Path(__file__).with_name("heavy.txt")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark the tests listed in ``tests/heavy.txt`` ``heavy`` (deselected by default: the fast
+    suite stays under 5 minutes; CI runs them after it). A listed id whose file was collected
+    but which no longer exists is an error, so a renamed heavy test is never silently lost."""
+    listed = {line.strip() for line in HEAVY_TESTS_FILE.read_text().splitlines() if line.strip() and not line.startswith("#")}
+    root = Path(str(config.rootpath))
+    seen = set()
+    for item in items:
+        node = Path(str(item.path)).relative_to(root).as_posix() + "::" + item.name
+        if node in listed:
+            item.add_marker(pytest.mark.heavy)
+            seen.add(node)
+    collected_files = {Path(str(item.path)).relative_to(root).as_posix() for item in items}
+    missing = sorted(n for n in listed - seen if n.split("::")[0] in collected_files)
+    if missing:
+        raise pytest.UsageError(f"tests/heavy.txt lists tests that do not exist (renamed or removed?): {missing}")
