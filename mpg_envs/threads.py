@@ -37,10 +37,33 @@ import os
 import statistics
 import sys
 import time
-from typing import Mapping
+from contextlib import contextmanager
+from typing import Iterator, Mapping
 
 THREADS_ENV = "MPG_NUM_THREADS"
 """Environment variable that fixes the thread count (a positive integer)."""
+
+WORKER_THREAD_ENV: dict[str, str] = {"OMP_NUM_THREADS": "1", "MPG_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE", "MKL_NUM_THREADS": "1"}
+"""What a worker process needs before it imports torch to compute on one passive thread (what
+:func:`worker_init` sets once it runs); :func:`one_thread_children` puts it in place while
+workers start, so they inherit it."""
+
+
+@contextmanager
+def one_thread_children() -> Iterator[None]:
+    """Set :data:`WORKER_THREAD_ENV` in this process's environment while worker processes are
+    started inside the block (they inherit it before they import torch), then restore every
+    variable as it was (unset ones unset)."""
+    saved = {k: os.environ.get(k) for k in WORKER_THREAD_ENV}
+    os.environ.update(WORKER_THREAD_ENV)
+    try:
+        yield
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
 
 def choose_threads(cores: int, load: float, max_threads: int | None = None, machine_cores: int | None = None) -> int:

@@ -29,8 +29,8 @@ from typing import Any, Callable, Iterator, Sequence
 
 from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, registered_options, run_episodes, summarise
 
-# what mpg_envs.threads.worker_init sets, before the worker imports torch
-THREAD_ENV = {"OMP_NUM_THREADS": "1", "MPG_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE", "MKL_NUM_THREADS": "1"}
+from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
+from mpg_envs.threads import one_thread_children
 
 
 @dataclass(frozen=True)
@@ -222,9 +222,7 @@ def _run_on_processes(jobs: Sequence[EvalJob], workers: int, on_record: RecordHo
 
     from mpg_envs.threads import worker_init
 
-    saved = {k: os.environ.get(k) for k in THREAD_ENV}
-    os.environ.update(THREAD_ENV)  # inherited by the workers before they import torch
-    try:
+    with one_thread_children():  # the workers start (lazily, as jobs are submitted) on one thread each
         start = time.perf_counter()
         chunks: list[list[ChunkResult]] = [[] for _ in jobs]
         done_at = [0.0] * len(jobs)
@@ -240,12 +238,6 @@ def _run_on_processes(jobs: Sequence[EvalJob], workers: int, on_record: RecordHo
                     if on_record is not None:
                         for record in chunk.records:
                             on_record(jobs[j], record)
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
     return chunks, done_at
 
 

@@ -25,7 +25,8 @@ import traceback
 from pathlib import Path
 from typing import Any, Sequence
 
-from mpg_agents.evaluation.eval_runner import THREAD_ENV
+from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
+from mpg_envs.threads import one_thread_children
 from mpg_agents.learning.actors import Actor, ActorSpec, ActorStep, ActRequest
 from mpg_agents.learning.train_config import TrainConfig
 
@@ -135,25 +136,18 @@ class ProcessActorPool(ActorPool):
         self._conns: list[Any] = []
         self._procs: list[Any] = []
         self._busy: set[int] = set()
-        saved = {k: os.environ.get(k) for k in THREAD_ENV}
-        os.environ.update(THREAD_ENV)  # inherited by the children before they import torch
         try:
-            for spec in specs:
-                parent, child = context.Pipe()
-                proc = context.Process(target=_actor_process, args=(spec, child), name=f"mpg-actor-{spec.index}", daemon=True)
-                proc.start()
-                child.close()
-                self._conns.append(parent)
-                self._procs.append(proc)
+            with one_thread_children():  # inherited by the children before they import torch
+                for spec in specs:
+                    parent, child = context.Pipe()
+                    proc = context.Process(target=_actor_process, args=(spec, child), name=f"mpg-actor-{spec.index}", daemon=True)
+                    proc.start()
+                    child.close()
+                    self._conns.append(parent)
+                    self._procs.append(proc)
         except BaseException:
             self.close()
             raise
-        finally:
-            for key, value in saved.items():
-                if value is None:
-                    os.environ.pop(key, None)
-                else:
-                    os.environ[key] = value
 
     def submit(self, actor: int, request: ActRequest) -> None:
         _check_free(self._busy, actor, self.size)

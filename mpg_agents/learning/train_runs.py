@@ -86,7 +86,7 @@ def train_run(spec: RunSpec) -> RunResult:
     ``train.log`` in its folder (appended, so a resumed run keeps its history)."""
     if spec.finished:
         return RunResult(spec.run, spec.seed, str(spec.folder), "finished before", 0.0)
-    from mpg_agents.evaluation.eval_runner import THREAD_ENV
+    from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
 
     spec.folder.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, **THREAD_ENV}

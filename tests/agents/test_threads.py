@@ -107,3 +107,14 @@ def test_a_process_pinned_to_few_cores_counts_the_load_of_the_whole_machine():
     assert choose_threads(4, 13.0, machine_cores=16) == 3
     with pytest.raises(ValueError, match="machine_cores"):
         choose_threads(4, 0.0, machine_cores=2)
+
+
+def test_one_thread_children_sets_the_worker_env_and_restores_it(monkeypatch):
+    from mpg_envs.threads import WORKER_THREAD_ENV, one_thread_children
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "7")
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    with one_thread_children():
+        assert {k: os.environ.get(k) for k in WORKER_THREAD_ENV} == WORKER_THREAD_ENV
+    assert os.environ["OMP_NUM_THREADS"] == "7"
+    assert "MKL_NUM_THREADS" not in os.environ
