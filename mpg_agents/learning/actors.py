@@ -33,6 +33,7 @@ from mpg_agents.acting.seeds import episode_seed
 from mpg_agents.acting.spaces import finger_geometry, geometry_of_config
 from mpg_agents.learning.exploration import Choice, Explorer
 from mpg_agents.learning.train_config import TrainConfig
+from mpg_agents.learning.training_objects import stage_env_config, training_object_set
 from mpg_agents.learning.training_stages import TrainingStage
 from mpg_agents.learning.trials import try_alternatives
 from mpg_envs.grid.actions import PRIMITIVES
@@ -47,11 +48,15 @@ def make_training_env(stage: TrainingStage, config: TrainConfig, num_objects: in
     kwargs: dict[str, Any] = {}
     if num_objects is not None:
         kwargs["num_objects"] = num_objects
-    env_config = EnvConfig(reward=stage.reward_config()) if stage.reward else EnvConfig()
+    options = dict(stage.env_options)  # the stage's object set, visual randomization, observation, config
+    env_config = stage_env_config(options, stage.reward)
     if config.discriminator is not None:
-        kwargs["grasp_scorer"] = Discriminator.from_weights(config.discriminator, geometry_of_config(env_config), device)
-    if stage.reward:
+        kwargs["grasp_scorer"] = Discriminator.from_weights(config.discriminator, geometry_of_config(env_config or EnvConfig()), device)
+    if env_config is not None:
         kwargs["config"] = env_config
+    for key, value in options.items():
+        if key != "config":
+            kwargs[key] = training_object_set(value) if key == "object_set" else value
     env = gym.make(stage.env_id, **kwargs)
     check_not_held_out("custom", env.unwrapped.object_set, f"training on {stage.env_id}")  # however they got there
     return env

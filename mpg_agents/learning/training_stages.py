@@ -19,6 +19,8 @@ from mpg_agents.acting.coordination import check_coordination
 from mpg_envs.grid.actions import check_primitives
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
+from mpg_envs.perception.visual_randomization import VisualRandomization
+from mpg_agents.learning.training_objects import OBS_MODES, STAGE_ENV_OPTIONS, object_set_entries, stage_env_config
 
 
 MAX_MOVE_TRIALS = 8
@@ -87,6 +89,13 @@ class TrainingStage:
             primitive it did not take, so a rule weighing the two
             (``coordination = "uncover_max_q"``, with ``reward = {push_uncovers = true}``)
             learns where a push does the move's work. Privileged like ``grasp_trials``; off by default.
+        env_options: ``((keyword, value), ...)`` (a TOML table) of ``gym.make`` keywords for the
+            stage's training envs, of :data:`STAGE_ENV_OPTIONS`: ``object_set`` (a set name, or a
+            list of sets pooled into one, each ``"name"`` or ``"name:seed"``, e.g.
+            ``["blocks", "procedural:0", "procedural:1"]``; see :func:`object_set_entries`),
+            ``visual_randomization`` (the env option), ``obs_mode`` and ``config`` (a table of
+            EnvConfig fields other than ``reward``, e.g. ``scene_tries``). The object count and the
+            rewards stay the stage's own (``objects``, ``reward``); empty: the env's defaults.
     """
 
     name: str
@@ -111,8 +120,25 @@ class TrainingStage:
     grasp_trials: int = 0
     move_trials: int = 0
     rival_trials: bool = False
+    env_options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
+        options = dict(self.env_options.items() if isinstance(self.env_options, Mapping) else (tuple(p) for p in self.env_options))
+        unknown = sorted(set(options) - set(STAGE_ENV_OPTIONS))
+        if unknown:
+            raise ValueError(f"stage {self.name}: env_options takes {list(STAGE_ENV_OPTIONS)}, got {unknown}")
+        if "object_set" in options:
+            entries = object_set_entries(options["object_set"], f"stage {self.name}")
+            options["object_set"] = entries[0][0] if len(entries) == 1 and entries[0][1] is None else tuple(
+                name if seed is None else f"{name}:{seed}" for name, seed in entries
+            )
+        if "visual_randomization" in options:
+            VisualRandomization.from_option(options["visual_randomization"])  # raises naming what is wrong
+        if "config" in options:
+            stage_env_config(options)  # raises naming what is wrong
+        if options.get("obs_mode", "raycast") not in OBS_MODES:
+            raise ValueError(f"stage {self.name}: env_options obs_mode must be one of {list(OBS_MODES)}, got {options['obs_mode']!r}")
+        object.__setattr__(self, "env_options", tuple(sorted(options.items())))
         if not isinstance(self.rival_trials, bool):
             raise ValueError(f"stage {self.name}: rival_trials must be true or false, got {self.rival_trials!r}")
         for name, most in (("grasp_trials", GRASP_ROTATIONS - 1), ("move_trials", MAX_MOVE_TRIALS)):
@@ -203,6 +229,7 @@ class TrainingStage:
         data["branch_init"] = [list(pair) for pair in self.branch_init]
         data["alternate_shares"] = [list(pair) for pair in self.alternate_shares]
         data["reward"] = dict(self.reward)
+        data["env_options"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.env_options}
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
     @classmethod
