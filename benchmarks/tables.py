@@ -29,6 +29,8 @@ again to resume), cells of earlier runs are taken from ``--reuse``'s file, and
 ``OUT/tracks.{json,md}`` hold the table. ``--run-policies`` runs only the cells of those
 policies (``oracle``, ``shipped``, a checkpoint path as the policy file gives it), ``--no-run``
 none: the table then shows the cells recorded so far, a cell not run is ``-``.
+``--block-episodes K`` runs each missing cell as blocks of K seeds kept as they end
+(``<cell>.blocks/``), for cells longer than a sitting.
 
     python benchmarks/tables.py --tracks hard hard-novel hard-camera --policy-file benchmarks/tracks.toml \
         --reuse benchmarks/results/tracks/reused.toml --episodes 100 --objects 15 30 --seed 500000 \
@@ -60,6 +62,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--tracks", nargs="+", choices=STRICT_TRACKS, help="the track table over these tracks, cell by cell in OUT/<track>/cells/ (resumes)")
     parser.add_argument("--reuse", help="with --tracks: a TOML file of [[cell]] entries recorded by earlier runs")
     parser.add_argument("--run-policies", nargs="+", metavar="POLICY", help="with --tracks: run only these policies' missing cells")
+    parser.add_argument(
+        "--block-episodes", type=int, metavar="K",
+        help="with --tracks: run each missing cell as blocks of K seeds, each kept as it ends (a stopped cell resumes at its first missing block)",
+    )
     parser.add_argument("--no-run", action="store_true", help="with --tracks: run nothing, make the table of the cells recorded")
     parser.add_argument("--policies", nargs="+", help=f"{' | '.join(BUILTIN)} or checkpoint paths (default: oracle grasp-only random shipped)")
     parser.add_argument("--policy-file", help="a TOML file of [[policy]] entries (label, policy, settings) instead of --policies")
@@ -92,8 +98,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error(f"--episodes and --workers must be >= 1, got {args.episodes} and {args.workers}")
     if args.policies and args.policy_file:
         parser.error("give --policies or --policy-file, not both")
-    if not args.tracks and (args.reuse or args.run_policies or args.no_run):
-        parser.error("--reuse, --run-policies and --no-run go with --tracks")
+    if not args.tracks and (args.reuse or args.run_policies or args.no_run or args.block_episodes):
+        parser.error("--reuse, --run-policies, --no-run and --block-episodes go with --tracks")
+    if args.block_episodes is not None and args.block_episodes < 1:
+        parser.error(f"--block-episodes must be >= 1, got {args.block_episodes}")
     if args.tracks and args.speedup:
         parser.error("--speedup measures a --track run, not --tracks")
     try:
@@ -142,7 +150,7 @@ def track_table_main(args: argparse.Namespace) -> dict:
 
     report, markdown = make_track_table(
         args.tracks, args.specs, args.objects, args.episodes, args.seed, args.out, args.reused, args.env_options,
-        run, args.workers, args.ray_address, args.backend, on_cell, None if args.quiet else on_record,
+        run, args.workers, args.ray_address, args.backend, on_cell, None if args.quiet else on_record, args.block_episodes,
     )
     print()
     print(markdown)

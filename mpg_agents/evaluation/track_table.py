@@ -4,7 +4,7 @@ A cell is (track, policy, object count): ``episodes`` episodes on the track's en
 ``seed``. :func:`make_track_table` runs each cell that is missing and writes it as soon as it
 ends to ``OUT/<track>/cells/<label>_<objects>.json`` (``mpg-eval --json``'s format, with the
 policy entry it ran under ``table_policy``), so a stopped run resumes where it stopped and a
-small machine can run a table piece by piece. A cell is used only when it is what the table
+small machine can run a table piece by piece (a long cell too, in blocks of seeds). A cell is used only when it is what the table
 asks: the track's env, the object count, exactly the seeds ``seed .. seed + episodes - 1``,
 the same env options and the same policy entry; anything else raises
 :class:`CellMismatchError` naming the file and what differs, never a silently mixed table.
@@ -199,19 +199,59 @@ def _cell(
     ray_address: str | None,
     backend: str,
     on_record: Callable[[EvalJob, Any], None] | None,
+    block_episodes: int | None = None,
 ) -> tuple[dict[str, Any], str, str, float] | None:
-    """(cell, source, how, wall seconds) of one cell: reused, read from ``path``, or run and
-    written there; ``None`` when it is none of these."""
+    """(cell, source, how, wall seconds) of one cell: reused, read from ``path``, or run (in
+    blocks of ``block_episodes`` seeds when given) and written there; ``None`` when it is none
+    of these."""
     if reused is not None:
         return reused.load(request), reused.source(), "reused", 0.0
     if path.is_file():
         return read_cell_file(request, path), str(path), "recorded", 0.0
     if run is None or not run(request):
         return None
-    job = EvalJob(request.spec.policy, request.env_id, request.episodes, request.seed, request.objects, request.spec.settings, request.env_options)
-    (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
+    if block_episodes and block_episodes < request.episodes:
+        result, seconds = _run_in_blocks(request, path, block_episodes, workers, ray_address, backend, on_record)
+    else:
+        job = EvalJob(request.spec.policy, request.env_id, request.episodes, request.seed, request.objects, request.spec.settings, request.env_options)
+        (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
+        seconds = timing.wall_seconds
     write_cell_file(request, result, path)
-    return cell_json(result), str(path), "ran", timing.wall_seconds
+    return cell_json(result), str(path), "ran", seconds
+
+
+def block_folder(path: Path) -> Path:
+    """Where a cell run in blocks keeps its finished blocks: ``<cell>.blocks/<first seed>.json``."""
+    return path.with_name(path.stem + ".blocks")
+
+
+def _run_in_blocks(
+    request: CellRequest,
+    path: Path,
+    block_episodes: int,
+    workers: int | None,
+    ray_address: str | None,
+    backend: str,
+    on_record: Callable[[EvalJob, Any], None] | None,
+) -> tuple[EvalResult, float]:
+    """The cell as blocks of ``block_episodes`` seeds, one after another (each over the
+    workers), every block written as it ends, so a stopped cell loses at most one block; blocks
+    already on disk are checked and kept. Returns the pooled cell and the blocks' wall seconds."""
+    folder, files, seconds = block_folder(path), [], 0.0
+    for start in range(0, request.episodes, block_episodes):
+        block = folder / f"{request.seed + start}.json"
+        if not block.is_file():
+            n = min(block_episodes, request.episodes - start)
+            job = EvalJob(request.spec.policy, request.env_id, n, request.seed + start, request.objects, request.spec.settings, request.env_options)
+            (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
+            write_cell_file(request, result, block)
+            seconds += timing.wall_seconds
+        elif json.loads(block.read_text()).get("table_policy") != request.policy_entry():
+            raise CellMismatchError(f"{block} ran another policy entry than {request.policy_entry()}: delete {folder} to run the cell again")
+        files.append(block)
+    result = merged_result(files)
+    request.check(result, str(folder))
+    return result, seconds
 
 
 def make_track_table(
@@ -229,6 +269,7 @@ def make_track_table(
     backend: str = "ray",
     on_cell: Callable[[CellRequest, str, float], None] | None = None,
     on_record: Callable[[EvalJob, Any], None] | None = None,
+    block_episodes: int | None = None,
 ) -> tuple[dict[str, Any], str]:
     """The table of ``tracks`` x ``specs`` x ``objects``: every cell reused (``reused``),
     read from ``OUT/<track>/cells/``, or run there when ``run(request)`` says so; a cell
@@ -238,7 +279,12 @@ def make_track_table(
     (:func:`~mpg_agents.evaluation.tables.tracks_success_rows`), then every figure
     (:func:`~mpg_agents.evaluation.tables.tracks_rows`). ``on_cell(request, how,
     seconds)`` hears of each cell: ``how`` is ``reused``, ``recorded`` or ``ran``;
-    ``on_record(job, record)`` of each episode run."""
+    ``on_record(job, record)`` of each episode run. With ``block_episodes``, a cell runs as
+    blocks of that many seeds, each kept as it ends (``<cell>.blocks/``; a stopped cell resumes
+    at its first missing block), then pooled into the cell file: for cells that take longer
+    than a sitting."""
+    if block_episodes is not None and (isinstance(block_episodes, bool) or not isinstance(block_episodes, int) or block_episodes < 1):
+        raise ValueError(f"block_episodes must be a positive integer or None, got {block_episodes!r}")
     labels = [s.label for s in specs]
     if len(set(labels)) != len(labels):
         raise ValueError(f"policy labels must differ, got {labels}")
@@ -258,7 +304,7 @@ def make_track_table(
             for n in objects:
                 request = CellRequest(name, spec, n, episodes, seed, extra)
                 path = Path(out) / name / "cells" / cell_file_name(spec.label, n)
-                found = _cell(request, path, reused.get((name, spec.label, n)), run, workers, ray_address, backend, on_record)
+                found = _cell(request, path, reused.get((name, spec.label, n)), run, workers, ray_address, backend, on_record, block_episodes)
                 if found is None:
                     missing.append([name, spec.label, n])
                     continue

@@ -78,6 +78,32 @@ def test_a_cell_runs_once_is_written_and_is_read_back_then_a_changed_policy_entr
         make_track_table(*args)
 
 
+def test_a_cell_in_blocks_keeps_each_block_resumes_at_the_first_missing_one_and_pools_as_one_run(tmp_path):
+    spec = PolicySpec("Random, one motion", "random")
+    args = (["hard"], [spec], [15], 5, 500000)
+    whole, _ = make_track_table(*args, tmp_path / "whole", env_options={"max_motions": 1}, run=lambda request: True)
+    seeds = []
+    blocks, _ = make_track_table(
+        *args, tmp_path / "blocks", env_options={"max_motions": 1}, run=lambda request: True, block_episodes=2,
+        on_record=lambda job, r: seeds.append(r.seed),
+    )
+    folder = tmp_path / "blocks" / "hard" / "cells" / (Path(cell_file_name(spec.label, 15)).stem + ".blocks")
+    assert sorted(p.name for p in folder.iterdir()) == ["500000.json", "500002.json", "500004.json"]
+    assert seeds == list(range(500000, 500005))
+    assert blocks["rows"] == whole["rows"]  # the pooled blocks are the cell run in one go
+    # A stop after two blocks: the cell file and the last block are missing; only that block runs again.
+    (tmp_path / "blocks" / "hard" / "cells" / cell_file_name(spec.label, 15)).unlink()
+    (folder / "500004.json").unlink()
+    seeds.clear()
+    again, _ = make_track_table(
+        *args, tmp_path / "blocks", env_options={"max_motions": 1}, run=lambda request: True, block_episodes=2,
+        on_record=lambda job, r: seeds.append(r.seed),
+    )
+    assert seeds == [500004] and again["rows"] == whole["rows"]
+    with pytest.raises(ValueError, match="block_episodes must be a positive integer"):
+        make_track_table(*args, tmp_path / "x", block_episodes=0)
+
+
 def test_a_cell_not_run_is_absent_and_named(tmp_path):
     report, markdown = make_track_table(["hard", "hard-camera"], [PolicySpec("Oracle", "oracle")], [15, 30], 100, 500000, tmp_path)
     assert report["rows"] == {} and len(report["missing"]) == 4
