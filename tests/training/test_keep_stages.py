@@ -1,0 +1,42 @@
+"""``benchmarks/keep_stages.py`` keeps a run's finished stages (small files, no replay) and a
+log without progress bars; a pipeline resumed from the kept files skips those stages."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "keep_stages.py"
+
+
+@pytest.fixture()
+def keep(monkeypatch):
+    spec = importlib.util.spec_from_file_location("keep_stages_under_test", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_finished_stages_are_kept_without_the_replay_and_a_running_stage_is_left(keep, tmp_path):
+    run, dest = tmp_path / "run", tmp_path / "kept"
+    for stage, done in (("Stage1", True), ("Stage2", True), ("Stage3", False)):
+        (run / stage / "state").mkdir(parents=True)
+        (run / stage / "state" / "replay.npz").write_bytes(b"x" * 1000)
+        (run / stage / "weights.safetensors").write_bytes(b"w")
+        (run / stage / "progress.csv").write_text("iteration\n1\n")
+        if done:
+            (run / stage / "done.json").write_text("{}")
+    (run / "Stage2" / "calibration.json").write_text("{}")
+    (run / "pipeline.json").write_text("{}")
+    (run / "train.log").write_text("Stage1: 600 iterations\nStage1:  1%|          | 1/600 [00:01<10:00,  1.00s/it]\rStage1:  2%|          | 2/600 [00:02<10:00,  1.00s/it]\nStage1: done\n")
+    assert keep.keep_stages(run, dest) == ["Stage1", "Stage2"]
+    assert sorted(p.name for p in (dest / "Stage1").iterdir()) == ["done.json", "progress.csv", "weights.safetensors"]
+    assert (dest / "Stage2" / "calibration.json").is_file() and not (dest / "Stage3").exists()
+    assert not list(dest.rglob("replay.npz")) and (dest / "pipeline.json").is_file()
+    assert (dest / "train.log").read_text() == "Stage1: 600 iterations\nStage1: done\n"
+    with pytest.raises(FileNotFoundError, match="no run folder"):
+        keep.keep_stages(tmp_path / "missing", dest)
