@@ -15,7 +15,7 @@ from typing import Any, Callable
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED
 from mpg_agents.learning.td_step import TDStepConfig
-from mpg_agents.learning.training_stages import check_fields
+from mpg_envs.settings_fields import check_known_fields
 
 ACTOR_BACKENDS = ("auto", "ray", "processes")
 """Where parallel actors run: Ray when it is installed (``auto``), Ray, or local processes (stdlib)."""
@@ -90,7 +90,7 @@ class TrainConfig:
         Raises:
             ValueError: a key is not a field (names the valid ones).
         """
-        check_fields(cls, data, "training")
+        check_known_fields(cls, data, "training settings")
         data = dict(data)
         for key in ("betas", "q_bounds"):
             if data.get(key) is not None:

@@ -19,6 +19,7 @@ from mpg_agents.acting.coordination import check_coordination
 from mpg_envs.grid.actions import check_primitives
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
+from mpg_envs.settings_fields import check_known_fields
 from mpg_envs.perception.visual_randomization import VisualRandomization
 from mpg_agents.learning.training_objects import OBS_MODES, STAGE_ENV_OPTIONS, object_set_entries, stage_env_config
 
@@ -234,7 +235,7 @@ class TrainingStage:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "TrainingStage":
-        check_fields(cls, data, "training stage")
+        check_known_fields(cls, data, "training stage settings")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
@@ -367,11 +368,3 @@ def with_overrides(stages: Sequence[TrainingStage], overrides: Mapping[str, Mapp
     if unknown:
         raise ValueError(f"overrides for unknown stages {unknown}; valid: {[s.name for s in stages]}")
     return tuple(TrainingStage.from_dict({**s.to_dict(), **overrides[s.name]}) if s.name in overrides else s for s in stages)
-
-
-def check_fields(cls: type, data: Mapping[str, Any], what: str) -> None:
-    """``ValueError`` naming the keys of ``data`` that are not fields of dataclass ``cls``."""
-    known = {f.name for f in fields(cls)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise ValueError(f"unknown {what} settings {unknown}; valid: {sorted(known)}")

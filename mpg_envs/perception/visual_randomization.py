@@ -20,7 +20,7 @@ The maths are pure functions: :func:`jitter_colors` here, the pose error in
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
 
 import mujoco
@@ -29,6 +29,7 @@ import numpy as np
 from mpg_envs.perception.appearance import Lighting
 from mpg_envs.perception.depth_noise import DepthNoise, corrupt_heights
 from mpg_envs.perception.heightmap import Heightmaps, RaycastHeightmapper, geom_colors
+from mpg_envs.settings_fields import check_known_fields
 
 OVERHEAD_CAMERA_Z = 0.85
 """World height (m) of the virtual camera whose depth noise the ray-cast path takes: the
@@ -110,10 +111,7 @@ class VisualRandomization:
         if isinstance(value, cls):
             return value
         if isinstance(value, Mapping):
-            valid = {f.name for f in fields(cls)}
-            unknown = sorted(set(value) - valid)
-            if unknown:
-                raise ValueError(f"visual_randomization: unknown keys {unknown}; valid: {sorted(valid)}")
+            check_known_fields(cls, value, "visual_randomization")
             data = dict(value)
             if isinstance(data.get("depth_noise"), Mapping):
                 data["depth_noise"] = DepthNoise(**data["depth_noise"])

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields, is_dataclass, replace
+from dataclasses import dataclass, is_dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -14,6 +14,7 @@ from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.simulation.robot import RobotConfig
 from mpg_envs.scenes.generators import GeneratorConfig
 from mpg_envs.grid.workspace import Workspace
+from mpg_envs.settings_fields import check_known_fields
 from mpg_envs.simulation.world import PhysicsConfig
 
 OBS_MODES = ("raycast", "camera")
@@ -59,10 +60,7 @@ def config_of(config: EnvConfig | dict[str, Any]) -> EnvConfig:
     if isinstance(config, EnvConfig):
         return config
     if isinstance(config, dict):
-        valid = {f.name for f in fields(EnvConfig)}
-        unknown = sorted(set(config) - valid)
-        if unknown:
-            raise ValueError(f"config has unknown EnvConfig fields {unknown}; valid: {sorted(valid)}")
+        check_known_fields(EnvConfig, config, "config")
         default = EnvConfig()
         # A nested settings dataclass may be named as a dict of its fields too (``{"generator": {...}}``).
         return replace(default, **{k: _fields_of(getattr(default, k), v, k) for k, v in config.items()})
@@ -74,8 +72,5 @@ def _fields_of(default: Any, value: Any, name: str) -> Any:
     with those fields replaced when ``default`` is a dataclass."""
     if not (isinstance(value, dict) and is_dataclass(default)):
         return value
-    valid = {f.name for f in fields(default)}
-    unknown = sorted(set(value) - valid)
-    if unknown:
-        raise ValueError(f"config[{name!r}] has unknown {type(default).__name__} fields {unknown}; valid: {sorted(valid)}")
+    check_known_fields(type(default), value, f"config[{name!r}]")
     return replace(default, **value)

@@ -156,7 +156,7 @@ def test_option_values():
     custom = VisualRandomization.from_option({"light_tilt": 10.0, "depth_noise": None, "ambient_share": [0.5, 0.5]})
     assert custom.light_tilt == 10.0 and custom.depth_noise is None and custom.ambient_share == (0.5, 0.5)
     assert VisualRandomization.from_option({"depth_noise": {"edge_dropout": 0.2}}).depth_noise.edge_dropout == 0.2
-    with pytest.raises(ValueError, match="unknown keys"):
+    with pytest.raises(ValueError, match="unknown VisualRandomization fields"):
         VisualRandomization.from_option({"light": 1})
     with pytest.raises(ValueError, match="visual_randomization must be"):
         VisualRandomization.from_option("yes")

@@ -47,7 +47,7 @@ def test_lookup_selection_and_overrides():
         select_stages(TRAINING_STAGES, ["9"])
     changed = with_overrides(TRAINING_STAGES, {"Stage3": {"objects": [2, 3], "iterations": 7}})
     assert changed[2].objects == (2, 3) and changed[2].iterations == 7
-    with pytest.raises(ValueError, match="unknown training stage settings"):
+    with pytest.raises(ValueError, match="training stage settings has unknown TrainingStage fields"):
         with_overrides(TRAINING_STAGES, {"Stage3": {"objetcs": [2, 3]}})
     with pytest.raises(ValueError, match="coordination"):
         TrainingStage("s", "MPG-Stage5-v0", coordination="vote")
