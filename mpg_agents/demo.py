@@ -10,7 +10,8 @@ available) and, for a network policy, ``qmaps_<k>.png`` for each motion ``k`` of
 episode (every branch's Q map at that decision, the chosen action drawn and named).
 By default it runs the shipped MPGNet on the hard track (``MPG-OccludedHard-v0``: the target
 at most 30% visible, strict retrieval) from a held-out scene where the net first moves the
-occluder aside, then grasps the target; ``--env MPG-Occluded-v0`` shows the paper's test scenes.
+occluder aside, then grasps the target; ``--env MPG-Occluded-v0`` shows the paper's test scenes,
+``--env MPG-OccludedHardNovel-v0 --seed 500001`` a scene of shapes no training used.
 """
 
 from __future__ import annotations
