@@ -112,3 +112,20 @@ def pytest_collection_modifyitems(config, items):
     missing = sorted(n for n in listed - seen if n.split("::")[0] in collected_files)
     if missing:
         raise pytest.UsageError(f"tests/heavy.txt lists tests that do not exist (renamed or removed?): {missing}")
+
+
+@pytest.fixture()
+def benchmark_script(monkeypatch):
+    """A loader of a script of ``benchmarks/`` as a module: ``benchmark_script("keep_stages")``
+    imports ``benchmarks/keep_stages.py`` under a test-only name, registered for this test alone."""
+    import importlib.util
+
+    def load(name: str):
+        path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+        spec = importlib.util.spec_from_file_location(f"{name}_under_test", path)
+        module = importlib.util.module_from_spec(spec)
+        monkeypatch.setitem(sys.modules, spec.name, module)
+        spec.loader.exec_module(module)
+        return module
+
+    return load

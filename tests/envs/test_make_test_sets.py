@@ -4,11 +4,8 @@ writes the sets made so far, and a shard made by another generator is refused. T
 
 from __future__ import annotations
 
-import importlib.util
 import shutil
-import sys
 from concurrent.futures import Future
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,16 +13,12 @@ import pytest
 from mpg_envs.scenes.generators import GeneratorConfig
 from mpg_envs.scenes.test_sets import load_test_set
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "make_test_sets.py"
 ENV, N = "MPG-OccludedHard-v0", 5
 
 
 @pytest.fixture()
-def script(monkeypatch):
-    spec = importlib.util.spec_from_file_location("make_test_sets_under_test", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, spec.name, module)
-    spec.loader.exec_module(module)
+def script(monkeypatch, benchmark_script):
+    module = benchmark_script("make_test_sets")
     module.made, module.fail_at = [], set()
 
     def fake_scene(task):

@@ -3,22 +3,12 @@ log without progress bars; a pipeline resumed from the kept files skips those st
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
-
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "keep_stages.py"
 
 
 @pytest.fixture()
-def keep(monkeypatch):
-    spec = importlib.util.spec_from_file_location("keep_stages_under_test", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, spec.name, module)
-    spec.loader.exec_module(module)
-    return module
+def keep(benchmark_script):
+    return benchmark_script("keep_stages")
 
 
 def test_finished_stages_are_kept_without_the_replay_and_a_running_stage_is_left(keep, tmp_path):
