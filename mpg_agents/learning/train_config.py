@@ -117,11 +117,14 @@ def _integer(name: str, value: Any, low: int, optional: bool = False) -> None:
         raise ValueError(f"training setting {name} must be an integer >= {low}{none}, got {value!r}")
 
 
-def _number(name: str, value: Any, low: float, high: float, valid: str, optional: bool = False) -> None:
-    """``value`` a finite real number in ``[low, high]`` (not a bool, not a string)."""
+def _number(name: str, value: Any, low: float, high: float, valid: str, optional: bool = False, above_low: bool = False) -> None:
+    """``value`` a finite real number in ``[low, high]``, or ``(low, high]`` with ``above_low``
+    (not a bool, not a string). A strict bound, not ``low = math.ulp(0.0)``: a process that
+    flushes denormals to zero reads the smallest positive float as 0 and would let 0 pass."""
     if optional and value is None:
         return
-    if isinstance(value, bool) or not isinstance(value, Real) or not math.isfinite(value) or not low <= value <= high:
+    number = not isinstance(value, bool) and isinstance(value, Real) and math.isfinite(value)
+    if not number or not (low < value if above_low else low <= value) or value > high:
         raise ValueError(f"training setting {name} must be {valid}{' or None' if optional else ''}, got {value!r}")
 
 
@@ -146,7 +149,7 @@ def check_train_config(cfg: TrainConfig) -> None:
         raise ValueError(f"training setting variant must be 'small' or 'large', got {cfg.variant!r}")
     _integer("num_objects", cfg.num_objects, 1, optional=True)
     _number("gamma", cfg.gamma, 0.0, 1.0, "a number in [0, 1]")
-    _number("learning_rate", cfg.learning_rate, math.ulp(0.0), inf, "a positive finite number")
+    _number("learning_rate", cfg.learning_rate, 0.0, inf, "a positive finite number", above_low=True)
     _number("weight_decay", cfg.weight_decay, 0.0, inf, "a finite number >= 0")
     _pair("betas", cfg.betas, "two numbers in [0, 1)", lambda a, b: 0 <= a < 1 and 0 <= b < 1)
     _number("epsilon_start", cfg.epsilon_start, 0.0, 1.0, "a number in [0, 1]")
@@ -156,12 +159,10 @@ def check_train_config(cfg: TrainConfig) -> None:
     _integer("replay_capacity", cfg.replay_capacity, 1)
     _number("priority_alpha", cfg.priority_alpha, 0.0, inf, "a finite number >= 0")
     _integer("target_update_every", cfg.target_update_every, 1)
-    _number("replay_ratio", cfg.replay_ratio, 0.0, inf, "a positive finite number (gradient steps per env step)")
-    if cfg.replay_ratio == 0:  # not a bound of ulp(0): a process that flushes denormals reads that as 0
-        raise ValueError("training setting replay_ratio must be a positive finite number (gradient steps per env step), got 0")
+    _number("replay_ratio", cfg.replay_ratio, 0.0, inf, "a positive finite number (gradient steps per env step)", above_low=True)
     if not isinstance(cfg.grasp_symmetry, bool):
         raise ValueError(f"training setting grasp_symmetry must be true or false, got {cfg.grasp_symmetry!r}")
-    _number("max_grad_norm", cfg.max_grad_norm, math.ulp(0.0), inf, "a positive finite number", optional=True)
+    _number("max_grad_norm", cfg.max_grad_norm, 0.0, inf, "a positive finite number", optional=True, above_low=True)
     if cfg.q_bounds is not None:
         _pair("q_bounds", cfg.q_bounds, "two finite numbers [low, high] with low < high",
               lambda a, b: math.isfinite(a) and math.isfinite(b) and a < b)
