@@ -171,11 +171,6 @@ def test_bad_training_settings_are_named(tmp_path, capsys, setting, message):
     assert not (tmp_path / "run").exists()
 
 
-@pytest.mark.parametrize("flag, message", [
-    (["--steps", "-1"], "training setting steps must be an integer >= 0 or None, got -1"),
-    (["--seed", "-5"], "training setting seed must be an integer >= 0, got -5"),
-    (["--num-objects", "0"], "training setting num_objects must be an integer >= 1 or None, got 0"),
-])
 def test_positive_settings_refuse_zero_with_a_strict_bound():
     """learning_rate, replay_ratio and max_grad_norm refuse 0 by a strict bound (a lower bound of
     ``math.ulp(0.0)`` reads as 0 where denormals are flushed) and take the smallest positive float."""
@@ -187,6 +182,11 @@ def test_positive_settings_refuse_zero_with_a_strict_bound():
         assert getattr(TrainConfig(**{name: 5e-324}), name) == 5e-324
 
 
+@pytest.mark.parametrize("flag, message", [
+    (["--steps", "-1"], "training setting steps must be an integer >= 0 or None, got -1"),
+    (["--seed", "-5"], "training setting seed must be an integer >= 0, got -5"),
+    (["--num-objects", "0"], "training setting num_objects must be an integer >= 1 or None, got 0"),
+])
 def test_bad_training_flags_are_named(tmp_path, capsys, flag, message):
     assert train_main(["--env", "MPG-Stage2-v0", *flag, "--out", str(tmp_path / "run")]) == 2
     assert f"error: {message}" in capsys.readouterr().err
