@@ -213,11 +213,24 @@ def _cell(
     if block_episodes and block_episodes < request.episodes:
         result, seconds = _run_in_blocks(request, path, block_episodes, workers, ray_address, backend, on_record)
     else:
-        job = EvalJob(request.spec.policy, request.env_id, request.episodes, request.seed, request.objects, request.spec.settings, request.env_options)
-        (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
-        seconds = timing.wall_seconds
+        result, seconds = _run_seeds(request, request.seed, request.episodes, workers, ray_address, backend, on_record)
     write_cell_file(request, result, path)
     return cell_json(result), str(path), "ran", seconds
+
+
+def _run_seeds(
+    request: CellRequest,
+    seed: int,
+    episodes: int,
+    workers: int | None,
+    ray_address: str | None,
+    backend: str,
+    on_record: Callable[[EvalJob, Any], None] | None,
+) -> tuple[EvalResult, float]:
+    """The cell's policy and env on ``episodes`` seeds from ``seed``: the result and its wall seconds."""
+    job = EvalJob(request.spec.policy, request.env_id, episodes, seed, request.objects, request.spec.settings, request.env_options)
+    (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
+    return result, timing.wall_seconds
 
 
 def block_folder(path: Path) -> Path:
@@ -242,10 +255,9 @@ def _run_in_blocks(
         block = folder / f"{request.seed + start}.json"
         if not block.is_file():
             n = min(block_episodes, request.episodes - start)
-            job = EvalJob(request.spec.policy, request.env_id, n, request.seed + start, request.objects, request.spec.settings, request.env_options)
-            (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
+            result, wall = _run_seeds(request, request.seed + start, n, workers, ray_address, backend, on_record)
             write_cell_file(request, result, block)
-            seconds += timing.wall_seconds
+            seconds += wall
         elif json.loads(block.read_text()).get("table_policy") != request.policy_entry():
             raise CellMismatchError(f"{block} ran another policy entry than {request.policy_entry()}: delete {folder} to run the cell again")
         files.append(block)
