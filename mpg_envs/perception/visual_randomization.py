@@ -8,7 +8,8 @@ light, colours, camera errors and depth noise. What applies where:
 - light direction, strength and shadows: the camera path only (the ray casts paint flat colours);
 - object and table colours: both paths (:func:`randomized_geom_colors`);
 - camera pose (a calibration error: the image comes from the true pose, the back-projection
-  uses the calibrated one): the camera path only;
+  uses the calibrated one): the camera path, and with ``raycast_misregistration`` the ray-cast
+  path as the same cameras would place it (:mod:`mpg_envs.perception.misregistration`);
 - depth noise and missing depth: both, each camera image on the camera path, and on the
   ray-cast path as a camera :data:`OVERHEAD_CAMERA_Z` straight above would see the heightmap
   (:func:`randomized_raycast`).
@@ -29,6 +30,7 @@ import numpy as np
 from mpg_envs.perception.appearance import Lighting
 from mpg_envs.perception.depth_noise import DepthNoise, corrupt_heights
 from mpg_envs.perception.heightmap import Heightmaps, RaycastHeightmapper, geom_colors
+from mpg_envs.perception.misregistration import misregistered_heightmaps
 from mpg_envs.settings_fields import check_known_fields
 
 OVERHEAD_CAMERA_Z = 0.85
@@ -68,6 +70,11 @@ class VisualRandomization:
             orientation (axis uniform).
         depth_noise: the depth sensor's noise and holes (``None``: clean depth).
         depth_noise_scale: range of a factor on ``depth_noise``'s standard deviations.
+        raycast_misregistration: the ray-cast path also places its heightmaps as the camera
+            mode's cameras with this episode's calibration errors would (each camera's view
+            moved by its own error, fused by the highest reading), so a policy trained on ray
+            casts meets the camera track's misplacement of image against target mask. Off by
+            default: the ray-cast path then stays registered.
     """
 
     light_tilt: float = 30.0
@@ -82,6 +89,7 @@ class VisualRandomization:
     camera_rotation_error: float = 1.0
     depth_noise: DepthNoise | None = field(default_factory=DepthNoise)
     depth_noise_scale: tuple[float, float] = (0.5, 1.5)
+    raycast_misregistration: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.light_tilt < 90.0:
@@ -96,6 +104,8 @@ class VisualRandomization:
             raise ValueError(f"VisualRandomization.camera_position_error must be in [0, 0.1] m, got {self.camera_position_error!r}")
         if not 0.0 <= self.camera_rotation_error <= 10.0:
             raise ValueError(f"VisualRandomization.camera_rotation_error must be in [0, 10] degrees, got {self.camera_rotation_error!r}")
+        if not isinstance(self.raycast_misregistration, bool):
+            raise ValueError(f"VisualRandomization.raycast_misregistration must be True or False, got {self.raycast_misregistration!r}")
         if self.depth_noise is not None and not isinstance(self.depth_noise, DepthNoise):
             raise ValueError(f"VisualRandomization.depth_noise must be a DepthNoise or None, got {self.depth_noise!r}")
 
@@ -143,6 +153,8 @@ class EpisodeVisuals:
         camera_rotations: ``(CAMERA_SLOTS, 3)`` rotation vectors (radians, world frame) from the
             calibrated to the true camera orientation.
         depth_noise: this episode's depth noise (``None``: clean).
+        raycast_misregistration: the ray-cast path places its heightmaps with the camera
+            errors (:attr:`VisualRandomization.raycast_misregistration`).
     """
 
     seed: int
@@ -152,6 +164,7 @@ class EpisodeVisuals:
     camera_offsets: np.ndarray
     camera_rotations: np.ndarray
     depth_noise: DepthNoise | None
+    raycast_misregistration: bool = False
 
     def noise_rng(self, observation: int) -> np.random.Generator:
         """The generator of observation ``observation``'s depth noise (same seed and index,
@@ -162,6 +175,7 @@ class EpisodeVisuals:
         """JSON-ready values, rounded; object gains of the first ``num_objects`` objects."""
         n = MAX_OBJECT_SLOTS if num_objects is None else int(num_objects)
         r = lambda a: np.round(np.asarray(a, float), 5).tolist()  # noqa: E731
+        extra = {"raycast_misregistration": True} if self.raycast_misregistration else {}  # records without it stay as they were
         return {
             "seed": int(self.seed),
             "lighting": self.lighting.to_dict(),
@@ -170,6 +184,7 @@ class EpisodeVisuals:
             "camera_offsets_m": r(self.camera_offsets),
             "camera_rotations_deg": r(np.degrees(np.linalg.norm(self.camera_rotations, axis=1))),
             "depth_noise": None if self.depth_noise is None else self.depth_noise.to_dict(),
+            **extra,
         }
 
 
@@ -203,7 +218,7 @@ def draw_visuals(config: VisualRandomization, seed: int) -> EpisodeVisuals:
         scale = rng.uniform(*config.depth_noise_scale)
         base = config.depth_noise
         noise = DepthNoise(**{**base.to_dict(), "base_std": base.base_std * scale, "quadratic": base.quadratic * scale})
-    return EpisodeVisuals(int(seed), lighting, table_gain, object_gains, offsets, rotations, noise)
+    return EpisodeVisuals(int(seed), lighting, table_gain, object_gains, offsets, rotations, noise, bool(config.raycast_misregistration))
 
 
 def episode_visuals(config: VisualRandomization | None, seed: int | None, rng: np.random.Generator) -> EpisodeVisuals | None:
@@ -252,15 +267,28 @@ def randomized_raycast(
     visuals: EpisodeVisuals,
     rng: np.random.Generator,
     background_color: tuple[int, int, int] = (0, 0, 0),
+    camera_centres: np.ndarray | None = None,
 ) -> Heightmaps:
-    """The ray-cast heightmaps with an episode's colours and, when it has one, its depth
-    noise as a camera at :data:`OVERHEAD_CAMERA_Z` straight above would give it: pixels that
-    lose their depth read height 0, ``background_color`` and geom -1, as the camera path's
-    pixels that no camera sees. The light and the camera pose do not apply."""
+    """The ray-cast heightmaps with an episode's colours, placed as cameras at
+    ``camera_centres`` with its calibration errors would place them when it asks for that
+    (``raycast_misregistration``; camera k takes row k of the errors), and, when it has one,
+    its depth noise as a camera at :data:`OVERHEAD_CAMERA_Z` straight above would give it:
+    pixels that lose their depth read height 0, ``background_color`` and geom -1, as the
+    camera path's pixels that no camera sees. The light does not apply.
+
+    Raises:
+        ValueError: misregistration asked for without ``camera_centres``, or more cameras
+            than :data:`CAMERA_SLOTS`.
+    """
     maps = raycaster.heightmaps(data, randomized_geom_colors(raycaster.model, visuals))
+    ws = raycaster.workspace
+    if visuals.raycast_misregistration:
+        if camera_centres is None or not 1 <= len(camera_centres) <= CAMERA_SLOTS:
+            raise ValueError(f"raycast_misregistration needs the calibrated centres of 1 to {CAMERA_SLOTS} cameras, got {camera_centres!r}")
+        k = len(camera_centres)
+        maps = misregistered_heightmaps(maps, ws, camera_centres, visuals.camera_offsets[:k], visuals.camera_rotations[:k], background_color)
     if visuals.depth_noise is None:
         return maps
-    ws = raycaster.workspace
     depth, lost = corrupt_heights(
         maps.depth, maps.color, visuals.depth_noise, rng, OVERHEAD_CAMERA_Z - ws.z_min, ws.z_max - ws.z_min
     )

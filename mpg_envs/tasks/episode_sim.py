@@ -154,8 +154,17 @@ class EpisodeSim:
                 self._camera = CameraHeightmapper(world.model, self.camera_config or CameraConfig(), self.config.workspace)
             return self._camera.heightmaps(world.data, rng, self.visuals)
         if self.visuals is not None:
-            return randomized_raycast(self._raycaster, world.data, self.visuals, rng)
+            return randomized_raycast(self._raycaster, world.data, self.visuals, rng, camera_centres=self._camera_centres())
         return self._raycaster(world.data)
+
+    def _camera_centres(self) -> np.ndarray | None:
+        """The camera mode's calibrated camera centres, where the ray-cast path places its
+        heightmaps as those cameras would (``raycast_misregistration``); else ``None``."""
+        if self.visuals is None or not self.visuals.raycast_misregistration:
+            return None
+        from mpg_envs.perception.camera import CameraConfig
+
+        return np.array([cam.position for cam in (self.camera_config or CameraConfig()).cameras], dtype=float)
 
     def _occlusion_depth(self, maps) -> np.ndarray:
         """The depth the occlusion flag is judged on: the observation's own in ray-cast mode; in
@@ -163,8 +172,11 @@ class EpisodeSim:
         inside the target's true footprint with its true top; a camera's heightmap is placed by
         its calibrated pose, up to about 1 cm off the true one, and with depth noise a
         neighbour's rim inside the footprint flagged clear targets as covered (3 of 8 on 30
-        tuning scenes), so a policy pushed on at uncovered targets."""
+        tuning scenes), so a policy pushed on at uncovered targets. The ray-cast path placed as
+        miscalibrated cameras would (``raycast_misregistration``) is judged on a clean cast too."""
         if self.obs_mode != "camera":
+            if self.visuals is not None and self.visuals.raycast_misregistration:
+                return self._raycaster(self._built().data).depth  # the same reason: a misplaced view
             return maps.depth
         if self._occlusion_caster is None:
             from mpg_envs.perception.heightmap import RaycastHeightmapper

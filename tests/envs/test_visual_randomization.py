@@ -26,6 +26,8 @@ from mpg_envs.perception.visual_randomization import (
     jitter_colors,
     randomized_geom_colors,
 )
+from mpg_envs.perception.camera import CameraConfig
+from mpg_envs.perception.misregistration import misregistered_heightmaps
 from mpg_envs.tasks.env import MPGEnv
 from mpg_envs.tasks.tracks import TRACKS
 
@@ -208,6 +210,30 @@ def test_env_option_on_the_raycast_path():
     np.testing.assert_array_equal(tried["depth"], taken["depth"])
     plain.close()
     noisy.close()
+
+
+def test_misregistration_on_the_raycast_path_places_the_view_as_the_cameras_would():
+    options = {"depth_noise": None, "object_brightness": 0.0, "object_hue": 0.0, "table_brightness": 0.0, "table_hue": 0.0}
+    registered = MPGEnv("Stage5", num_objects=8, visual_randomization=options)
+    moved = MPGEnv("Stage5", num_objects=8, visual_randomization={**options, "raycast_misregistration": True})
+    obs0, info0 = registered.reset(seed=11)
+    obs1, info1 = moved.reset(seed=11)
+    assert "raycast_misregistration" not in info0["visual_randomization"] and info1["visual_randomization"]["raycast_misregistration"]
+    # Colour and depth are the registered view moved by the cameras' errors; mask and flag are the true state's.
+    centres = np.array([cam.position for cam in CameraConfig().cameras])
+    visuals = moved.sim.visuals
+    expected = misregistered_heightmaps(
+        registered.sim.heightmaps(), moved.sim.config.workspace, centres, visuals.camera_offsets[:2], visuals.camera_rotations[:2]
+    )
+    np.testing.assert_array_equal(obs1["color"], expected.color)
+    np.testing.assert_array_equal(obs1["depth"], expected.depth)
+    assert not np.array_equal(obs1["depth"], obs0["depth"])
+    np.testing.assert_array_equal(obs1["mask"], obs0["mask"])
+    np.testing.assert_array_equal(obs1["occluded"], obs0["occluded"])
+    with pytest.raises(ValueError, match="raycast_misregistration must be True or False"):
+        VisualRandomization(raycast_misregistration=1)
+    registered.close()
+    moved.close()
 
 
 def test_camera_track_is_registered():
