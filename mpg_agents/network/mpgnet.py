@@ -341,7 +341,7 @@ class MPGNet(nn.Module):
 
     def load_imagenet(self, path: str | Path) -> None:
         """Initialise every trunk from a torchvision MobileNetV3 checkpoint of the same variant."""
-        trunks = [self.mask_trunk] + [t for b in self.branches.values() for t in (b.color_trunk, b.depth_trunk)]
+        trunks = [self.mask_trunk] + [t for b in self.branches.values() for t in b.trunks]
         for trunk in trunks:
             load_torchvision_features(trunk, path)
 

@@ -102,6 +102,10 @@ class MPGNetConfig:
             the occluder or a neighbour and lifted nothing.
         finger_tolerance_m: the slack of ``grasp_fingers="clear"`` and ``move_fingers="clear"``, metres.
         bn_momentum: batch-norm momentum of the trunks (see ``mobilenet.DEFAULT_BN_MOMENTUM``).
+        color_input: the nets read the colour heightmap (the paper). ``False``: each primitive's
+            net reads only depth and the shared mask features (no colour trunk: 4 trunk passes
+            per rotation instead of 7), so a camera's colour (its light, its colours, its image
+            placed off the target mask by a calibration error) cannot mislead it.
         channels_last: keep weights and activations channels-last (NHWC); 2-3x faster
             depthwise convolutions on CPU. Not part of the architecture (checkpoints load
             either way).
@@ -138,6 +142,7 @@ class MPGNetConfig:
     move_fingers: str = "any"
     finger_tolerance_m: float = 0.005
     bn_momentum: float = DEFAULT_BN_MOMENTUM
+    color_input: bool = True
     channels_last: bool = True
     trunk_batch: int | None = 4
 
@@ -176,6 +181,8 @@ class MPGNetConfig:
             raise ValueError(f"move_fingers must be one of {GRASP_FINGERS}, got {self.move_fingers!r}")
         if not self.finger_tolerance_m >= 0:
             raise ValueError(f"finger_tolerance_m must be >= 0 metres, got {self.finger_tolerance_m}")
+        if not isinstance(self.color_input, bool):
+            raise ValueError(f"color_input must be True or False, got {self.color_input!r}")
         if self.trunk_batch is not None and self.trunk_batch < 1:
             raise ValueError(f"trunk_batch must be None or positive, got {self.trunk_batch}")
 

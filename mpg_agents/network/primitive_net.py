@@ -54,25 +54,33 @@ class QHead(nn.Sequential):
 
 
 class PrimitiveNet(nn.Module):
-    """One primitive's Q-network: colour trunk, depth trunk and head (the mask trunk is shared)."""
+    """One primitive's Q-network: colour trunk (unless ``config.color_input`` is off), depth
+    trunk and head (the mask trunk is shared)."""
 
     def __init__(self, config: MPGNetConfig, mask_channels: int) -> None:
         super().__init__()
         self.config = config
-        self.color_trunk = MobileNetV3Features(config.variant, 3, config.trunk_depth, config.bn_momentum)
+        self.color_trunk = MobileNetV3Features(config.variant, 3, config.trunk_depth, config.bn_momentum) if config.color_input else None
         # Depth and mask are single-channel: a 1-channel stem is equivalent to replicating them to
         # 3 channels (an ImageNet stem is loaded by summing its RGB kernels) and 3x cheaper.
         self.depth_trunk = MobileNetV3Features(config.variant, 1, config.trunk_depth, config.bn_momentum)
-        channels = self.color_trunk.out_channels + self.depth_trunk.out_channels + mask_channels
+        color_channels = self.color_trunk.out_channels if self.color_trunk is not None else 0
+        channels = color_channels + self.depth_trunk.out_channels + mask_channels
         self.head = QHead(channels, config.head_channels, config.head_dilation, zero_output=config.head_init == "zero")
+
+    @property
+    def trunks(self) -> tuple[MobileNetV3Features, ...]:
+        """This net's own trunks (colour when it reads colour, depth)."""
+        return tuple(t for t in (self.color_trunk, self.depth_trunk) if t is not None)
 
     def forward(self, planes: Tensor, mask_features: Tensor) -> Tensor:
         """Coarse Q map ``(N, 1, h, w)`` from rotated, padded input planes (:data:`PLANES`) and
         mask-trunk features."""
         size = trunk_chunk(self.config, self.training, planes)
-        color_f = run_in_batches(self.color_trunk, planes, size, first_channel=PLANES["color"])
-        depth_f = run_in_batches(self.depth_trunk, planes, size, first_channel=PLANES["depth"])
-        return self.head(torch.cat([color_f, depth_f, mask_features], dim=1))
+        features = [run_in_batches(self.depth_trunk, planes, size, first_channel=PLANES["depth"]), mask_features]
+        if self.color_trunk is not None:
+            features.insert(0, run_in_batches(self.color_trunk, planes, size, first_channel=PLANES["color"]))
+        return self.head(torch.cat(features, dim=1))
 
 
 def trunk_chunk(config: MPGNetConfig, training: bool, planes: Tensor) -> int | None:

@@ -266,3 +266,32 @@ def test_channels_first_colour_is_accepted(small_net, scene):
         a = small_net(scene, ("grasp",))["grasp"]
         b = small_net({k: (v if k == "color" else v[None]) for k, v in chw.items()}, ("grasp",))["grasp"]
     assert torch.equal(a, b)
+
+
+def test_a_colour_free_net_reads_depth_and_mask_only_and_round_trips(tmp_path, scene):
+    from mpg_agents.acting.weights import load_mpgnet, save_mpgnet
+
+    from .conftest import calibrate_bn
+
+    torch.manual_seed(0)
+    net = MPGNet(MPGNetConfig.small(color_input=False))
+    calibrate_bn(net, scene)
+    for branch in net.branches.values():
+        assert branch.color_trunk is None and branch.trunks == (branch.depth_trunk,)
+    assert not any("color_trunk" in key for key in net.state_dict())
+    with torch.inference_mode():
+        maps = net(scene)
+        recoloured = net(dict(scene, color=255 - scene["color"]))
+        deeper = net(dict(scene, depth=scene["depth"] + 0.01))
+    for p in net.primitives:
+        assert torch.equal(maps[p], recoloured[p])  # the colour reaches no Q
+    assert not torch.equal(maps["push"], deeper["push"])  # the depth does
+    path = tmp_path / "depth_only.safetensors"
+    save_mpgnet(net, path)
+    loaded, header = load_mpgnet(path)
+    assert loaded.config.color_input is False and header["config"]["color_input"] is False
+    loaded.eval()
+    with torch.inference_mode():
+        assert torch.equal(loaded(scene)["grasp"], maps["grasp"])
+    with pytest.raises(ValueError, match="color_input must be True or False"):
+        MPGNetConfig.small(color_input="no")
