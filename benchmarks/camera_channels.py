@@ -26,10 +26,11 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.evaluation.comparison import EvalRecords, compare_paired
 from mpg_agents.evaluation.env_options import parse_env_options
 from mpg_agents.evaluation.evaluate import run_episode
 from mpg_agents.evaluation.policy_zoo import make_policy
-from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
+from mpg_agents.evaluation.stats import wilson_interval
 from mpg_envs.perception.heightmap import RaycastHeightmapper
 
 CONDITIONS: dict[str, tuple[str, ...]] = {
@@ -99,14 +100,15 @@ def summary(records: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def paired(a: list[dict[str, Any]], b: list[dict[str, Any]]) -> dict[str, Any]:
-    """``a`` minus ``b`` on the same seeds (success points and motions, 95% bootstrap)."""
-    ds = np.array([float(x["success"]) - float(y["success"]) for x, y in zip(a, b, strict=True)])
-    dm = np.array([float(x["motions"]) - float(y["motions"]) for x, y in zip(a, b, strict=True)])
+    """``a`` minus ``b`` on the same seeds (success points and motions, 95% paired bootstrap:
+    :func:`~mpg_agents.evaluation.comparison.compare_paired`)."""
+    side = lambda records: EvalRecords("", "", None, {int(r["seed"]): r for r in records})  # noqa: E731
+    c = compare_paired(side(a), side(b))
     return {
-        "success_difference": float(ds.mean()),
-        "success_interval": list(bootstrap_mean_interval(ds)),
-        "motions_difference": float(dm.mean()),
-        "motions_interval": list(bootstrap_mean_interval(dm)),
+        "success_difference": c.success_difference,
+        "success_interval": list(c.success_interval),
+        "motions_difference": c.motions_difference,
+        "motions_interval": list(c.motions_interval),
     }
 
 

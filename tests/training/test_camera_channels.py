@@ -47,11 +47,11 @@ def test_a_swapped_channel_is_the_clean_ray_cast_of_the_state(benchmark_script):
 def test_paired_differences_and_summary_by_hand(benchmark_script):
     script = benchmark_script("camera_channels")
 
-    def record(success, motions, pushes=0, end="success"):
-        return {"success": success, "motions": motions, "primitives": {"push": pushes, "grasp": 1, "move": 0}, "end_reason": end}
+    def record(seed, success, motions, pushes=0, end="success"):
+        return {"seed": seed, "success": success, "motions": motions, "primitives": {"push": pushes, "grasp": 1, "move": 0}, "end_reason": end}
 
-    a = [record(True, 2), record(True, 3), record(False, 10, 9, "motion_cap")]
-    b = [record(False, 10, 9, "motion_cap"), record(True, 5, 4), record(False, 10, 9, "motion_cap")]
+    a = [record(1, True, 2), record(2, True, 3), record(3, False, 10, 9, "motion_cap")]
+    b = [record(1, False, 10, 9, "motion_cap"), record(2, True, 5, 4), record(3, False, 10, 9, "motion_cap")]
     diff = script.paired(a, b)
     assert diff["success_difference"] == pytest.approx(1 / 3)
     assert diff["motions_difference"] == pytest.approx((-8 - 2 + 0) / 3)
