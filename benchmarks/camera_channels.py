@@ -29,7 +29,7 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.evaluation.comparison import EvalRecords, compare_paired
 from mpg_agents.evaluation.env_options import parse_env_options
 from mpg_agents.evaluation.evaluate import run_episode
-from mpg_agents.evaluation.policy_zoo import make_policy
+from mpg_agents.evaluation.policy_zoo import make_network_policy, make_policy
 from mpg_agents.evaluation.stats import wilson_interval
 from mpg_envs.perception.heightmap import RaycastHeightmapper
 
@@ -122,13 +122,17 @@ def main() -> None:
     parser.add_argument("--conditions", nargs="+", default=list(CONDITIONS), choices=list(CONDITIONS))
     parser.add_argument("--env-option", action="append", metavar="KEY=VALUE",
                         help="an env keyword (repeatable), e.g. \"visual_randomization={'shadows': False}\"")
+    parser.add_argument("--q-star", type=float, help="a network policy's grasp threshold Q*_g (default: its checkpoint's)")
     parser.add_argument("--json", help="write the records and the summary here")
     args = parser.parse_args()
     if args.seed >= 500000 and args.seed < 700000:
         parser.error("seeds 500000-699999 are held-out test scenes: diagnose on tuning seeds (700000 on)")
     options = parse_env_options(args.env_option)
     env = gym.make(args.env, num_objects=args.objects, **options)
-    base = make_policy(args.policy, env)
+    try:
+        base = make_policy(args.policy, env) if args.q_star is None else make_network_policy(args.policy, env, q_star=args.q_star)
+    except ValueError as exc:
+        parser.error(str(exc))
     results: dict[str, list[dict[str, Any]]] = {}
     for name in args.conditions:
         policy = RaycastSwap(base, env, CONDITIONS[name])
@@ -140,7 +144,7 @@ def main() -> None:
               f"grasps {s['grasps']}  motion caps {s['motion_caps']}", flush=True)
     env.close()
     out = {
-        "policy": args.policy, "env_id": args.env, "num_objects": args.objects, "seed": args.seed, "env_options": options,
+        "policy": args.policy, "env_id": args.env, "num_objects": args.objects, "seed": args.seed, "q_star": args.q_star, "env_options": options,
         "summary": {k: summary(v) for k, v in results.items()},
         "paired_vs_camera": {k: paired(v, results["camera"]) for k, v in results.items() if k != "camera" and "camera" in results},
     }

@@ -58,3 +58,12 @@ def test_paired_differences_and_summary_by_hand(benchmark_script):
     s = script.summary(b)
     assert (s["episodes"], s["pushes"], s["motion_caps"]) == (3, 22, 2)
     assert s["success"] == pytest.approx(1 / 3) and s["motions"] == pytest.approx(25 / 3)
+
+
+def test_q_star_needs_a_network_policy(benchmark_script, monkeypatch, capsys):
+    script = benchmark_script("camera_channels")
+    argv = ["camera_channels.py", "--env", "MPG-Stage2-v0", "--policy", "oracle", "--q-star", "0.5", "--episodes", "1"]
+    monkeypatch.setattr("sys.argv", argv)
+    with pytest.raises(SystemExit):
+        script.main()
+    assert "--policy must be an MPGNet checkpoint" in capsys.readouterr().err
