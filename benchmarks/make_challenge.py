@@ -22,48 +22,19 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
-import mujoco
 import numpy as np
-from scipy.spatial import ConvexHull
 
 import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_envs.scenes.arranged import Arrangement, Block, arrangement_scene, settle_arrangement
 from mpg_envs.scenes.cases import INDEX_FILE, challenge_dir, jitter_scene
-from mpg_envs.simulation.objects import blocks_object_set
-from mpg_envs.scenes.scene_io import SceneFile, SceneObject, read_scene, save_scene
-from mpg_envs.scenes.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
-from mpg_envs.grid.workspace import Workspace
+from mpg_envs.scenes.scene_io import read_scene, save_scene
+from mpg_envs.scenes.scene_loading import pose_errors
 
 ENV_ID = "MPG-Occluded-v0"
-GAP = 0.0005  # a block is placed this far (m) above what it rests on, then settles
-
-
-@dataclass(frozen=True)
-class Block:
-    """One block of a case: ``shape`` from the blocks set at ``(x, y)`` mm from the workspace
-    centre, turned ``yaw`` degrees about z; ``side=True`` lays it on its side first (turned
-    90 degrees about its own x axis)."""
-
-    shape: str
-    x: float
-    y: float
-    yaw: float = 0.0
-    side: bool = False
-
-
-@dataclass(frozen=True)
-class Spec:
-    """A challenge case: its blocks, which one is the target, what makes it hard, and the
-    band the target's visible fraction at reset must lie in."""
-
-    name: str
-    note: str
-    target: int
-    blocks: tuple[Block, ...]
-    visible: tuple[float, float] = (0.0, 1.0)
+Spec = Arrangement  # a case is an arrangement written by hand (mpg_envs.scenes.arranged)
 
 
 def ring(shape: str, radius: float, count: int, start: float = 0.0) -> tuple[Block, ...]:
@@ -120,71 +91,16 @@ SPECS: tuple[Spec, ...] = (
 
 
 # ------------------------------------------------------------------------------ building
-def block_quat(block: Block) -> np.ndarray:
-    """Orientation of a block: on its side if asked, then turned by its yaw."""
-    quat = np.array([1.0, 0.0, 0.0, 0.0])
-    if block.side:
-        quat = np.array([math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0])
-    yaw = np.array([math.cos(math.radians(block.yaw) / 2), 0.0, 0.0, math.sin(math.radians(block.yaw) / 2)])
-    out = np.empty(4)
-    mujoco.mju_mulQuat(out, yaw, quat)
-    return out
-
-
-def _world_vertices(vertices: np.ndarray, position: np.ndarray, quat: np.ndarray) -> np.ndarray:
-    rot = np.empty(9)
-    mujoco.mju_quat2Mat(rot, quat)
-    return position + vertices @ rot.reshape(3, 3).T
-
-
-def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
-    """Whether two point sets' convex footprints (xy) overlap (separating axis test)."""
-    for points in (a, b):
-        hull = points[ConvexHull(points).vertices]
-        edges = np.roll(hull, -1, axis=0) - hull
-        for normal in np.stack([-edges[:, 1], edges[:, 0]], axis=1):
-            pa, pb = a @ normal, b @ normal
-            if pa.max() <= pb.min() + 1e-6 or pb.max() <= pa.min() + 1e-6:
-                return False
-    return True
-
-
-def spec_scene(spec: Spec, workspace: Workspace = Workspace()) -> SceneFile:
-    """The case's blocks stacked in order (each just above what is under it), to settle."""
-    assets = {a.name: a for a in blocks_object_set()}
-    placed: list[np.ndarray] = []
-    objects = []
-    for k, block in enumerate(spec.blocks):
-        if block.shape not in assets:
-            raise ValueError(f"case {spec.name!r} block {k}: unknown shape {block.shape!r}; valid: {sorted(assets)}")
-        asset = assets[block.shape]
-        quat = block_quat(block)
-        xy = np.array([workspace.center[0] + block.x / 1000, workspace.center[1] + block.y / 1000])
-        verts = _world_vertices(asset.vertices, np.array([*xy, 0.0]), quat)
-        below = [p[:, 2].max() for p in placed if _overlap(p[:, :2], verts[:, :2])]
-        z = max(below, default=0.0) + GAP - verts[:, 2].min()
-        position = np.array([*xy, z])
-        placed.append(_world_vertices(asset.vertices, position, quat))
-        objects.append(SceneObject(asset, position, quat, True, f"object {k} ({block.shape!r})"))
-    return SceneFile(tuple(objects), spec.target, spec.name, None, 0, settle=True)
-
-
-def build(spec: Spec, env, out: Path) -> dict:
+def build(spec: Arrangement, env, out: Path) -> dict:
     """Settle, check and write one case; returns what was measured."""
-    scene = spec_scene(spec)
-    obs, info = env.reset(options={"scene": scene})
-    distance, angle = pose_errors(env.world, scene)
-    if np.nanmax(distance) > LOAD_TOLERANCE_M or np.nanmax(angle) > LOAD_TOLERANCE_DEG:
-        k = int(np.nanargmax(distance / LOAD_TOLERANCE_M + angle / LOAD_TOLERANCE_DEG))
-        raise RuntimeError(f"{spec.name}: {scene.objects[k].label} moved {1000 * distance[k]:.1f} mm, {angle[k]:.1f} deg while settling")
-    visible = info["visible_fraction"]
-    if not spec.visible[0] <= visible <= spec.visible[1]:
-        raise RuntimeError(f"{spec.name}: the target is {visible:.2f} visible, outside the case's band {spec.visible}")
-    path = save_scene(env.current_scene(), out / f"{spec.name}.json")
-    obs2, info2 = env.reset(options={"scene": str(path)})
+    settled, visible = settle_arrangement(env, spec)
+    obs = env.last_observation
+    moved = float(np.nanmax(pose_errors(env.world, arrangement_scene(spec, env.config.workspace))[0]))
+    path = save_scene(settled, out / f"{spec.name}.json")
+    obs2, _ = env.reset(options={"scene": str(path)})
     if not all(np.array_equal(obs[k], obs2[k]) for k in obs):
         raise RuntimeError(f"{spec.name}: the saved file does not reproduce the settled scene")
-    return {"name": spec.name, "visible_fraction": round(float(visible), 3), "settled_mm": round(1000 * float(np.nanmax(distance)), 2)}
+    return {"name": spec.name, "visible_fraction": round(visible, 3), "settled_mm": round(1000 * moved, 2)}
 
 
 def oracle_runs(name: str, path: Path, env, runs: int) -> list[tuple[bool, int, str, float]]:
