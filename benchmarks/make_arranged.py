@@ -1,4 +1,4 @@
-"""Write a set of arranged scenes (:mod:`mpg_envs.scenes.arranged`) drawn from consecutive
+"""Write a set of arranged scenes (:mod:`mpg_envs.scenes.arrangement_draw`) drawn from consecutive
 seeds: each drawn, settled and checked (every block where it was designed, the target's
 visible fraction in its kind's band); a seed whose arrangement does not stand is skipped and
 listed with the reason. Writes one scene file per kept seed, ``index.json`` (the scenes in
@@ -24,7 +24,8 @@ from pathlib import Path
 import gymnasium as gym
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_envs.scenes.arranged import ARRANGEMENT_KINDS, ArrangementError, draw_arrangement, settle_arrangement
+from mpg_envs.scenes.arranged import ARRANGEMENT_KINDS, ArrangementError, settle_arrangement
+from mpg_envs.scenes.arrangement_draw import draw_arrangement
 from mpg_envs.scenes.cases import INDEX_FILE
 from mpg_envs.scenes.scene_io import save_scene
 

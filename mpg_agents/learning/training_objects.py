@@ -17,8 +17,9 @@ from mpg_envs.simulation.families import FAMILY_SEED_RANGES, PROCEDURAL_SETS
 from mpg_envs.simulation.objects import load_object_set
 from mpg_envs.tasks.config import EnvConfig, config_of
 
-STAGE_ENV_OPTIONS = ("object_set", "visual_randomization", "obs_mode", "config")
-"""The ``gym.make`` keywords a stage's ``env_options`` may set: ``config`` is a table of
+STAGE_ENV_OPTIONS = ("object_set", "visual_randomization", "obs_mode", "config", "arranged")
+"""The ``gym.make`` keywords a stage's ``env_options`` may set (``arranged``: a share of resets
+starting from drawn arrangements, :class:`~mpg_envs.scenes.arranged.ArrangedScenes`); ``config`` is a table of
 :class:`~mpg_envs.tasks.config.EnvConfig` fields (e.g. ``scene_tries``, ``generator``) other
 than ``reward``. The object count, the rewards and the discriminator are the stage's and the
 run's own."""

@@ -21,6 +21,7 @@ from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
 from mpg_envs.settings_fields import check_known_fields
 from mpg_envs.perception.visual_randomization import VisualRandomization
+from mpg_envs.scenes.arranged import ArrangedScenes
 from mpg_agents.learning.training_objects import OBS_MODES, STAGE_ENV_OPTIONS, object_set_entries, stage_env_config
 
 
@@ -94,7 +95,7 @@ class TrainingStage:
             stage's training envs, of :data:`STAGE_ENV_OPTIONS`: ``object_set`` (a set name, or a
             list of sets pooled into one, each ``"name"`` or ``"name:seed"``, e.g.
             ``["blocks", "procedural:0", "procedural:1"]``; see :func:`object_set_entries`),
-            ``visual_randomization`` (the env option), ``obs_mode`` and ``config`` (a table of
+            ``visual_randomization`` and ``arranged`` (the env options), ``obs_mode`` and ``config`` (a table of
             EnvConfig fields other than ``reward``, e.g. ``scene_tries``). The object count and the
             rewards stay the stage's own (``objects``, ``reward``); empty: the env's defaults.
     """
@@ -135,6 +136,8 @@ class TrainingStage:
             )
         if "visual_randomization" in options:
             VisualRandomization.from_option(options["visual_randomization"])  # raises naming what is wrong
+        if "arranged" in options:
+            ArrangedScenes.from_option(options["arranged"])  # raises naming what is wrong
         if "config" in options:
             stage_env_config(options)  # raises naming what is wrong
         if options.get("obs_mode", "raycast") not in OBS_MODES:

@@ -25,8 +25,9 @@ from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRando
 from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.tasks.episode_sim import EpisodeSim
 from mpg_envs.tasks.rewards import StepOutcome
-from mpg_envs.tasks.scene_source import SceneRequest, drop_scene, scene_from_test_set
+from mpg_envs.tasks.scene_source import SceneRequest, arranged_start, drop_scene, scene_from_test_set
 from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
+from mpg_envs.scenes.arranged import ArrangedScenes
 from mpg_envs.scenes.scene_io import MAX_OBJECTS, SceneFile, SceneFileError, read_scene
 from mpg_envs.scenes.scene_loading import load_scene, scene_of
 from mpg_envs.scenes.generators import InvalidSceneError
@@ -60,7 +61,9 @@ class MPGEnv(gym.Env):
 
     Keywords beyond the stage: ``wrong_grasp`` (``"remove"``, the paper's protocol, or ``"fail"``: strict
     retrieval, a mis-pick ends the episode), ``visible_range`` (a band of the target's visible fraction at
-    reset), ``use_test_set`` (True or False: load the shipped scenes of the test seeds, or generate every scene).
+    reset), ``use_test_set`` (True or False: load the shipped scenes of the test seeds, or generate every scene),
+    ``arranged`` (a share of generated resets starting from a drawn arrangement of blocks, with its own
+    object count and start: :class:`~mpg_envs.scenes.arranged.ArrangedScenes`; off by default).
 
     Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
     workspace, and meets the start condition (the stage's occlusion or surround, the visible
@@ -94,6 +97,7 @@ class MPGEnv(gym.Env):
         visible_range: tuple[float, float] | None = None,
         use_test_set: bool = True,
         visual_randomization: Any = None,
+        arranged: Any = None,
     ):
         config = config_of(config)  # a dict of EnvConfig fields too (a registered track's)
         self.stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
@@ -128,6 +132,7 @@ class MPGEnv(gym.Env):
         self.grasp_scorer = grasp_scorer
         self.camera_config = camera_config
         self.visual_randomization = VisualRandomization.from_option(visual_randomization)  # None: off
+        self.arranged = ArrangedScenes.from_option(arranged)  # None: off
         self.object_set = (
             load_object_set(object_set, seed=config.object_set_seed) if isinstance(object_set, (str, Path)) else list(object_set)
         )
@@ -210,8 +215,13 @@ class MPGEnv(gym.Env):
         fixed = scene_from_test_set(request, seed)
         if fixed is not None:
             self._load_scene_file(fixed, drop_outside=False)
-        else:
-            self.target = drop_scene(self.sim, request)
+            return
+        # The share is drawn only with the option on: without it, episodes are as they were.
+        if self.arranged is not None and self.sim.random.random() < self.arranged.share:
+            self.target = arranged_start(self.sim, request, self.arranged, lambda s: load_scene(self.sim.build, s, self.config.workspace, False)[1])
+            if self.target is not None:
+                return
+        self.target = drop_scene(self.sim, request)
 
     def evaluate(
         self, primitive: str, before: dict[str, np.ndarray], result: PrimitiveResult, score_before: float | None, visible_before: float | None = None

@@ -1,4 +1,5 @@
-"""Where a reset's scene comes from: a shipped test set, or objects dropped afresh.
+"""Where a reset's scene comes from: a shipped test set, objects dropped afresh, or (with the
+env's ``arranged`` option) an arrangement drawn afresh (:func:`arranged_start`).
 
 :func:`drop_scene` drops objects with the stage's generator (:mod:`mpg_envs.scenes.generators`) until a
 scene meets the episode's start condition: every object resting inside the workspace, and a
@@ -27,11 +28,13 @@ import hashlib
 import inspect
 import json
 from dataclasses import asdict, dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 from mpg_envs.scenes import generators
 
 from mpg_envs.perception.occlusion import in_band, surrounded_sectors
+from mpg_envs.scenes.arranged import ArrangedScenes, ArrangementError, arrangement_scene, check_settled
+from mpg_envs.scenes.arrangement_draw import draw_arrangement
 from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, keep_inside
 from mpg_envs.scenes.scene_io import SceneFile
 from mpg_envs.simulation.assets import ObjectAsset
@@ -186,3 +189,24 @@ def code_fingerprint(source: str) -> str:
         if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
             node.body = body[1:] or [ast.Pass()]
     return ast.unparse(tree)
+
+
+def arranged_start(sim: EpisodeSim, request: SceneRequest, arranged: ArrangedScenes, load: Callable[[SceneFile], int | None]) -> int | None:
+    """Start the episode in ``sim`` from an arrangement drawn from ``sim.random`` (a kind of
+    ``arranged.kinds``, then its seed), built by ``load`` (which builds a scene file's world and
+    returns its target), and return its target; ``None`` when none of ``arranged.tries``
+    draws stood as designed (:func:`~mpg_envs.scenes.arranged.check_settled`): the reset then
+    drops a scene. See :class:`~mpg_envs.scenes.arranged.ArrangedScenes`."""
+    for _ in range(arranged.tries):
+        kind = arranged.kinds[int(sim.random.integers(len(arranged.kinds)))]
+        arrangement = draw_arrangement(int(sim.random.integers(2**31)), request.config.workspace, kind=kind)
+        scene = arrangement_scene(arrangement, request.config.workspace)
+        target = load(scene)
+        maps = sim.heightmaps()
+        mask, _ = sim.target_view(maps.depth, target)
+        try:
+            check_settled(sim.world, scene, arrangement, sim.visible_fraction(maps, mask, target))
+        except ArrangementError:
+            continue
+        return target
+    return None

@@ -14,17 +14,19 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.scenes.arranged import (
     ARRANGEMENT_KINDS,
+    ArrangedScenes,
     Arrangement,
     ArrangementError,
     Block,
     arrangement_scene,
-    draw_arrangement,
     half_extents,
     settle_arrangement,
 )
+from mpg_envs.scenes.arrangement_draw import draw_arrangement
 from mpg_envs.scenes.cases import load_cases
 
 WS = Workspace()
+ARRANGEMENT_SHAPES = ("cube", "long_box", "flat_box", "tall_box", "cylinder", "disc", "triangular_prism", "arch")
 
 
 def footprint_corners(block: Block) -> np.ndarray:
@@ -136,3 +138,55 @@ def test_make_arranged_writes_a_case_folder(benchmark_script, tmp_path):
     assert [c.name for c in cases] == [k["name"] for k in record["kept"]]
     assert all(c.note for c in cases)
     assert json.loads((tmp_path / "arranged.json").read_text())["seeds_tried"] == 3
+
+
+# ------------------------------------------------------------------------------ env option
+def test_the_arranged_option_reads_a_share_or_a_table_and_names_what_is_wrong():
+    assert ArrangedScenes.from_option(None) is None and ArrangedScenes.from_option(0) is None
+    assert ArrangedScenes.from_option(0.25) == ArrangedScenes(0.25)
+    assert ArrangedScenes.from_option({"share": 1, "kinds": ["ring"]}).kinds == ("ring",)
+    for bad, match in ((1.5, "share"), (True, "arranged must be"), ({"share": 0.5, "kinds": ["pile"]}, "kinds"),
+                       ({"kinds": ["ring"]}, "share \\(required\\)"), ({"share": 0.5, "tries": 0}, "tries"), ("ring", "arranged must be")):  # fmt: skip
+        with pytest.raises(ValueError, match=match):
+            ArrangedScenes.from_option(bad)
+    with pytest.raises(ValueError, match="arranged share"):
+        gym.make("MPG-Stage4-v0", arranged=2.0)
+
+
+def test_arranged_resets_start_as_designed_and_leave_other_resets_alone():
+    plain = gym.make("MPG-Stage4-v0")
+    arranged = gym.make("MPG-Stage4-v0", arranged={"share": 1.0, "kinds": ["ring", "boxed-in"]})
+    try:
+        a, info = arranged.reset(seed=3)
+        b, _ = arranged.reset(seed=3)
+        assert all(np.array_equal(a[k], b[k]) for k in a)  # seeded
+        scene = arranged.unwrapped.current_scene()
+        assert {obj.asset.name for obj in scene.objects} <= set(ARRANGEMENT_SHAPES)  # the blocks, placed
+        assert info["visible_fraction"] >= 0.9 and not info["occluded"]  # the kinds' band, not Stage IV's rule
+        # With the option off, the episode is the plain env's, draw for draw.
+        off = gym.make("MPG-Stage4-v0", arranged=None)
+        c, _ = off.reset(seed=3)
+        d, _ = plain.reset(seed=3)
+        assert all(np.array_equal(c[k], d[k]) for k in c)
+        off.close()
+        # A test seed still loads its shipped scene.
+        occluded = gym.make("MPG-Occluded-v0", arranged=1.0)
+        e, _ = occluded.reset(seed=500000)
+        f, _ = gym.make("MPG-Occluded-v0").reset(seed=500000)
+        assert all(np.array_equal(e[k], f[k]) for k in e)
+        occluded.close()
+    finally:
+        plain.close()
+        arranged.close()
+
+
+def test_a_stage_may_train_on_arranged_scenes():
+    import dataclasses
+
+    from mpg_agents.learning.training_stages import TRAINING_STAGES
+
+    stage = next(s for s in TRAINING_STAGES if s.name == "Stage4")
+    ok = dataclasses.replace(stage, env_options={"arranged": {"share": 0.3, "kinds": ["ring"]}})
+    assert dict(ok.env_options)["arranged"] == {"share": 0.3, "kinds": ["ring"]}
+    with pytest.raises(ValueError, match="arranged share"):
+        dataclasses.replace(stage, env_options={"arranged": 3})
