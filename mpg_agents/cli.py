@@ -152,6 +152,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                         help="network policies: grasp threshold Q*_g (override the checkpoint's calibrated one)")
     parser.add_argument("--avoid-repeats", action="store_true",
                         help="network policies: never repeat an action on an unchanged scene (take the best other one)")
+    parser.add_argument("--grasp-retries", type=int, metavar="K",
+                        help="network policies: after K grasps in a row that did not take the target, push once (a move without a push net)")
     parser.add_argument("--device", choices=DEVICES, help="network policies: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
@@ -185,6 +187,10 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         extra += tuple(_net_settings(args).items())
         if args.avoid_repeats:
             extra += (("avoid_repeats", True),)
+        if args.grasp_retries is not None:
+            if args.grasp_retries < 1:
+                raise UsageError(f"--grasp-retries must be >= 1, got {args.grasp_retries}")
+            extra += (("grasp_retries", args.grasp_retries),)
         if args.q_star is not None:
             extra += (("q_star", args.q_star),)
         if args.device is not None:

@@ -94,13 +94,18 @@ class NetworkPolicy:
     the motion cap. With ``avoid_repeats`` it remembers its actions in the episode
     (:class:`mpg_envs.policies.action_memory.ActionMemory`, as the oracle does) and takes the best one
     that would not repeat an action on an unchanged scene; the name ends with ``[no repeats]``.
+    A failed grasp usually nudges the scene, so it is no repeat: a target hemmed in on every
+    side (a closed ring, a tight box) meets grasp after grasp. With ``grasp_retries`` ``k``,
+    after ``k`` grasps in a row that did not end the episode (none took the target) the next
+    motion is the best push (a move where the net has no push), then grasps may follow again;
+    the name ends with ``[push after k failed grasps]``.
     """
 
     def __init__(
         self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
         grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
         move_region: str | None = None, q_star: float | None = None, grasp_fingers: str | None = None,
-        move_fingers: str | None = None, device: str | None = None,
+        move_fingers: str | None = None, device: str | None = None, grasp_retries: int | None = None,
     ):
         import torch
 
@@ -150,6 +155,14 @@ class NetworkPolicy:
             self.name += f" [move fingers: {move_fingers}]"
         if q_star is not None:
             self.name += f" [Q*_g: {q_star:g}]"
+        if grasp_retries is not None and (isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 1):
+            raise ValueError(f"grasp_retries must be a positive integer or None, got {grasp_retries!r}")
+        fallback = [p for p in ("push", "move") if p in self.primitives]
+        self.grasp_retries = grasp_retries if fallback else None  # a grasp-only net has nothing else to do
+        self._instead_of_grasp = fallback[0] if fallback else None
+        self._grasps_in_a_row = 0
+        if self.grasp_retries is not None:
+            self.name += f" [push after {grasp_retries} failed grasps]"
         self.memory = None
         if avoid_repeats:
             from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
@@ -158,18 +171,23 @@ class NetworkPolicy:
             self.name += " [no repeats]"
 
     def reset(self) -> None:
-        """Forget the episode's actions (only ``avoid_repeats`` keeps any)."""
+        """Forget the episode's actions (``avoid_repeats``) and grasps in a row (``grasp_retries``)."""
+        self._grasps_in_a_row = 0
         if self.memory is not None:
             self.memory.clear()
 
     def act(self, obs: Mapping[str, np.ndarray]) -> int:
-        if self.memory is None:
-            return int(self.policy.decide(obs).action)
-        depth = np.asarray(obs["depth"])
-        rotations = self.policy.net_config.num_rotations
-        forbidden = {p: self.memory.forbidden(p, depth, rotations) for p in self.primitives} if len(self.memory) else None
-        decision = self.policy.decide(obs, forbidden=forbidden)
-        self.memory.record(decision.primitive, decision.rotation, decision.row, decision.col, depth)
+        # Called again after a grasp: that grasp did not take the target (it would have ended the episode).
+        instead = self._instead_of_grasp if self.grasp_retries is not None and self._grasps_in_a_row >= self.grasp_retries else None
+        forbidden = None
+        if self.memory is not None and len(self.memory):
+            depth = np.asarray(obs["depth"])
+            rotations = self.policy.net_config.num_rotations
+            forbidden = {p: self.memory.forbidden(p, depth, rotations) for p in self.primitives}
+        decision = self.policy.decide(obs, primitive=instead, forbidden=forbidden)
+        if self.memory is not None:
+            self.memory.record(decision.primitive, decision.rotation, decision.row, decision.col, np.asarray(obs["depth"]))
+        self._grasps_in_a_row = self._grasps_in_a_row + 1 if decision.primitive == "grasp" else 0
         return int(decision.action)
 
     def save_qmaps(self, path: str | Path, obs: Mapping[str, np.ndarray]) -> None:
