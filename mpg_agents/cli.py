@@ -153,7 +153,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--avoid-repeats", action="store_true",
                         help="network policies: never repeat an action on an unchanged scene (take the best other one)")
     parser.add_argument("--grasp-retries", type=int, metavar="K",
-                        help="network policies: after K grasps in a row that did not take the target, push once (a move without a push net)")
+                        help="network policies: after K grasps in a row that did not take the target, push once (a move without a push net); 0: never (default: the checkpoint's)")
     parser.add_argument("--device", choices=DEVICES, help="network policies: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
@@ -188,8 +188,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         if args.avoid_repeats:
             extra += (("avoid_repeats", True),)
         if args.grasp_retries is not None:
-            if args.grasp_retries < 1:
-                raise UsageError(f"--grasp-retries must be >= 1, got {args.grasp_retries}")
+            if args.grasp_retries < 0:
+                raise UsageError(f"--grasp-retries must be >= 0, got {args.grasp_retries}")
             extra += (("grasp_retries", args.grasp_retries),)
         if args.q_star is not None:
             extra += (("q_star", args.q_star),)
@@ -309,6 +309,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     _add_net_setting_arguments(parser, "")
     parser.add_argument("--q-star", type=float, help="Q*_g of the copy (training's stays on record in the header)")
     parser.add_argument("--coordination", choices=COORDINATIONS, help="the rule the copy acts with")
+    parser.add_argument("--grasp-retries", type=int, metavar="K", help="the copy's default loop breaker: push once after K grasps in a row that did not take the target (0: never)")
     args = parser.parse_args(argv)
     try:
         from mpg_agents.acting.weights import export_weights, read_checkpoint_header
@@ -318,7 +319,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         settings = _net_settings(args)
         primitives = tuple(p.strip() for p in args.primitives.split(",")) if args.primitives else None
         dst = export_weights(args.src, args.dst, primitives=primitives, half=not args.float32, settings=settings,
-                             coordination=args.coordination, q_star=args.q_star)
+                             coordination=args.coordination, q_star=args.q_star, grasp_retries=args.grasp_retries)
         header = read_checkpoint_header(dst)
     except (UsageError, FileNotFoundError, ValueError) as exc:
         return fail(exc)

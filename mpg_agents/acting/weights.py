@@ -197,6 +197,7 @@ change them (:func:`export_weights`). The execution fields (``channels_last``,
 def export_weights(
     src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True,
     settings: Mapping[str, Any] | None = None, coordination: str | None = None, q_star: float | None = None,
+    grasp_retries: int | None = None,
 ) -> Path:
     """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
     the shared mask trunk), floating tensors stored as float16 (loading casts them back).
@@ -208,7 +209,12 @@ def export_weights(
     default: the checkpoint's), for checkpoints written before the learner recorded it.
     ``q_star`` replaces Q*_g (e.g. one measured under the new settings); the header's ``extra``
     keeps training's as ``q_star_from_training`` (:func:`~mpg_agents.acting.grasp_threshold.exported_q_star`).
+    ``grasp_retries`` records the copy's loop breaker for evaluation (a network policy pushes
+    once after that many grasps in a row that did not take the target; 0: never), the default of
+    :class:`~mpg_agents.evaluation.policy_zoo.NetworkPolicy`.
     """
+    if grasp_retries is not None and (isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0):
+        raise ValueError(f"grasp_retries must be a non-negative integer (0: never push instead), got {grasp_retries!r}")
     if Path(dst).exists() and Path(dst).samefile(src):
         raise ValueError(f"the copy {str(dst)!r} is the source checkpoint {str(src)!r}; write it to another file")
     settings = dict(settings or {})
@@ -223,6 +229,8 @@ def export_weights(
     q_star, extra = exported_q_star(header, q_star, {**header.get("extra", {}), "exported_from": str(src), "float16": half})
     if coordination is not None:
         extra["coordination"] = check_coordination(coordination)
+    if grasp_retries is not None:
+        extra["grasp_retries"] = grasp_retries
     if settings:
         extra["settings_after_training"] = {**extra.get("settings_after_training", {}), **settings}
     save_mpgnet(net, dst, q_star=q_star, extra=extra)

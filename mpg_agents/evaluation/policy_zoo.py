@@ -98,7 +98,8 @@ class NetworkPolicy:
     side (a closed ring, a tight box) meets grasp after grasp. With ``grasp_retries`` ``k``,
     after ``k`` grasps in a row that did not end the episode (none took the target) the next
     motion is the best push (a move where the net has no push), then grasps may follow again;
-    the name ends with ``[push after k failed grasps]``.
+    the name ends with ``[push after k failed grasps]``. ``None`` takes the checkpoint's
+    (``mpg-export --grasp-retries``; off when it has none), 0 turns it off.
     """
 
     def __init__(
@@ -155,10 +156,14 @@ class NetworkPolicy:
             self.name += f" [move fingers: {move_fingers}]"
         if q_star is not None:
             self.name += f" [Q*_g: {q_star:g}]"
-        if grasp_retries is not None and (isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 1):
-            raise ValueError(f"grasp_retries must be a positive integer or None, got {grasp_retries!r}")
+        if grasp_retries is None:  # the checkpoint's own (mpg-export --grasp-retries), else off
+            from mpg_agents.acting.weights import read_checkpoint_header
+
+            grasp_retries = read_checkpoint_header(path).get("extra", {}).get("grasp_retries", 0)
+        if isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0:
+            raise ValueError(f"grasp_retries must be a non-negative integer (0: off) or None (the checkpoint's), got {grasp_retries!r}")
         fallback = [p for p in ("push", "move") if p in self.primitives]
-        self.grasp_retries = grasp_retries if fallback else None  # a grasp-only net has nothing else to do
+        self.grasp_retries = grasp_retries if grasp_retries and fallback else None  # a grasp-only net has nothing else to do
         self._instead_of_grasp = fallback[0] if fallback else None
         self._grasps_in_a_row = 0
         if self.grasp_retries is not None:

@@ -54,11 +54,25 @@ def test_grasp_retries_is_off_by_default_refused_when_not_positive_and_idle_for_
     for _ in range(5):
         policy.act(obs)
     assert policy.policy.asked == [None] * 5
-    for bad in (0, -1, True, 1.5):
+    for bad in (-1, True, 1.5):
         with pytest.raises(ValueError, match="grasp_retries"):
             make_policy("shipped", env, grasp_retries=bad)
+    assert make_policy("shipped", env, grasp_retries=0).grasp_retries is None
     grasp_only = make_policy(GRASP_NET, gym.make("MPG-Stage2-v0"), grasp_retries=1)
     assert grasp_only.grasp_retries is None and "failed grasps" not in grasp_only.name
+
+
+def test_an_exported_checkpoint_carries_its_default_and_a_policy_may_turn_it_off(env, tmp_path):
+    from mpg_agents.acting.weights import read_checkpoint_header
+    from mpg_agents.cli import export_main
+
+    dst = tmp_path / "copy.safetensors"
+    assert export_main([str(shipped_checkpoint()), str(dst), "--grasp-retries", "2"]) == 0
+    assert read_checkpoint_header(dst)["extra"]["grasp_retries"] == 2
+    assert make_policy(str(dst), env).grasp_retries == 2
+    assert make_policy(str(dst), env, grasp_retries=0).grasp_retries is None
+    assert make_policy(str(dst), env, grasp_retries=3).grasp_retries == 3
+    assert export_main([str(shipped_checkpoint()), str(tmp_path / "bad.safetensors"), "--grasp-retries", "-1"]) != 0
 
 
 def test_in_a_closed_ring_the_shipped_net_pushes_after_two_failed_grasps(env):
