@@ -6,7 +6,7 @@ import pytest
 
 from mpg_envs.perception.camera import CameraConfig, add_cameras
 
-from .camera_scene import clutter_spec, compile_forward
+from .hand_scenes import clutter_spec, compile_forward
 
 
 @pytest.fixture(scope="module")

@@ -31,7 +31,7 @@ from mpg_envs.perception.camera import (  # noqa: E402
 from mpg_envs.perception.heightmap import RaycastHeightmapper  # noqa: E402
 from mpg_envs.grid.workspace import Workspace  # noqa: E402
 
-from .camera_scene import BOX, clutter_spec, compile_forward, make_cameras, yaw_quat  # noqa: E402
+from .hand_scenes import BOX, clutter_spec, compile_forward, make_cameras, yaw_quat  # noqa: E402
 
 WS = Workspace()
 

@@ -15,7 +15,7 @@ import pytest  # noqa: E402
 from mpg_envs.perception.camera import CameraConfig  # noqa: E402
 from mpg_envs.perception.heightmap import RaycastHeightmapper  # noqa: E402
 
-from .camera_scene import make_cameras  # noqa: E402
+from .hand_scenes import make_cameras  # noqa: E402
 
 
 

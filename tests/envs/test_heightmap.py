@@ -16,6 +16,8 @@ from mpg_envs.perception.footprint import fill_convex_hull, footprint_mask, geom
 from mpg_envs.perception.heightmap import RaycastHeightmapper, geom_colors, geomgroup_mask, heights_from_world_z
 from mpg_envs.grid.workspace import Workspace, pixel_to_world, world_to_pixel
 
+from .hand_scenes import compile_forward, yaw_quat
+
 WS = Workspace()
 BOX = mujoco.mjtGeom.mjGEOM_BOX
 TABLE_RGBA = [0.6, 0.5, 0.4, 1.0]
@@ -48,20 +50,8 @@ def add_geom(spec: mujoco.MjSpec, name: str, pos, size, rgba, group: int = 1, gt
     return spec.worldbody.add_geom(**kwargs)
 
 
-def compile_forward(spec: mujoco.MjSpec) -> tuple[mujoco.MjModel, mujoco.MjData]:
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    return model, data
-
-
 def gid(model: mujoco.MjModel, name: str) -> int:
     return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
-
-
-def yaw_quat(deg: float) -> list[float]:
-    half = math.radians(deg) / 2
-    return [math.cos(half), 0.0, 0.0, math.sin(half)]
 
 
 def prism_vertices(radius: float, height: float) -> np.ndarray:

@@ -1,5 +1,6 @@
-"""A hand-made clutter scene for the camera tests: table, boxes (one stacked), convex prisms
-and a robot stand-in that no heightmap may see."""
+"""Hand-made MuJoCo scenes for the perception tests: compiling a spec, turning a geom, and the
+camera tests' clutter scene (table, boxes, one stacked, convex prisms and a robot stand-in
+that no heightmap may see)."""
 
 from __future__ import annotations
 
