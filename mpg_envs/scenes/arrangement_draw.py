@@ -29,6 +29,12 @@ _POSTS = ("tall_box", "cube", "cylinder")
 # footprints are axis-aligned rectangles), then turned and moved into the workspace.
 
 
+def _turned_extents(shape: str, yaw: float) -> tuple[float, float]:
+    """Half extents (mm) along local x and y of ``shape`` turned ``yaw`` (a multiple of 90)."""
+    hx, hy = half_extents(shape)
+    return (hy, hx) if round(yaw / 90) % 2 else (hx, hy)
+
+
 @dataclass
 class _Layout:
     blocks: list[tuple[str, float, float, float]]  # shape, x, y, yaw (local)
@@ -38,13 +44,10 @@ class _Layout:
 
     def rect(self, i: int) -> tuple[float, float, float, float]:
         shape, x, y, yaw = self.blocks[i]
-        hx, hy = half_extents(shape)
-        return (x, y, hy, hx) if round(yaw / 90) % 2 else (x, y, hx, hy)
+        return (x, y, *_turned_extents(shape, yaw))
 
     def clear(self, shape: str, x: float, y: float, yaw: float, gap: float = 1.0) -> bool:
-        hx, hy = half_extents(shape)
-        if round(yaw / 90) % 2:
-            hx, hy = hy, hx
+        hx, hy = _turned_extents(shape, yaw)
         return all(abs(x - cx) >= hx + ax + gap or abs(y - cy) >= hy + ay + gap for cx, cy, ax, ay in map(self.rect, range(len(self.blocks))))
 
     def put_beside(self, shape: str, direction: tuple[float, float], gap: float, yaw: float, along: float = 0.0) -> bool:
@@ -52,9 +55,7 @@ class _Layout:
         steps in x and y), moved ``along`` mm sideways, pushed outward until clear of every
         block placed; False when it would not fit within 150 mm."""
         dx, dy = direction
-        hx, hy = half_extents(shape)
-        if round(yaw / 90) % 2:
-            hx, hy = hy, hx
+        hx, hy = _turned_extents(shape, yaw)
         _, _, tx, ty = self.rect(0)
         x = dx * (tx + gap + hx) + (along if dx == 0 else 0.0)
         y = dy * (ty + gap + hy) + (along if dy == 0 else 0.0)
