@@ -14,7 +14,11 @@ Each batch holds the first ``B`` transitions; the first repeat of each size is a
 counted). The networks start from ``--seed``; every step trains them (Adam), so repeats see
 slightly different weights, as training does. ``--device`` puts the networks and the batches
 on ``cpu`` or ``cuda`` (where the code has a device option). ``--decisions N`` also times the
-full coordinated decision (``agent.decide``, Q*_g 0.6) on the recorded observations. The last
+full coordinated decision (``agent.decide``, Q*_g 0.6) on the recorded observations.
+``--profile`` also splits each batch size's step into its phases (the targets, of which the
+all-rotation greedy pass, the training forward, backward and optimizer step; medians, synchronised
+on a GPU) and prints ``torch.profiler``'s table of the ops that took the most time over two steps
+(kernel time on a GPU), with the number of kernel launches and host synchronisations. The last
 output line is one JSON object.
 """
 
@@ -91,6 +95,7 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--profile", action="store_true", help="also time each phase of the step and print torch.profiler's top ops")
     parser.add_argument("--decisions", type=int, default=0, help="also time this many coordinated decisions (agent.decide) on the recorded observations")
     args = parser.parse_args()
     if args.record:
@@ -132,11 +137,58 @@ def main() -> None:
             times.append(time.perf_counter() - start)
         seconds[size] = statistics.median(times[1:])
         print(f"batch {size:3d}: {seconds[size]:.3f} s per TD step (median of {args.repeats}; {args.threads} thread(s), {device})")
+        if args.profile:
+            profile_step(agent.q_net, target, optimizer, batch, config, args.repeats, device)
     result = {"td_step_s": {str(k): round(v, 4) for k, v in seconds.items()}, "device": str(device), "threads": args.threads}
     if args.decisions:
         result["decision_s"] = round(time_decisions(agent, data, args.decisions, device), 4)
         print(f"decision: {result['decision_s']:.3f} s (median of {args.decisions}; the full coordinated decision, {device})")
     print(json.dumps(result))
+
+
+def profile_step(q_net, target, optimizer, batch, config, repeats: int, device: torch.device) -> None:
+    """Print the median seconds of each phase of a TD step on ``batch`` and the profiler's top ops."""
+    from torch.nn import functional as F
+
+    from mpg_agents.learning.td_step import td_step, td_targets
+
+    def timed(fn):
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        start = time.perf_counter()
+        out = fn()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        return out, time.perf_counter() - start
+
+    phases: dict[str, list[float]] = {"targets": [], "greedy pass": [], "forward": [], "backward": [], "optimizer": []}
+    actions = batch.actions.reshape(-1).long()
+    for _ in range(repeats):
+        with torch.no_grad():
+            q_net.set_training_mode(False)
+            phases["greedy pass"].append(timed(lambda: q_net.greedy_actions(batch.next_observations))[1])
+        q_net.set_training_mode(True)
+        ys, t = timed(lambda: td_targets(q_net, target, batch.next_observations, batch.rewards, batch.dones, config.gamma, config.target_bounds))
+        phases["targets"].append(t)
+        loss, t = timed(lambda: F.smooth_l1_loss(q_net.q_values_at(batch.observations, actions), ys))
+        phases["forward"].append(t)
+        optimizer.zero_grad(set_to_none=True)
+        phases["backward"].append(timed(loss.backward)[1])
+        phases["optimizer"].append(timed(optimizer.step)[1])
+    print("  phases (median s): " + ", ".join(f"{k} {statistics.median(v):.4f}" for k, v in phases.items()) + " (the greedy pass is part of the targets)")
+    activities = [torch.profiler.ProfilerActivity.CPU] + ([torch.profiler.ProfilerActivity.CUDA] if device.type == "cuda" else [])
+    with torch.profiler.profile(activities=activities) as prof:
+        for _ in range(2):
+            td_step(q_net, target, optimizer, batch, config)
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+    events = prof.key_averages()
+    launches = sum(e.count for e in events if e.key in ("cudaLaunchKernel", "cuLaunchKernel"))
+    syncs = sum(e.count for e in events if e.key in ("cudaStreamSynchronize", "cudaDeviceSynchronize"))
+    if device.type == "cuda":
+        kernel_s = sum(e.self_device_time_total for e in events) / 2e6
+        print(f"  per step: {kernel_s:.4f} s of GPU kernels, {launches // 2} kernel launches, {syncs // 2} host synchronisations")
+    print(events.table(sort_by="self_cuda_time_total" if device.type == "cuda" else "self_cpu_time_total", row_limit=15, max_name_column_width=50))
 
 
 def time_decisions(agent, data: dict[str, np.ndarray], count: int, device: torch.device) -> float:
