@@ -46,6 +46,12 @@ def load_eval_records(paths: Sequence[str | Path]) -> EvalRecords:
     by_seed: dict[int, dict[str, Any]] = {}
     for i, path in enumerate(paths):
         data = json.loads(Path(path).read_text())
+        if not isinstance(data.get("records"), list):
+            raise ValueError(
+                f"{path} is not an episode evaluation (`mpg-eval --env ... --json`): its records are "
+                f"{'per case (a `--cases` run)' if isinstance(data.get('records'), dict) else 'missing'}; "
+                "paired comparisons take episode evaluations of one env and object count"
+            )
         cell = (_policy_file(data["policy"]), data["env_id"], data.get("num_objects"))
         if i == 0:
             policy, env_id, num_objects = cell

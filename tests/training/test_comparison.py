@@ -74,3 +74,12 @@ def test_the_command_line_prints_a_minus_b(tmp_path, capsys):
     assert compare_main(["--a", str(a), "--b", str(b), "--names", "X,Y"]) == 0
     out = capsys.readouterr().out
     assert "A = X, B = Y" in out and "difference -1.50 [-2.00, -1.00]" in out
+
+
+def test_a_case_set_evaluation_is_refused_by_name(tmp_path):
+    """A ``mpg-eval --cases`` file keys its runs by case: a clear error, not a TypeError."""
+    path = tmp_path / "cases.json"
+    path.write_text(json.dumps({"policy": "A", "env_id": "MPG-Occluded-v0", "records": {"ring-1": [{"seed": 4000, "success": True, "motions": 2}]}}))
+    with pytest.raises(ValueError, match=r"cases.json is not an episode evaluation.*per case"):
+        load_eval_records([path])
+    assert compare_main(["--a", str(path), "--b", str(path)]) == 2
