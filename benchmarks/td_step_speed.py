@@ -128,13 +128,7 @@ def main() -> None:
         batch = batch_of(data, size, device)
         times = []
         for _ in range(args.repeats + 1):
-            if device.type == "cuda":
-                torch.cuda.synchronize()
-            start = time.perf_counter()
-            td_step(agent.q_net, target, optimizer, batch, config)
-            if device.type == "cuda":
-                torch.cuda.synchronize()
-            times.append(time.perf_counter() - start)
+            times.append(timed(lambda: td_step(agent.q_net, target, optimizer, batch, config), device)[1])
         seconds[size] = statistics.median(times[1:])
         print(f"batch {size:3d}: {seconds[size]:.3f} s per TD step (median of {args.repeats}; {args.threads} thread(s), {device})")
         if args.profile:
@@ -146,35 +140,37 @@ def main() -> None:
     print(json.dumps(result))
 
 
+def timed(fn, device: torch.device):
+    """``(fn(), seconds)``, synchronised before and after on a GPU (its work is asynchronous)."""
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+    start = time.perf_counter()
+    out = fn()
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+    return out, time.perf_counter() - start
+
+
 def profile_step(q_net, target, optimizer, batch, config, repeats: int, device: torch.device) -> None:
     """Print the median seconds of each phase of a TD step on ``batch`` and the profiler's top ops."""
     from torch.nn import functional as F
 
     from mpg_agents.learning.td_step import td_step, td_targets
 
-    def timed(fn):
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        start = time.perf_counter()
-        out = fn()
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        return out, time.perf_counter() - start
-
     phases: dict[str, list[float]] = {"targets": [], "greedy pass": [], "forward": [], "backward": [], "optimizer": []}
     actions = batch.actions.reshape(-1).long()
     for _ in range(repeats):
         with torch.no_grad():
             q_net.set_training_mode(False)
-            phases["greedy pass"].append(timed(lambda: q_net.greedy_actions(batch.next_observations))[1])
+            phases["greedy pass"].append(timed(lambda: q_net.greedy_actions(batch.next_observations), device)[1])
         q_net.set_training_mode(True)
-        ys, t = timed(lambda: td_targets(q_net, target, batch.next_observations, batch.rewards, batch.dones, config.gamma, config.target_bounds))
+        ys, t = timed(lambda: td_targets(q_net, target, batch.next_observations, batch.rewards, batch.dones, config.gamma, config.target_bounds), device)
         phases["targets"].append(t)
-        loss, t = timed(lambda: F.smooth_l1_loss(q_net.q_values_at(batch.observations, actions), ys))
+        loss, t = timed(lambda: F.smooth_l1_loss(q_net.q_values_at(batch.observations, actions), ys), device)
         phases["forward"].append(t)
         optimizer.zero_grad(set_to_none=True)
-        phases["backward"].append(timed(loss.backward)[1])
-        phases["optimizer"].append(timed(optimizer.step)[1])
+        phases["backward"].append(timed(loss.backward, device)[1])
+        phases["optimizer"].append(timed(optimizer.step, device)[1])
     print("  phases (median s): " + ", ".join(f"{k} {statistics.median(v):.4f}" for k, v in phases.items()) + " (the greedy pass is part of the targets)")
     activities = [torch.profiler.ProfilerActivity.CPU] + ([torch.profiler.ProfilerActivity.CUDA] if device.type == "cuda" else [])
     with torch.profiler.profile(activities=activities) as prof:
@@ -199,13 +195,7 @@ def time_decisions(agent, data: dict[str, np.ndarray], count: int, device: torch
     times = []
     for i in range(count + 1):
         obs = {k: data[f"obs_{k}"][i % len(data["actions"])] for k in keys}
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        start = time.perf_counter()
-        agent.decide(obs)
-        if device.type == "cuda":
-            torch.cuda.synchronize()
-        times.append(time.perf_counter() - start)
+        times.append(timed(lambda: agent.decide(obs), device)[1])
     return statistics.median(times[1:])
 
 
