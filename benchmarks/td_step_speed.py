@@ -179,9 +179,9 @@ def profile_step(q_net, target, optimizer, batch, config, repeats: int, device: 
         if device.type == "cuda":
             torch.cuda.synchronize()
     events = prof.key_averages()
-    launches = sum(e.count for e in events if e.key in ("cudaLaunchKernel", "cuLaunchKernel"))
-    syncs = sum(e.count for e in events if e.key in ("cudaStreamSynchronize", "cudaDeviceSynchronize"))
     if device.type == "cuda":
+        launches = sum(e.count for e in events if e.key in ("cudaLaunchKernel", "cuLaunchKernel"))
+        syncs = sum(e.count for e in events if e.key in ("cudaStreamSynchronize", "cudaDeviceSynchronize"))
         kernel_s = sum(e.self_device_time_total for e in events) / 2e6
         print(f"  per step: {kernel_s:.4f} s of GPU kernels, {launches // 2} kernel launches, {syncs // 2} host synchronisations")
     print(events.table(sort_by="self_cuda_time_total" if device.type == "cuda" else "self_cpu_time_total", row_limit=15, max_name_column_width=50))
