@@ -32,18 +32,19 @@ def part_mesh_name(vertices: np.ndarray, faces: np.ndarray) -> str:
     return f"part/{digest.hexdigest()}"
 
 
-_MESH_NAMES: dict[int, tuple[ObjectAsset, tuple[str, ...]]] = {}
-"""id of an asset -> the asset and its parts' mesh names (an asset is frozen; a world compiles
-the same assets again and again). Bounded: the oldest entries go first."""
+_PART_MESHES: dict[int, tuple[ObjectAsset, tuple[tuple[str, bytes], ...]]] = {}
+"""id of an asset -> the asset and, per part, its mesh name and ``.msh`` file (an asset is
+frozen; a world compiles the same assets again and again, and a reset from a test set builds
+one). Bounded: the oldest entries go first."""
 
 
-def _part_mesh_names(asset: ObjectAsset) -> tuple[str, ...]:
-    kept = _MESH_NAMES.get(id(asset))
+def _part_meshes(asset: ObjectAsset) -> tuple[tuple[str, bytes], ...]:
+    kept = _PART_MESHES.get(id(asset))
     if kept is None or kept[0] is not asset:
-        kept = (asset, tuple(part_mesh_name(v, f) for v, f in asset.parts))
-        if len(_MESH_NAMES) >= 4096:
-            _MESH_NAMES.pop(next(iter(_MESH_NAMES)))
-        _MESH_NAMES[id(asset)] = kept
+        kept = (asset, tuple((part_mesh_name(v, f), msh_bytes(v, f)) for v, f in asset.parts))
+        if len(_PART_MESHES) >= 4096:
+            _PART_MESHES.pop(next(iter(_PART_MESHES)))
+        _PART_MESHES[id(asset)] = kept
     return kept[1]
 
 
@@ -94,13 +95,13 @@ def add_object_body(
     masses = asset.mass * volumes / volumes.sum()
     body = parent.add_body(name=name, pos=[float(x) for x in pos], quat=[float(x) for x in quat])
     body.add_freejoint(name=f"{name}/joint")
-    for i, ((vertices, faces), part_mass, mesh_name) in enumerate(zip(asset.parts, masses, _part_mesh_names(asset))):
+    for i, (part_mass, (mesh_name, mesh_file)) in enumerate(zip(masses, _part_meshes(asset))):
         if spec.mesh(mesh_name) is None:
             # An in-memory mesh file: MuJoCo's compiler keeps the processed mesh (hull,
             # inertia) in its asset cache by file name, so a later world with the same part
             # compiles it in microseconds; the name is a digest of the part, never reused.
             file = mesh_file_name(mesh_name)
-            spec.assets[file] = msh_bytes(vertices, faces)
+            spec.assets[file] = mesh_file
             mesh = spec.add_mesh(name=mesh_name, file=file)
             mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
         body.add_geom(
