@@ -14,6 +14,10 @@ Rules (:data:`COORDINATIONS`):
   least Q*_g is taken even when the target is occluded (a partly covered target the grasp
   net already scores graspable needs no move); otherwise occluded -> move, else push. Not
   the paper's rule; measured against it on the Experiments page of the documentation. Without a Q*_g it is the workflow.
+- ``"grasp_first_uncover_max_q"``: ``"grasp_first"``, but while the target is occluded and the
+  grasp is not taken, the larger of the best move Q and the best push Q (as
+  ``"uncover_max_q"``). For nets trained with ``uncover_max_q`` whose grasp net has learnt
+  covered targets (``TrainingStage.covered_grasp_trials``). Not the paper's rule.
 - ``"uncover_max_q"``: the workflow, but while the target is occluded the larger of the best
   move Q and the best push Q (either may uncover it). Not the paper's rule; meant for nets
   whose push is paid for uncovering as the move is (``RewardConfig.push_uncovers``), so the
@@ -33,9 +37,10 @@ from typing import Callable, Sequence
 
 from mpg_envs.grid.actions import check_primitives
 
-COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "uncover_max_q", "max_q")
+COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "uncover_max_q", "grasp_first_uncover_max_q", "max_q")
 """Ways to pick the primitive: the paper's workflow, the workflow asking the grasp first, the
-workflow uncovering by the larger of move and push Q, or the plain max over the Q maps."""
+workflow uncovering by the larger of move and push Q, both of those, or the plain max over the
+Q maps."""
 
 
 def check_coordination(rule: str) -> str:
@@ -84,11 +89,11 @@ def choose_primitive(
         return available[0]
     if rule == "max_q":
         return _largest(available, best_q)
-    if rule == "grasp_first" and occluded and "grasp" in available and q_star is not None:
+    if rule in ("grasp_first", "grasp_first_uncover_max_q") and occluded and "grasp" in available and q_star is not None:
         if best_q("grasp") >= q_star:
             return "grasp"
     if "move" in available and occluded:
-        if rule == "uncover_max_q" and "push" in available:
+        if rule in ("uncover_max_q", "grasp_first_uncover_max_q") and "push" in available:
             return _largest(("move", "push"), best_q)
         return "move"
     if "grasp" in available and "push" in available:

@@ -138,6 +138,8 @@ class TrialCounts:
     move_trial_successes: int = 0
     rival_trials: int = 0
     rival_trial_clears: int = 0
+    covered_grasp_trials: int = 0
+    covered_grasp_trial_targets: int = 0
 
 
 @dataclass

@@ -23,7 +23,7 @@ the state.
 Optionally (off by default, the paper is pure RL): oracle transitions fill a fresh run's replay
 (``TrainConfig.demonstration_episodes``, :mod:`mpg_agents.learning.demonstrations`); actions not
 taken are tried in the simulation, undone and stored (``TrainingStage.grasp_trials``,
-``move_trials``, ``rival_trials``; :mod:`mpg_agents.learning.trials`; privileged).
+``move_trials``, ``rival_trials``, ``covered_grasp_trials``; :mod:`mpg_agents.learning.trials`; privileged).
 """
 
 from __future__ import annotations
@@ -210,6 +210,8 @@ class Learner:
             summary.update(move_trials=c.move_trials, move_trial_successes=c.move_trial_successes)
         if self.stage.rival_trials:
             summary.update(rival_trials=c.rival_trials, rival_trial_clears=c.rival_trial_clears)
+        if self.stage.covered_grasp_trials:
+            summary.update(covered_grasp_trials=c.covered_grasp_trials, covered_grasp_trial_targets=c.covered_grasp_trial_targets)
         self.lock.release()
         return summary
 

@@ -91,6 +91,12 @@ class TrainingStage:
             primitive it did not take, so a rule weighing the two
             (``coordination = "uncover_max_q"``, with ``reward = {push_uncovers = true}``)
             learns where a push does the move's work. Privileged like ``grasp_trials``; off by default.
+        covered_grasp_trials: while the target is covered, each move or push the stage takes is
+            also tried as the grasp net's best grasp, in the simulation and undone, and stored
+            (one more gradient step): the grasp net learns which covered targets it can take
+            already, which the workflow (never grasping a covered target) does not teach it and
+            a rule grasping before uncovering (``coordination = "grasp_first_uncover_max_q"``)
+            needs. Privileged like ``grasp_trials``; off by default.
         env_options: ``((keyword, value), ...)`` (a TOML table) of ``gym.make`` keywords for the
             stage's training envs, of :data:`STAGE_ENV_OPTIONS`: ``object_set`` (a set name, or a
             list of sets pooled into one, each ``"name"`` or ``"name:seed"``, e.g.
@@ -122,6 +128,7 @@ class TrainingStage:
     grasp_trials: int = 0
     move_trials: int = 0
     rival_trials: bool = False
+    covered_grasp_trials: bool = False
     env_options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
@@ -143,8 +150,9 @@ class TrainingStage:
         if options.get("obs_mode", "raycast") not in OBS_MODES:
             raise ValueError(f"stage {self.name}: env_options obs_mode must be one of {list(OBS_MODES)}, got {options['obs_mode']!r}")
         object.__setattr__(self, "env_options", tuple(sorted(options.items())))
-        if not isinstance(self.rival_trials, bool):
-            raise ValueError(f"stage {self.name}: rival_trials must be true or false, got {self.rival_trials!r}")
+        for name in ("rival_trials", "covered_grasp_trials"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"stage {self.name}: {name} must be true or false, got {getattr(self, name)!r}")
         for name, most in (("grasp_trials", GRASP_ROTATIONS - 1), ("move_trials", MAX_MOVE_TRIALS)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= most:
@@ -318,6 +326,9 @@ baselines (which have no move) train without them, under the paper's push reward
 rival trials; ``uncover_max_q``, which only differs from the workflow for a net with a move,
 becomes the workflow)."""
 
+WITHOUT_MOVE_VERSUS_PUSH = {"uncover_max_q": "workflow", "grasp_first_uncover_max_q": "grasp_first"}
+"""The rule a learned baseline trains with in place of MPGNet's move-versus-push rules."""
+
 
 def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str, ...]], **last: Any) -> tuple[TrainingStage, ...]:
     """The earlier stages that train only ``keep``'s branch sets, then the last stage changed by
@@ -329,7 +340,7 @@ def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str,
         "branch_init": (),
         "rival_trials": False,
         "reward": tuple(pair for pair in last_stage.reward if pair[0] not in MOVE_VERSUS_PUSH),
-        "coordination": "workflow" if last_stage.coordination == "uncover_max_q" else last_stage.coordination,
+        "coordination": WITHOUT_MOVE_VERSUS_PUSH.get(last_stage.coordination, last_stage.coordination),
         **last,
     }
     final = _without_unused_calibration(replace(last_stage, **changes))

@@ -15,6 +15,10 @@ demonstrations: a simulator's counterfactual, not the paper's pure RL; off by de
 - Rival trials (``TrainingStage.rival_trials``): while the target is covered, a move is also
   tried as the push net's best push and a push as the move net's best move, so the value of
   each uncovering step is learnt beside the one it would replace.
+- Covered-grasp trials (``TrainingStage.covered_grasp_trials``): while the target is covered,
+  a move or push is also tried as the grasp net's best grasp. The workflow never grasps a
+  covered target, so without them the grasp net's Q on covered targets is never labelled and
+  cannot tell a graspable one (what a rule grasping before uncovering needs).
 """
 
 from __future__ import annotations
@@ -61,6 +65,14 @@ def rival_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], primitive:
     return policy.alternatives(obs, rival, 1, 0.0)
 
 
+def covered_grasp_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], primitive: str) -> list[int]:
+    """The grasp net's best grasp when the target is covered in ``obs``, the step taken uncovers
+    (a move or a push) and the policy has a grasp branch; else none."""
+    if primitive not in RIVALS or "grasp" not in policy.usable_primitives or not bool(obs["occluded"][0]):
+        return []
+    return policy.alternatives(obs, "grasp", 1, 0.0)
+
+
 def run_trials(env: Any, obs: dict[str, np.ndarray], actions: list[int], store: Store) -> list[dict[str, Any]]:
     """Try each action from the current state (undone after each) and ``store`` its transition
     from ``obs``; returns the trials' ``info`` dicts."""
@@ -99,5 +111,11 @@ def try_alternatives(
         infos = run_trials(env, obs, actions, store)
         c.rival_trials += len(infos)
         c.rival_trial_clears += sum(int(not i["occluded"] and not i["target_grasped"]) for i in infos)
+        tried += actions
+    if stage.covered_grasp_trials:
+        actions = covered_grasp_trial_actions(policy, obs, choice.primitive)
+        infos = run_trials(env, obs, actions, store)
+        c.covered_grasp_trials += len(infos)
+        c.covered_grasp_trial_targets += sum(int(i["target_grasped"]) for i in infos)
         tried += actions
     return tried

@@ -110,6 +110,21 @@ def test_uncover_max_q_without_a_push_branch_moves_while_covered():
     assert calls == []
 
 
+@pytest.mark.parametrize(
+    "occluded, values, expected, needed",
+    [
+        (True, {"move": 0.6, "push": 0.9, "grasp": 0.8}, "grasp", ["grasp"]),  # covered but graspable
+        (True, {"move": 0.6, "push": 0.9, "grasp": 0.7}, "push", ["grasp", "move", "push"]),  # then uncover by the larger
+        (True, {"move": 0.9, "push": 0.6, "grasp": 0.7}, "move", ["grasp", "move", "push"]),
+        (False, {"move": 9.0, "push": 0.1, "grasp": 0.7}, "push", ["grasp"]),  # uncovered: the workflow
+    ],
+)
+def test_grasp_first_uncover_max_q_grasps_then_uncovers_by_the_larger(occluded, values, expected, needed):
+    best_q, calls = asked(values)
+    assert choose_primitive("grasp_first_uncover_max_q", ALL, occluded, 0.75, best_q) == expected
+    assert calls == needed
+
+
 def test_nan_is_no_way_to_say_no_q_star():
     from mpg_agents.acting.grasp_threshold import GraspThreshold
 

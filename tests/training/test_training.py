@@ -133,6 +133,29 @@ def test_rival_trials_label_the_push_a_covered_move_replaces(tmp_path, monkeypat
 def test_rival_trials_is_a_switch():
     with pytest.raises(ValueError, match="rival_trials must be true or false"):
         with_overrides(TRAINING_STAGES, {"Stage5": {"rival_trials": 1}})
+    with pytest.raises(ValueError, match="covered_grasp_trials must be true or false"):
+        with_overrides(TRAINING_STAGES, {"Stage5": {"covered_grasp_trials": "yes"}})
+
+
+def test_covered_grasp_trials_label_the_grasp_a_covered_step_skips(tmp_path, monkeypatch):
+    import mpg_agents.learning.learner as learner_module
+
+    stage = with_overrides(TRAINING_STAGES, {"Stage5": {
+        "env_id": "MPG-OccludedHard-v0", "objects": [6, 6], "covered_grasp_trials": True, "alternate_every": 1,
+        "coordination": "uncover_max_q", "reward": {"push_uncovers": True},
+    }})[-1]
+    steps = []
+    real = learner_module.td_step
+    monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
+    learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
+    summary = learner.run()  # the hard track's target starts covered: a move or a push is taken
+    env = learner.env.unwrapped
+    assert summary["covered_grasp_trials"] == learner.counters.covered_grasp_trials == 1 and len(steps) == 2
+    assert summary["covered_grasp_trial_targets"] in (0, 1)
+    tried, taken = (env.action_space.decode(int(a))[0] for a in learner.replay.actions[:2, 0, 0])
+    assert tried == "grasp" and taken in ("move", "push")  # the trial is stored first, then the step
+    assert env.num_motions == 1  # the trial was undone: only the step taken counts
+    learner.env.close()
 
 
 def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):

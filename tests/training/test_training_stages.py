@@ -100,6 +100,8 @@ def test_learned_baselines_are_table_changes_at_the_same_budget():
         assert not last.rival_trials and last.reward == (("move_needs_lift", True),), name
         assert last.coordination == ("max_q" if name == "to-vpg" else "workflow"), name
     assert without_multistage(one_scale)[-1].rival_trials and without_multistage(one_scale)[-1].reward == one_scale[-1].reward
+    grasping_first = with_overrides(TRAINING_STAGES, {"Stage5": {"coordination": "grasp_first_uncover_max_q"}})
+    assert BASELINES["push-grasp"](grasping_first)[-1].coordination == "grasp_first"
     with pytest.raises(ValueError, match="budget"):
         at_budget(TRAINING_STAGES, 10)
     with pytest.raises(ValueError, match="branches"):
