@@ -58,7 +58,7 @@ from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
-from mpg_agents.learning.trials import try_alternatives
+from mpg_agents.learning.trials import TRIAL_COUNTERS, try_alternatives
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_envs.simulation.objects import check_not_held_out
@@ -204,14 +204,9 @@ class Learner:
             self.calibrate_from_own_grasps()
         c = self.counters
         summary = {"iteration": c.iteration, "episodes": c.episode}
-        if self.stage.grasp_trials:
-            summary.update(grasp_trials=c.grasp_trials, grasp_trial_targets=c.grasp_trial_targets)
-        if self.stage.move_trials:
-            summary.update(move_trials=c.move_trials, move_trial_successes=c.move_trial_successes)
-        if self.stage.rival_trials:
-            summary.update(rival_trials=c.rival_trials, rival_trial_clears=c.rival_trial_clears)
-        if self.stage.covered_grasp_trials:
-            summary.update(covered_grasp_trials=c.covered_grasp_trials, covered_grasp_trial_targets=c.covered_grasp_trial_targets)
+        for switch, counters in TRIAL_COUNTERS.items():
+            if getattr(self.stage, switch):
+                summary.update({name: getattr(c, name) for name in counters})
         self.lock.release()
         return summary
 

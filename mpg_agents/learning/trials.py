@@ -35,6 +35,15 @@ MOVE_TRIAL_SPACING_PX = 10.0
 other and from the move taken: about a block's short side, so each trial lifts at another
 object or another part of one."""
 
+TRIAL_COUNTERS: dict[str, tuple[str, ...]] = {
+    "grasp_trials": ("grasp_trials", "grasp_trial_targets"),
+    "move_trials": ("move_trials", "move_trial_successes"),
+    "rival_trials": ("rival_trials", "rival_trial_clears"),
+    "covered_grasp_trials": ("covered_grasp_trials", "covered_grasp_trial_targets"),
+}
+"""Each kind of trial (a ``TrainingStage`` field that switches it on) and the run counters
+(:class:`~mpg_agents.learning.run_state.Counters` fields) a stage's summary reports for it."""
+
 Store = Callable[[dict[str, np.ndarray], dict[str, np.ndarray], int, float, bool], None]
 
 

@@ -109,11 +109,13 @@ def test_move_trials_store_the_move_nets_next_places(tmp_path, monkeypatch):
     learner.env.close()
 
 
-def test_rival_trials_label_the_push_a_covered_move_replaces(tmp_path, monkeypatch):
+def _one_covered_step(tmp_path, monkeypatch, trial: str):
+    """One Stage V iteration on the hard track (its target starts covered: a move or a push is
+    taken) with the trial switch ``trial`` on; returns the learner, its summary and the TD steps."""
     import mpg_agents.learning.learner as learner_module
 
     stage = with_overrides(TRAINING_STAGES, {"Stage5": {
-        "env_id": "MPG-OccludedHard-v0", "objects": [6, 6], "rival_trials": True, "alternate_every": 1,
+        "env_id": "MPG-OccludedHard-v0", "objects": [6, 6], trial: True, "alternate_every": 1,
         "coordination": "uncover_max_q", "reward": {"push_uncovers": True},
     }})[-1]
     steps = []
@@ -121,7 +123,11 @@ def test_rival_trials_label_the_push_a_covered_move_replaces(tmp_path, monkeypat
     monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
     learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
     assert learner.env.unwrapped.config.reward.push_uncovers
-    summary = learner.run()  # the hard track's target starts covered: a move or a push is taken
+    return learner, learner.run(), steps
+
+
+def test_rival_trials_label_the_push_a_covered_move_replaces(tmp_path, monkeypatch):
+    learner, summary, steps = _one_covered_step(tmp_path, monkeypatch, "rival_trials")
     env = learner.env.unwrapped
     assert summary["rival_trials"] == learner.counters.rival_trials == 1 and len(steps) == 2
     assert summary["rival_trial_clears"] in (0, 1)
@@ -138,17 +144,7 @@ def test_rival_trials_is_a_switch():
 
 
 def test_covered_grasp_trials_label_the_grasp_a_covered_step_skips(tmp_path, monkeypatch):
-    import mpg_agents.learning.learner as learner_module
-
-    stage = with_overrides(TRAINING_STAGES, {"Stage5": {
-        "env_id": "MPG-OccludedHard-v0", "objects": [6, 6], "covered_grasp_trials": True, "alternate_every": 1,
-        "coordination": "uncover_max_q", "reward": {"push_uncovers": True},
-    }})[-1]
-    steps = []
-    real = learner_module.td_step
-    monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
-    learner = Learner(TrainConfig(steps=1, **TINY), stage, tmp_path, log=lambda s: None)
-    summary = learner.run()  # the hard track's target starts covered: a move or a push is taken
+    learner, summary, steps = _one_covered_step(tmp_path, monkeypatch, "covered_grasp_trials")
     env = learner.env.unwrapped
     assert summary["covered_grasp_trials"] == learner.counters.covered_grasp_trials == 1 and len(steps) == 2
     assert summary["covered_grasp_trial_targets"] in (0, 1)
