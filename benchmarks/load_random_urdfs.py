@@ -19,6 +19,7 @@ import re
 import sys
 import time
 import warnings
+from pathlib import Path
 
 from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange
 from mpg_envs.simulation.meshes import DEFAULT_TIME_LIMIT_S, MeshLoadError, load_mesh_file
@@ -58,6 +59,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     fit = "none" if args.fit == "none" else ExtentRange(args.min_extent, BLOCKS_EXTENTS.max_extent, BLOCKS_EXTENTS.max_two_smallest)
     entries = random_urdf_entries(args.folder, args.split)
+    # Records name each file from the folder above random_urdfs, not from this machine's root.
+    root = f"{Path(entries[0].mesh).parents[2]}/" if entries else ""
+
+    def shown(what: object) -> str:
+        return str(what).replace(root, "")
+
     start = time.perf_counter()
     loaded, parts, failures, fallbacks = [], [], [], []
     for i, entry in enumerate(entries):
@@ -71,9 +78,9 @@ def main(argv: list[str] | None = None) -> int:
                 loaded.append(entry.number)
                 parts.append(asset.num_parts)
             except MeshLoadError as exc:
-                failures.append({"file": str(entry.mesh), "kind": kind_of(str(exc)), "error": str(exc)})
+                failures.append({"file": shown(entry.mesh), "kind": kind_of(str(exc)), "error": shown(exc)})
             except Exception as exc:  # a bug, not a bad mesh: still reported with its file
-                failures.append({"file": str(entry.mesh), "kind": f"unexpected {type(exc).__name__}", "error": str(exc)})
+                failures.append({"file": shown(entry.mesh), "kind": f"unexpected {type(exc).__name__}", "error": shown(exc)})
         fallbacks += [f"{entry.mesh}: {w.message}" for w in caught if issubclass(w.category, RuntimeWarning)]
         if (i + 1) % 50 == 0:
             print(f"{i + 1}/{len(entries)}: {len(loaded)} loaded, {len(failures)} failed, "

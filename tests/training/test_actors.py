@@ -14,13 +14,7 @@ from mpg_agents.learning.actor_pool import check_actor_backend
 from mpg_agents.learning.actors import ActorStep, Choice
 from mpg_agents.learning.learner import Learner, StopRequested
 from mpg_agents.learning.train_config import TrainConfig
-
-TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
-
-
-@pytest.fixture(autouse=True)
-def _quiet_threads():
-    torch.set_num_threads(1)
+from .tiny import TINY
 
 
 def _rows(folder):

@@ -5,21 +5,15 @@ from dataclasses import asdict, replace
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.learning.demonstrations import DemoStats, collect_demonstrations
 from mpg_agents.acting.seeds import episode_seed
 from mpg_agents.learning.learner import Counters, Learner
 from mpg_agents.learning.train_config import TrainConfig
+from .tiny import TINY
 
 # The tiny learner settings of tests/training/test_training.py.
-TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
-
-
-@pytest.fixture(autouse=True)
-def _quiet_threads():
-    torch.set_num_threads(1)
 
 
 def _recorder(calls: list):

@@ -3,23 +3,20 @@ folder has one owner, a resume with other settings refuses, output paths and set
 before any work."""
 
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
-import torch
 
 from mpg_agents.cli import calibrate_main, eval_main, plot_main, train_main
 from mpg_agents.learning.learner import Learner
 from mpg_agents.learning.run_folder import LOCK_NAME, RunFolderBusy, RunLock, prepare_run_folder, resume_differences
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.train_log import CSV_COLUMNS, rewind_progress
+from .tiny import TINY
 
 REPO = Path(__file__).resolve().parents[2]
-TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
 TINY_TOML = """batch_size = 1
 replay_capacity = 64
 checkpoint_every = 2
@@ -28,11 +25,6 @@ torch_threads = 1
 [net_config]
 trunk_depth = 2
 """
-
-
-@pytest.fixture(autouse=True)
-def _quiet_threads():
-    torch.set_num_threads(1)
 
 
 def iterations(path: Path) -> list[int]:

@@ -3,21 +3,13 @@
 import json
 
 import pytest
-import torch
 
 from mpg_agents.cli import eval_main
 from mpg_agents.learning.learner import Learner
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
-
-# A shallow trunk keeps every test fast; the code paths are the full ones.
-TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
-
-
-@pytest.fixture(autouse=True)
-def _quiet_threads():
-    torch.set_num_threads(1)
+from .tiny import TINY
 
 
 def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):

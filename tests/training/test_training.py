@@ -14,16 +14,9 @@ from mpg_agents.learning.learner import Learner, StopRequested
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
+from .tiny import TINY
 
 REPO = Path(__file__).resolve().parents[2]
-
-# A shallow trunk keeps every test fast; the code paths are the full ones.
-TINY = dict(batch_size=1, replay_capacity=64, checkpoint_every=2, target_update_every=2, net_config={"trunk_depth": 2}, torch_threads=1)
-
-
-@pytest.fixture(autouse=True)
-def _quiet_threads():
-    torch.set_num_threads(1)
 
 
 def test_tiny_pipeline_runs_stages_one_to_five(tmp_path):
