@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
                 failures.append({"file": shown(entry.mesh), "kind": kind_of(str(exc)), "error": shown(exc)})
             except Exception as exc:  # a bug, not a bad mesh: still reported with its file
                 failures.append({"file": shown(entry.mesh), "kind": f"unexpected {type(exc).__name__}", "error": shown(exc)})
-        fallbacks += [f"{entry.mesh}: {w.message}" for w in caught if issubclass(w.category, RuntimeWarning)]
+        fallbacks += [f"{shown(entry.mesh)}: {w.message}" for w in caught if issubclass(w.category, RuntimeWarning)]
         if (i + 1) % 50 == 0:
             print(f"{i + 1}/{len(entries)}: {len(loaded)} loaded, {len(failures)} failed, "
                   f"{time.perf_counter() - start:.0f} s", flush=True)  # fmt: skip
