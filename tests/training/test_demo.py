@@ -101,7 +101,8 @@ def test_moves_kept_on_the_occluders_top():
     # The paper's workflow sends an occluded target to the move net whatever the grasp Q
     # (the shipped net's own grasp_first rule may grasp through the cover instead).
     policy = make_policy("shipped", env, move_region="top", coordination="workflow")
-    assert policy.name.endswith("[move region: top]")
+    # The shipped net pushes once after 3 failed grasps in a row (grasp retries in its header).
+    assert policy.name.endswith("[move region: top] [push after 3 failed grasps]")
     obs, _ = env.reset(seed=700_003)
     assert obs["occluded"][0] == 1
     a = decode_action(env.unwrapped.primitives, policy.act(obs))

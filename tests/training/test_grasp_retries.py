@@ -13,6 +13,8 @@ from mpg_envs.scenes.arranged import arrangement_scene
 from mpg_envs.scenes.arrangement_draw import draw_arrangement
 
 GRASP_NET = str(shipped_checkpoint().parent / "stage2_grasp_small.safetensors")
+# The shipped config trained on clean heightmaps (training seed 1): exported without grasp retries.
+CLEAN_NET = "benchmarks/results/strict_run/uncover_s1.safetensors"
 
 
 class ScriptedAgent:
@@ -47,8 +49,19 @@ def test_k_failed_grasps_then_one_push_then_grasps_again(env):
     assert policy.policy.asked[-1] is None
 
 
-def test_grasp_retries_is_off_by_default_refused_when_not_positive_and_idle_for_a_grasp_only_net(env):
+def test_the_shipped_net_pushes_after_three_failed_grasps_by_its_header(env):
     policy = make_policy("shipped", env)
+    assert policy.grasp_retries == 3 and policy.name.endswith("[push after 3 failed grasps]")
+    policy.policy = ScriptedAgent()
+    obs = env.observation_space.sample()
+    for _ in range(5):
+        policy.act(obs)
+    assert policy.policy.asked == [None, None, None, "push", None]
+
+
+def test_grasp_retries_is_off_by_default_refused_when_not_positive_and_idle_for_a_grasp_only_net(env):
+    policy = make_policy(CLEAN_NET, env)  # its header has no grasp_retries
+    assert policy.grasp_retries is None
     policy.policy = ScriptedAgent()
     obs = env.observation_space.sample()
     for _ in range(5):
@@ -77,7 +90,8 @@ def test_an_exported_checkpoint_carries_its_default_and_a_policy_may_turn_it_off
 
 def test_in_a_closed_ring_the_shipped_net_pushes_after_two_failed_grasps(env):
     """The drawn tuning scene ring-700027: a cube in a closed ring of six round blocks, where
-    the shipped MPGNet grasps ten times in a row to the motion cap."""
+    the shipped config trained on clean heightmaps (training seed 1), without grasp retries,
+    grasps ten times in a row to the motion cap."""
     arrangement = draw_arrangement(700027)
     assert arrangement.name == "ring-700027"
     obs, _ = env.reset(seed=0, options={"scene": arrangement_scene(arrangement)})
