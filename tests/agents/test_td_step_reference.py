@@ -53,7 +53,7 @@ def recorded_batch(size: int, seed: int) -> SimpleNamespace:
     )
 
 
-def reference_record(steps: int = 2, size: int = 3, trunk_batch: int | None = 4) -> dict:
+def reference_record(steps: int = 2, size: int = 3, trunk_batch: int | str | None = 4) -> dict:
     """Two TD steps of a seeded small net on recorded batches: losses, surprises and, per step,
     each parameter's gradient sum and absolute sum (``trunk_batch``: the inference chunk of the
     trunks; ``None`` runs them as an accelerator does)."""

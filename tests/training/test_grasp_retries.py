@@ -1,6 +1,8 @@
 """``grasp_retries``: after K grasps in a row that did not take the target, a network policy
 pushes once, then may grasp again."""
 
+from pathlib import Path
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -14,7 +16,7 @@ from mpg_envs.scenes.arrangement_draw import draw_arrangement
 
 GRASP_NET = str(shipped_checkpoint().parent / "stage2_grasp_small.safetensors")
 # The shipped config trained on clean heightmaps (training seed 1): exported without grasp retries.
-CLEAN_NET = "benchmarks/results/strict_run/uncover_s1.safetensors"
+CLEAN_NET = str(Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "strict_run" / "uncover_s1.safetensors")
 
 
 class ScriptedAgent:
