@@ -170,7 +170,7 @@ def test_the_repositorys_track_policies_and_reused_blocks_cells_hold(monkeypatch
     from mpg_agents.evaluation.policy_zoo import BUILTIN
 
     specs = read_policy_specs(ROOT / "benchmarks" / "tracks.toml")
-    assert [s.policy for s in specs][:5] == ["oracle", "grasp-only", "random", "shipped", "benchmarks/results/strict_run/uncover_s1.safetensors"] and len(specs) == 8
+    assert [s.policy for s in specs][:5] == ["oracle", "grasp-only", "random", "shipped", "benchmarks/results/strict_run/uncover_s1.safetensors"] and len(specs) == 9
     assert all(s.policy in BUILTIN or (ROOT / s.policy).is_file() for s in specs)
     reused = read_reused(ROOT / "benchmarks" / "results" / "tracks" / "reused.toml")
     # The shipped net's blocks cells and the clean-heightmap net's are cell files in tracks/hard/cells/.
