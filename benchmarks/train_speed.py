@@ -7,10 +7,12 @@ learning step (double-DQN target on a prioritised batch, backward, Adam). The fi
 under 1 s per iteration on 2 cores; VPG needed about 5 s per iteration on a GPU.
 ``--replay-ratio R`` learns as a run at that ratio does (R gradient steps per env step, the
 fraction carried over), so an iteration's mean, not its median, is the figure to compare;
-``--net-option KEY=VALUE`` sets an ``MPGNetConfig`` field (``color_input=False``).
+The nets are the shipped config's (``[net_config]`` of ``mpg_agents/checkpoints/mpgnet_train.toml``:
+colour-free); ``--net-option KEY=VALUE`` sets an ``MPGNetConfig`` field over it
+(``color_input=True``: the paper's colour trunks).
 The last output line is one JSON object.
 
-    python benchmarks/train_speed.py [--iterations 30] [--warmup 5] [--batch-size 2] [--replay-ratio 1] [--net-option color_input=False]
+    python benchmarks/train_speed.py [--iterations 30] [--warmup 5] [--batch-size 2] [--replay-ratio 1] [--net-option color_input=True]
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import json
 import statistics
 import tempfile
 import time
+import tomllib
 
 
 import numpy as np  # noqa: E402
@@ -28,6 +31,7 @@ import torch  # noqa: E402
 
 from mpg_agents.learning.learner import Learner  # noqa: E402
 from mpg_agents.learning.train_config import TrainConfig  # noqa: E402
+from mpg_agents.learning.train_runs import DEFAULT_CONFIG  # noqa: E402
 
 
 def main() -> None:
@@ -39,7 +43,7 @@ def main() -> None:
     parser.add_argument("--replay-ratio", type=float, default=1.0)
     parser.add_argument("--net-option", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
-    net_config = {}
+    net_config = dict(tomllib.loads(DEFAULT_CONFIG.read_text()).get("net_config", {}))  # the shipped nets
     for text in args.net_option:
         key, _, value = text.partition("=")
         net_config[key.strip()] = ast.literal_eval(value.strip())

@@ -170,14 +170,17 @@ def test_the_repositorys_track_policies_and_reused_blocks_cells_hold(monkeypatch
     from mpg_agents.evaluation.policy_zoo import BUILTIN
 
     specs = read_policy_specs(ROOT / "benchmarks" / "tracks.toml")
-    assert [s.policy for s in specs][:5] == ["oracle", "grasp-only", "random", "shipped", "benchmarks/results/strict_run/uncover_s1.safetensors"] and len(specs) == 9
+    assert [s.policy for s in specs][:6] == [
+        "oracle", "grasp-only", "random", "shipped",
+        "benchmarks/results/generalize/blocks_rand_s1.safetensors", "benchmarks/results/strict_run/uncover_s1.safetensors",
+    ] and len(specs) == 10
     assert all(s.policy in BUILTIN or (ROOT / s.policy).is_file() for s in specs)
     reused = read_reused(ROOT / "benchmarks" / "results" / "tracks" / "reused.toml")
-    # The shipped net's blocks cells and the clean-heightmap net's are cell files in tracks/hard/cells/.
-    in_files = {s.label for s in specs[3:5]}
+    # The shipped net's blocks cells and the colour-trunk nets' are cell files in tracks/hard/cells/.
+    in_files = {s.label for s in specs[3:6]}
     assert set(reused) == {("hard", s.label, n) for s in specs for n in (15, 30) if s.label not in in_files}  # every other blocks cell, nothing else
     monkeypatch.chdir(ROOT)  # the reuse file's paths are the repository's
     report, _ = make_track_table(["hard"], specs, [15, 30], 100, 500000, ROOT / "benchmarks" / "results" / "tracks", reused)
     rows = report["rows"]["hard"]
-    assert report["missing"] == [] and rows["MPGNet (shipped)"]["15"]["success"] == 1.0 and rows["MPGNet (shipped)"]["30"]["success"] == 0.99
-    assert rows[specs[4].label]["30"]["success"] == 0.98
+    assert report["missing"] == [] and rows["MPGNet (shipped)"]["15"]["success"] == 0.99 and rows["MPGNet (shipped)"]["30"]["success"] == 0.99
+    assert rows[specs[4].label]["15"]["success"] == 1.0 and rows[specs[5].label]["30"]["success"] == 0.98
