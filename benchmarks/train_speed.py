@@ -23,13 +23,13 @@ import json
 import statistics
 import tempfile
 import time
-import tomllib
 
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from mpg_agents.learning.learner import Learner  # noqa: E402
+from mpg_agents.cli_input import read_config  # noqa: E402
 from mpg_agents.learning.train_config import TrainConfig  # noqa: E402
 from mpg_agents.learning.train_runs import DEFAULT_CONFIG  # noqa: E402
 
@@ -43,7 +43,7 @@ def main() -> None:
     parser.add_argument("--replay-ratio", type=float, default=1.0)
     parser.add_argument("--net-option", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
-    net_config = dict(tomllib.loads(DEFAULT_CONFIG.read_text()).get("net_config", {}))  # the shipped nets
+    net_config = dict(read_config(str(DEFAULT_CONFIG)).get("net_config", {}))  # the shipped nets
     for text in args.net_option:
         key, _, value = text.partition("=")
         net_config[key.strip()] = ast.literal_eval(value.strip())
