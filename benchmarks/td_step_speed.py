@@ -1,6 +1,8 @@
 """Seconds per TD step (``mpg_agents.learning.td_step.td_step``) at given batch sizes, on recorded
-Stage V transitions, with the shipped training configuration's network (small, grasp region on
-the target, 8 px off its rim, zero-initialised heads, Q bounds).
+Stage V transitions, with the shipped training configuration's network (small; ``[net_config]`` of
+``mpg_agents/checkpoints/mpgnet_train.toml``: colour-free, grasp region on the target, 8 px off its
+rim, zero-initialised heads) and its Q bounds; ``--net-option KEY=VALUE`` sets an
+``MPGNetConfig`` field over it (``color_input=True``: the paper's colour trunks).
 
 First record transitions once (env steps: the heuristic grasp, or a random move/push):
 
@@ -33,7 +35,20 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-DEFAULT_NET = {"grasp_region": "target", "target_margin_px": -8, "head_init": "zero"}
+
+
+def shipped_net_config(options: list[str]) -> dict:
+    """The shipped training config's ``[net_config]``, with ``KEY=VALUE`` options over it."""
+    import ast
+
+    from mpg_agents.cli_input import read_config
+    from mpg_agents.learning.train_runs import DEFAULT_CONFIG
+
+    net_config = dict(read_config(str(DEFAULT_CONFIG)).get("net_config", {}))
+    for text in options:
+        key, _, value = text.partition("=")
+        net_config[key.strip()] = ast.literal_eval(value.strip())
+    return net_config
 
 
 def record(path: str, transitions: int, seed: int) -> None:
@@ -96,6 +111,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--profile", action="store_true", help="also time each phase of the step and print torch.profiler's top ops")
+    parser.add_argument("--net-option", action="append", default=[], metavar="KEY=VALUE", help="an MPGNetConfig field over the shipped config's")
     parser.add_argument("--decisions", type=int, default=0, help="also time this many coordinated decisions (agent.decide) on the recorded observations")
     args = parser.parse_args()
     if args.record:
@@ -115,7 +131,7 @@ def main() -> None:
     data = dict(np.load(args.transitions_file))
     space = PixelActionSpace(("move", "push", "grasp"))
     torch.manual_seed(args.seed)
-    agent = MPGAgent.build(observation_space(), space, variant="small", net_config=DEFAULT_NET)
+    agent = MPGAgent.build(observation_space(), space, variant="small", net_config=shipped_net_config(args.net_option))
     target = MPGQFunction(agent.net_config, agent.action_primitives)
     target.load_state_dict(agent.q_net.state_dict())
     agent.q_net.to(device)
@@ -133,7 +149,8 @@ def main() -> None:
         print(f"batch {size:3d}: {seconds[size]:.3f} s per TD step (median of {args.repeats}; {args.threads} thread(s), {device})")
         if args.profile:
             profile_step(agent.q_net, target, optimizer, batch, config, args.repeats, device)
-    result = {"td_step_s": {str(k): round(v, 4) for k, v in seconds.items()}, "device": str(device), "threads": args.threads}
+    result = {"td_step_s": {str(k): round(v, 4) for k, v in seconds.items()}, "device": str(device), "threads": args.threads,
+              "net_config": {k: v for k, v in agent.net_config.to_dict().items() if k in ("color_input", "channels_last", "trunk_batch")}}
     if args.decisions:
         result["decision_s"] = round(time_decisions(agent, data, args.decisions, device), 4)
         print(f"decision: {result['decision_s']:.3f} s (median of {args.decisions}; the full coordinated decision, {device})")
