@@ -36,6 +36,11 @@ import numpy as np
 import torch
 
 
+RATIO_GOAL = 4.0
+"""At most this many times batch 2's seconds for a TD step at batch 16: the step's fixed work is
+shared by the batch. Met on a GPU (2.2x on an H200); on a CPU the convolutions of the exact
+targets' all-rotation greedy pass grow with the batch (7.7x on 2 threads of an AVX-512 Xeon)."""
+
 
 def shipped_net_config(options: list[str]) -> dict:
     """The shipped training config's ``[net_config]``, with ``KEY=VALUE`` options over it."""
@@ -149,6 +154,11 @@ def main() -> None:
         print(f"batch {size:3d}: {seconds[size]:.3f} s per TD step (median of {args.repeats}; {args.threads} thread(s), {device})")
         if args.profile:
             profile_step(agent.q_net, target, optimizer, batch, config, args.repeats, device)
+    sizes = sorted(seconds)
+    if len(sizes) >= 2:
+        ratio = seconds[sizes[-1]] / seconds[sizes[0]]
+        met = "met" if ratio <= RATIO_GOAL else "NOT met"
+        print(f"batch {sizes[-1]} / batch {sizes[0]}: {ratio:.1f}x (goal for 16 / 2: at most {RATIO_GOAL:g}x; {met})")
     result = {"td_step_s": {str(k): round(v, 4) for k, v in seconds.items()}, "device": str(device), "threads": args.threads,
               "net_config": {k: v for k, v in agent.net_config.to_dict().items() if k in ("color_input", "channels_last", "trunk_batch")}}
     if args.decisions:

@@ -3,8 +3,10 @@
 One iteration = decide (the coordinated greedy decision, or exploration) + act (the
 primitive and the new observation, inside ``env.step``) + store the transition + one
 learning step (double-DQN target on a prioritised batch, backward, Adam). The first
-``--warmup`` iterations (PyTorch picks its kernels then) are not counted. Goal:
-under 1 s per iteration on 2 cores; VPG needed about 5 s per iteration on a GPU.
+``--warmup`` iterations (PyTorch picks its kernels then) are not counted. Goals
+(:data:`GOALS_S`, mean seconds per iteration on 2 quiet cores): under 1 s (VPG needed about 5 s
+per iteration on a GPU), and 0.25 s (not met on a CPU with exact double-DQN targets at replay
+ratio 1: the documentation's "Training with actors" says where the time goes).
 ``--replay-ratio R`` learns as a run at that ratio does (R gradient steps per env step, the
 fraction carried over), so an iteration's mean, not its median, is the figure to compare;
 The nets are the shipped config's (``[net_config]`` of ``mpg_agents/checkpoints/mpgnet_train.toml``:
@@ -32,6 +34,10 @@ from mpg_agents.learning.learner import Learner  # noqa: E402
 from mpg_agents.cli_input import read_config  # noqa: E402
 from mpg_agents.learning.train_config import TrainConfig  # noqa: E402
 from mpg_agents.learning.train_runs import DEFAULT_CONFIG  # noqa: E402
+
+
+GOALS_S = (1.0, 0.25)
+"""Mean seconds per iteration on 2 quiet cores the benchmark checks, loosest first."""
 
 
 def main() -> None:
@@ -79,7 +85,8 @@ def main() -> None:
           f"{torch.get_num_threads()} threads, {args.iterations} iterations")
     for name in med:
         print(f"  {name:12s} {med[name]:.3f} s (median), {mean[name]:.3f} s (mean)")
-    print("goal (< 1 s per iteration) " + ("met" if mean["iteration_s"] < 1.0 else "NOT met"))
+    for goal in GOALS_S:
+        print(f"goal (at most {goal:g} s per iteration, mean) " + ("met" if mean["iteration_s"] <= goal else "NOT met"))
     print(json.dumps({
         "iteration_s": round(med["iteration_s"], 4), "iteration_mean_s": round(mean["iteration_s"], 4),
         "parts": {k: round(v, 4) for k, v in med.items() if k != "iteration_s"},
