@@ -5,7 +5,8 @@
 
 Each side is one policy in one cell (env, object count): one or more ``mpg-eval --json`` files,
 e.g. seed blocks run apart. Episodes are paired by their reset seed; only the seeds both sides
-played count. Prints A minus B with 95% paired-bootstrap intervals (``mpg_agents.evaluation.comparison``).
+played count. Prints A minus B with 95% paired-bootstrap intervals (``mpg_agents.evaluation.comparison``),
+and the motions' difference split by primitive (moves, pushes, grasps per episode).
 """
 
 from __future__ import annotations

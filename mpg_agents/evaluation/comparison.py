@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
@@ -85,6 +85,9 @@ class PairedComparison:
     motions_interval: tuple[float, float]
     fewer_motions_a: int
     fewer_motions_b: int
+    primitive_differences: dict[str, float] = field(default_factory=dict)
+    """Mean per-episode A minus B count of each primitive (they sum to the motions' difference);
+    empty when a record does not say its primitives (files of older versions)."""
 
     def describe(self, name_a: str = "A", name_b: str = "B") -> str:
         lo, hi = self.success_interval
@@ -96,6 +99,11 @@ class PairedComparison:
             f"  motions  {name_a} {self.motions_a:.2f}  {name_b} {self.motions_b:.2f}  "
             f"difference {self.motions_difference:+.2f} [{mlo:+.2f}, {mhi:+.2f}]\n"
             f"  fewer motions: {name_a} in {self.fewer_motions_a} episodes, {name_b} in {self.fewer_motions_b}"
+            + (
+                "\n  motions by primitive, difference per episode: "
+                + ", ".join(f"{p} {d:+.2f}" for p, d in self.primitive_differences.items())
+                if self.primitive_differences else ""
+            )
         )
 
 
@@ -122,7 +130,17 @@ def compare_paired(a: EvalRecords, b: EvalRecords, seed: int = 0) -> PairedCompa
         motions_a=float(motions[0].mean()), motions_b=float(motions[1].mean()),
         motions_difference=float(d_motions.mean()), motions_interval=bootstrap_mean_interval(d_motions, seed=seed),
         fewer_motions_a=int((d_motions < 0).sum()), fewer_motions_b=int((d_motions > 0).sum()),
+        primitive_differences=_primitive_differences(a, b, seeds),
     )
+
+
+def _primitive_differences(a: EvalRecords, b: EvalRecords, seeds: Sequence[int]) -> dict[str, float]:
+    """Mean A minus B count per primitive over ``seeds`` (``{}`` when a record lacks its counts)."""
+    counts = [[side.by_seed[s].get("primitives") for s in seeds] for side in (a, b)]
+    if any(c is None for side in counts for c in side):
+        return {}
+    names = sorted({p for side in counts for c in side for p in c}, key=lambda p: (p != "move", p != "push", p))
+    return {p: float(np.mean([ca.get(p, 0) - cb.get(p, 0) for ca, cb in zip(*counts)])) for p in names}
 
 
 def _column(a: EvalRecords, b: EvalRecords, seeds: Iterable[int], key: str) -> np.ndarray:

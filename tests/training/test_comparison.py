@@ -83,3 +83,21 @@ def test_a_case_set_evaluation_is_refused_by_name(tmp_path):
     with pytest.raises(ValueError, match=r"cases.json is not an episode evaluation.*per case"):
         load_eval_records([path])
     assert compare_main(["--a", str(path), "--b", str(path)]) == 2
+
+
+def test_the_motions_difference_splits_by_primitive(tmp_path):
+    def write(name, policy, prims):
+        records = [{"seed": s, "success": True, "motions": sum(p.values()), "primitives": p} for s, p in enumerate(prims)]
+        path = tmp_path / name
+        path.write_text(json.dumps({"policy": policy, "env_id": "MPG-Occluded-v0", "num_objects": 15, "records": records}))
+        return load_eval_records([path])
+
+    # Episode 0: A pushes twice where B moves once; episode 1: A grasps twice where B grasps once.
+    a = write("a.json", "A", [{"push": 2, "grasp": 1}, {"grasp": 2, "move": 0, "push": 0}])
+    b = write("b.json", "B", [{"move": 1, "grasp": 1}, {"grasp": 1}])
+    result = compare_paired(a, b)
+    assert result.primitive_differences == pytest.approx({"move": -0.5, "push": 1.0, "grasp": 0.5})
+    assert sum(result.primitive_differences.values()) == pytest.approx(result.motions_difference)
+    assert "motions by primitive, difference per episode: move -0.50, push +1.00, grasp +0.50" in result.describe()
+    # Records without primitive counts (older files) leave the split out.
+    assert compare_paired(a, load_eval_records([write_eval(tmp_path / "c.json", "C", [(0, True, 3), (1, True, 2)])])).primitive_differences == {}
