@@ -20,7 +20,6 @@ The last output line is one JSON object.
 from __future__ import annotations
 
 import argparse
-import ast
 import json
 import statistics
 import tempfile
@@ -31,9 +30,8 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from mpg_agents.learning.learner import Learner  # noqa: E402
-from mpg_agents.cli_input import read_config  # noqa: E402
 from mpg_agents.learning.train_config import TrainConfig  # noqa: E402
-from mpg_agents.learning.train_runs import DEFAULT_CONFIG  # noqa: E402
+from td_step_speed import shipped_net_config  # noqa: E402  (the shipped nets, with --net-option over them)
 
 
 GOALS_S = (1.0, 0.25)
@@ -49,10 +47,7 @@ def main() -> None:
     parser.add_argument("--replay-ratio", type=float, default=1.0)
     parser.add_argument("--net-option", action="append", default=[], metavar="KEY=VALUE")
     args = parser.parse_args()
-    net_config = dict(read_config(str(DEFAULT_CONFIG)).get("net_config", {}))  # the shipped nets
-    for text in args.net_option:
-        key, _, value = text.partition("=")
-        net_config[key.strip()] = ast.literal_eval(value.strip())
+    net_config = shipped_net_config(args.net_option)
     cfg = TrainConfig(
         steps=10**9, variant=args.variant, batch_size=args.batch_size, torch_threads=2, replay_ratio=args.replay_ratio, net_config=net_config
     )
