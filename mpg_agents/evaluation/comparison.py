@@ -20,6 +20,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from mpg_agents.evaluation.stats import bootstrap_mean_interval
+from mpg_envs.grid.actions import PRIMITIVES
 
 
 @dataclass(frozen=True)
@@ -139,7 +140,8 @@ def _primitive_differences(a: EvalRecords, b: EvalRecords, seeds: Sequence[int])
     counts = [[side.by_seed[s].get("primitives") for s in seeds] for side in (a, b)]
     if any(c is None for side in counts for c in side):
         return {}
-    names = sorted({p for side in counts for c in side for p in c}, key=lambda p: (p != "move", p != "push", p))
+    seen = {p for side in counts for c in side for p in c}
+    names = [p for p in PRIMITIVES if p in seen] + sorted(seen - set(PRIMITIVES))
     return {p: float(np.mean([ca.get(p, 0) - cb.get(p, 0) for ca, cb in zip(*counts)])) for p in names}
 
 

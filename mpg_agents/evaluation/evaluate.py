@@ -25,9 +25,9 @@ import numpy as np
 
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
+from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
 
-PRIMITIVES = ("move", "push", "grasp")
 UNREPORTED = "unreported"  # an env that does not (yet) put end_reason in the last step's info
 
 

@@ -9,9 +9,12 @@ import pytest
 from mpg_agents.evaluation.comparison import compare_main, compare_paired, load_eval_records
 
 
-def write_eval(path, policy, episodes, env_id="MPG-Occluded-v0", num_objects=15):
-    """An mpg-eval --json file with the fields the comparison reads: (seed, success, motions) per episode."""
+def write_eval(path, policy, episodes, env_id="MPG-Occluded-v0", num_objects=15, primitives=None):
+    """An mpg-eval --json file with the fields the comparison reads: (seed, success, motions) per
+    episode, and each episode's primitive counts when ``primitives`` (one dict per episode) is given."""
     records = [{"seed": s, "success": ok, "motions": m} for s, ok, m in episodes]
+    for record, counts in zip(records, primitives or []):
+        record["primitives"] = counts
     path.write_text(json.dumps({"policy": policy, "env_id": env_id, "num_objects": num_objects, "records": records}))
     return path
 
@@ -87,10 +90,8 @@ def test_a_case_set_evaluation_is_refused_by_name(tmp_path):
 
 def test_the_motions_difference_splits_by_primitive(tmp_path):
     def write(name, policy, prims):
-        records = [{"seed": s, "success": True, "motions": sum(p.values()), "primitives": p} for s, p in enumerate(prims)]
-        path = tmp_path / name
-        path.write_text(json.dumps({"policy": policy, "env_id": "MPG-Occluded-v0", "num_objects": 15, "records": records}))
-        return load_eval_records([path])
+        episodes = [(seed, True, sum(p.values())) for seed, p in enumerate(prims)]
+        return load_eval_records([write_eval(tmp_path / name, policy, episodes, primitives=prims)])
 
     # Episode 0: A pushes twice where B moves once; episode 1: A grasps twice where B grasps once.
     a = write("a.json", "A", [{"push": 2, "grasp": 1}, {"grasp": 2, "move": 0, "push": 0}])
