@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_agents.acting.episode_loop import episode_steps
+from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
@@ -50,6 +51,7 @@ class EpisodeRecord:
     # with a continuous action space (mpg_envs.integrations.wrappers.ContinuousAction) tuples of floats.
     actions: tuple[int | tuple[float, ...], ...] = ()
     visuals: dict[str, Any] | None = None  # the episode's drawn visual randomization (env option visual_randomization)
+    steps: tuple[MotionRecord, ...] = ()  # what each motion met (mpg_agents.evaluation.motion_log)
     seconds: float = field(default=0.0, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -184,9 +186,10 @@ def run_episode(
         on_reset(index, obs)
     primitives = dict.fromkeys(PRIMITIVES, 0)
     grasps = target_grasps = wrong_grasps = 0
-    actions = []
+    actions, steps = [], []
     for step in episode_steps(env, obs, policy.act, _recorded):
         actions.append(step.action)
+        steps.append(MotionRecord.from_info(step.info, info.get("visible_fraction")))
         info = step.info
         if on_step is not None:
             on_step(index, step.reward, info)
@@ -209,6 +212,7 @@ def run_episode(
         visible_fraction=None if visible is None else float(visible),
         actions=tuple(actions),
         visuals=reset_info.get("visual_randomization"),
+        steps=tuple(steps),
         seconds=time.perf_counter() - start,
     )
 

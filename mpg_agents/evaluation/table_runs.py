@@ -28,6 +28,7 @@ from typing import Any, Callable, Mapping, Sequence
 from mpg_agents.evaluation.comparison import load_eval_records
 from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, summarise
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
+from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
 
 
@@ -119,6 +120,7 @@ def merged_result(paths: Sequence[str | Path]) -> EvalResult:
     for index, seed in enumerate(sorted(cell.by_seed)):
         data = {k: v for k, v in cell.by_seed[seed].items() if k in fields}
         data["actions"] = tuple(tuple(a) if isinstance(a, list) else a for a in data.get("actions", ()))
+        data["steps"] = tuple(MotionRecord.from_dict(m) for m in data.get("steps", ()))
         records.append(EpisodeRecord(index=index, **data))
     return summarise(
         records, first["policy"], cell.env_id, int(cell.num_objects or 0), min(cell.by_seed), 0.0, env_options=first.get("env_options", {})

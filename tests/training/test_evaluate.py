@@ -137,6 +137,10 @@ def test_mpg_eval_writes_json_only_when_asked_and_reports_end_reasons(tmp_path, 
     assert set(data["end_reasons"]) <= set(END_REASONS)
     for record in data["records"]:
         assert (record["end_reason"] == "target_grasped") == record["success"]
+        # one motion record per motion, agreeing with the episode's counts
+        assert len(record["steps"]) == record["motions"]
+        assert Counter(m["primitive"] for m in record["steps"]) == Counter({p: n for p, n in record["primitives"].items() if n})
+        assert sum(m["target_grasped"] for m in record["steps"]) == record["target_grasps"]
     assert data["success_interval"][0] <= data["task_success_rate"] <= data["success_interval"][1]
 
 
