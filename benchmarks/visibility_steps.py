@@ -6,8 +6,8 @@ cover and its visible fraction before each motion, from ``mpg-eval --json`` file
     python benchmarks/visibility_steps.py net.json oracle.json
 
 One table per file (a row per primitive and cover, a column per visibility band, grasps with
-how many took the target); files written before the evaluation recorded each motion are
-refused, naming them.
+how many took the target), and how often a move or push on a covered target uncovered it.
+Files written before the evaluation recorded each motion are refused, naming them.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-from mpg_agents.evaluation.motion_log import MotionRecord, motions_by_visibility, visibility_table
+from mpg_agents.evaluation.motion_log import MotionRecord, motions_by_visibility, uncovering_outcomes, visibility_table
 
 
 def file_table(path: Path) -> str:
@@ -28,10 +28,13 @@ def file_table(path: Path) -> str:
         raise ValueError(f"{path} holds no episode records (an `mpg-eval --env ... --json` file is needed)")
     if any("steps" not in r for r in records):
         raise ValueError(f"{path} has no per-motion records (written by an older mpg-eval); evaluate again")
-    steps = [MotionRecord.from_dict(m) for r in records for m in r["steps"]]
-    counts = motions_by_visibility(steps)
+    episodes = [[MotionRecord.from_dict(m) for m in r["steps"]] for r in records]
+    counts = motions_by_visibility(step for steps in episodes for step in steps)
+    freed, counted = uncovering_outcomes(episodes)
     title = f"{data['policy']} on {data['env_id']} ({data.get('num_objects')} objects), {len(records)} episodes"
-    return f"{title}\n\n{visibility_table(counts, len(records))}\n"
+    share = f" ({100 * freed / counted:.0f}%)" if counted else ""
+    uncovering = f"moves and pushes on a covered target that left it uncovered: {freed} of {counted}{share}"
+    return f"{title}\n\n{visibility_table(counts, len(records))}\n\n{uncovering}\n"
 
 
 def main(argv: list[str] | None = None) -> int:

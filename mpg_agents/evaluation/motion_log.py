@@ -5,13 +5,14 @@ An episode's :class:`MotionRecord` tuple (``EpisodeRecord.steps``, written by ``
 --json``) answers where two policies part: at which visibility one grasps and the other still
 uncovers. :func:`motions_by_visibility` counts a policy's motions by primitive, cover and the
 visibility band (:data:`mpg_envs.perception.occlusion.VISIBILITY_BANDS`) of the target before
-the motion; ``benchmarks/visibility_steps.py`` prints it for ``mpg-eval --json`` files.
+the motion, and :func:`uncovering_outcomes` how often a move or push on a covered target
+left it uncovered; ``benchmarks/visibility_steps.py`` prints both for ``mpg-eval --json`` files.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
@@ -86,6 +87,20 @@ def motions_by_visibility(steps: Iterable[MotionRecord]) -> dict[tuple[str, bool
         tally[2] += int(step.wrong_grasp)
     order = {(p, c, b): (i, j, k) for i, p in enumerate(PRIMITIVES) for j, c in enumerate((True, False)) for k, b in enumerate(BAND_LABELS)}
     return {key: VisibilityCount(*counts[key]) for key in sorted(counts, key=order.__getitem__)}
+
+
+def uncovering_outcomes(episodes: Iterable[Sequence[MotionRecord]]) -> tuple[int, int]:
+    """``(freed, counted)``: of the moves and pushes made while the target was covered and
+    followed by another motion of the same episode, how many left it uncovered (the next
+    motion's ``covered_before`` false). An episode's last motion has no next one to tell, and
+    motions whose cover the env did not report are left out."""
+    freed = counted = 0
+    for steps in episodes:
+        for step, after in zip(steps, steps[1:]):
+            if step.primitive in ("move", "push") and step.covered_before and after.covered_before is not None:
+                counted += 1
+                freed += int(not after.covered_before)
+    return freed, counted
 
 
 def visibility_table(counts: Mapping[tuple[str, bool, str], VisibilityCount], episodes: int) -> str:

@@ -81,3 +81,38 @@ def test_motion_records_come_back_from_an_eval_file(tmp_path):
     path = tmp_path / "cell.json"
     path.write_text(json.dumps(summarise(records, "p", "MPG-OccludedHard-v0", 15, 100, 1.0).to_dict()))
     assert [r.steps for r in merged_result([path]).records] == [steps, steps]
+
+
+def test_uncovering_outcomes_count_covered_moves_and_pushes_by_what_the_next_motion_met():
+    from mpg_agents.evaluation.motion_log import uncovering_outcomes
+
+    episodes = [
+        # push frees it, then a grasp: 1 of 1
+        [MotionRecord("push", True, 0.2), MotionRecord("grasp", False, 0.9, target_grasped=True)],
+        # move leaves it covered, push frees it, the last push has no next motion: 1 of 2
+        [MotionRecord("move", True, 0.1), MotionRecord("push", True, 0.3), MotionRecord("push", False, 1.0), MotionRecord("push", True, 0.2)],
+        # a grasp on a covered target and an unreported cover count for nothing
+        [MotionRecord("grasp", True, 0.2), MotionRecord("push", True, 0.2), MotionRecord("grasp", None, None)],
+        [],
+    ]
+    assert uncovering_outcomes(episodes) == (2, 3)
+
+
+def test_the_script_prints_a_file_table_and_refuses_files_without_motion_records(tmp_path, benchmark_script, capsys):
+    from mpg_agents.evaluation.evaluate import EpisodeRecord, summarise
+
+    script = benchmark_script("visibility_steps")
+    steps = (MotionRecord("push", True, 0.2), MotionRecord("grasp", False, 0.9, target_grasped=True))
+    record = EpisodeRecord(0, 7, True, 2, "target_grasped", {"move": 0, "push": 1, "grasp": 1}, 1, 1, 0, 14, 0.2, steps=steps)
+    data = summarise([record], "p", "MPG-OccludedHard-v0", 15, 7, 1.0).to_dict()
+    good, old = tmp_path / "good.json", tmp_path / "old.json"
+    good.write_text(json.dumps(data))
+    for r in data["records"]:
+        del r["steps"]
+    old.write_text(json.dumps(data))
+    assert script.main([str(good)]) == 0
+    out = capsys.readouterr().out
+    assert "| push | covered | . | 1 | . | . | 1.00 |" in out
+    assert "left it uncovered: 1 of 1 (100%)" in out
+    assert script.main([str(good), str(old)]) == 2
+    assert "old.json has no per-motion records" in capsys.readouterr().err
