@@ -29,7 +29,7 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 import mpg_envs  # noqa: E402,F401
-from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band  # noqa: E402
+from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, visibility_band  # noqa: E402
 from mpg_envs.tasks.stages import STAGES  # noqa: E402
 from mpg_envs.scenes.test_sets import TEST_SEED_START, find_test_set, test_set_name  # noqa: E402
 
@@ -76,16 +76,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.digests:
         print(json.dumps(digests(args.resets, cells)))
         return 0
-    print("| env | objects | scenes | visible fraction: median [quartiles] | " + " | ".join(f"{lo:g}-{hi:g}" for lo, hi in VISIBILITY_BANDS) + " |")
+    print("| env | objects | scenes | visible fraction: median [quartiles] | " + " | ".join(VISIBILITY_BAND_LABELS) + " |")
     for env_id, n in cells:
         test_set = shipped_set(env_id, n)
         v = test_set.visible_fraction
-        counts = [sum(visibility_band(float(x)) == f"{lo:g}-{hi:g}" for x in v) for lo, hi in VISIBILITY_BANDS]
+        counts = [sum(visibility_band(float(x)) == label for x in v) for label in VISIBILITY_BAND_LABELS]
         print(f"| {env_id} | {n} | {len(v)} | {np.median(v):.2f} [{np.quantile(v, 0.25):.2f}, {np.quantile(v, 0.75):.2f}] | " + " | ".join(map(str, counts)) + " |")
     for env_id in ("MPG-Stage2-v0", "MPG-Stage3-v0", "MPG-Stage4-v0", "MPG-Stage5-v0")[: 4 if args.training_envs else 0]:
         env = gym.make(env_id)
         v = np.array([env.reset(seed=i)[1]["visible_fraction"] for i in range(args.training_envs)])
-        counts = [sum(visibility_band(float(x)) == f"{lo:g}-{hi:g}" for x in v) for lo, hi in VISIBILITY_BANDS]
+        counts = [sum(visibility_band(float(x)) == label for x in v) for label in VISIBILITY_BAND_LABELS]
         print(f"| {env_id} | {env.unwrapped.num_objects} | {len(v)} generated | {np.median(v):.2f} [{np.quantile(v, 0.25):.2f}, {np.quantile(v, 0.75):.2f}] | " + " | ".join(map(str, counts)) + " |")
     print(f"load average {os.getloadavg()[0]:.2f} (timings want a quiet machine)")
     for env_id, n in cells:

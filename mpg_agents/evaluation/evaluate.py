@@ -27,7 +27,7 @@ from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.grid.actions import PRIMITIVES
-from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
+from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, visibility_band
 
 UNREPORTED = "unreported"  # an env that does not (yet) put end_reason in the last step's info
 
@@ -276,8 +276,7 @@ def success_by_visibility(records: Sequence[EpisodeRecord]) -> dict[str, dict[st
     """Task success per band of the target's visible fraction at reset (episodes whose
     env reports none are left out)."""
     cells: dict[str, dict[str, Any]] = {}
-    for low, high in VISIBILITY_BANDS:
-        label = f"{low:g}-{high:g}"
+    for label in VISIBILITY_BAND_LABELS:
         band = [r for r in records if r.visible_fraction is not None and visibility_band(r.visible_fraction) == label]
         if band:
             k = sum(r.success for r in band)

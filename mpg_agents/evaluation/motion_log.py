@@ -15,10 +15,7 @@ from dataclasses import dataclass
 from typing import Any, Iterable, Mapping, Sequence
 
 from mpg_envs.grid.actions import PRIMITIVES
-from mpg_envs.perception.occlusion import VISIBILITY_BANDS, visibility_band
-
-BAND_LABELS: tuple[str, ...] = tuple(f"{low:g}-{high:g}" for low, high in VISIBILITY_BANDS)
-"""The visibility bands' labels, lowest first (as :func:`~mpg_envs.perception.occlusion.visibility_band` gives them)."""
+from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, visibility_band
 
 
 @dataclass(frozen=True)
@@ -85,7 +82,7 @@ def motions_by_visibility(steps: Iterable[MotionRecord]) -> dict[tuple[str, bool
         tally[0] += 1
         tally[1] += int(step.target_grasped)
         tally[2] += int(step.wrong_grasp)
-    order = {(p, c, b): (i, j, k) for i, p in enumerate(PRIMITIVES) for j, c in enumerate((True, False)) for k, b in enumerate(BAND_LABELS)}
+    order = {(p, c, b): (i, j, k) for i, p in enumerate(PRIMITIVES) for j, c in enumerate((True, False)) for k, b in enumerate(VISIBILITY_BAND_LABELS)}
     return {key: VisibilityCount(*counts[key]) for key in sorted(counts, key=order.__getitem__)}
 
 
@@ -113,11 +110,11 @@ def visibility_table(counts: Mapping[tuple[str, bool, str], VisibilityCount], ep
     """
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
-    header = "| motion | target | " + " | ".join(f"visible {b}" for b in BAND_LABELS) + " | per episode |"
-    lines = [header, "| " + " | ".join(["---"] * (len(BAND_LABELS) + 3)) + " |"]
+    header = "| motion | target | " + " | ".join(f"visible {b}" for b in VISIBILITY_BAND_LABELS) + " | per episode |"
+    lines = [header, "| " + " | ".join(["---"] * (len(VISIBILITY_BAND_LABELS) + 3)) + " |"]
     for primitive in PRIMITIVES:
         for covered in (True, False):
-            row = {b: counts.get((primitive, covered, b)) for b in BAND_LABELS}
+            row = {b: counts.get((primitive, covered, b)) for b in VISIBILITY_BAND_LABELS}
             total = sum(c.motions for c in row.values() if c is not None)
             if not total:
                 continue

@@ -80,6 +80,10 @@ VISIBILITY_BANDS: tuple[tuple[float, float], ...] = ((0.0, 0.1), (0.1, 0.3), (0.
 """Bands of the target's visible fraction at reset that results are reported by: each
 includes its lower bound and excludes its upper one, except the last, which ends at 1."""
 
+VISIBILITY_BAND_LABELS: tuple[str, ...] = tuple(f"{low:g}-{high:g}" for low, high in VISIBILITY_BANDS)
+"""The bands' labels in :data:`VISIBILITY_BANDS`' order (``"0-0.1"``, ``"0.1-0.3"``, ...), as
+:func:`visibility_band` names them and the results report them."""
+
 
 def visibility_band(value: float | None) -> str | None:
     """The :data:`VISIBILITY_BANDS` label (``"0.1-0.3"``) of a visible fraction, ``None`` for none."""
@@ -87,9 +91,9 @@ def visibility_band(value: float | None) -> str | None:
         return None
     if not 0.0 <= value <= 1.0:
         raise ValueError(f"a visible fraction lies in [0, 1], got {value!r}")
-    for low, high in VISIBILITY_BANDS:
+    for (low, high), label in zip(VISIBILITY_BANDS, VISIBILITY_BAND_LABELS):
         if low <= value < high or value == high == VISIBILITY_BANDS[-1][1]:
-            return f"{low:g}-{high:g}"
+            return label
     raise AssertionError("the bands cover [0, 1]")
 
 

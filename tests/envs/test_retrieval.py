@@ -12,7 +12,7 @@ import pytest
 import mpg_envs  # noqa: F401
 from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.tasks.env import MPGEnv
-from mpg_envs.perception.occlusion import VISIBILITY_BANDS, check_band, in_band, visibility_band, visible_fraction
+from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, VISIBILITY_BANDS, check_band, in_band, visibility_band, visible_fraction
 from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.scenes.test_sets import TEST_SEED_START, find_test_set, load_test_set, shipped_set_path
@@ -43,6 +43,7 @@ def test_visibility_bands_cover_zero_to_one_once():
         "0-0.1", "0-0.1", "0.1-0.3", "0.1-0.3", "0.3-0.6", "0.6-1", "0.6-1", "0.6-1"
     ]
     assert visibility_band(None) is None and len(VISIBILITY_BANDS) == 4
+    assert VISIBILITY_BAND_LABELS == ("0-0.1", "0.1-0.3", "0.3-0.6", "0.6-1")
     with pytest.raises(ValueError, match="lies in"):
         visibility_band(1.5)
 

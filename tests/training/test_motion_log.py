@@ -8,12 +8,12 @@ from dataclasses import asdict
 import pytest
 
 from mpg_agents.evaluation.motion_log import (
-    BAND_LABELS,
     MotionRecord,
     VisibilityCount,
     motions_by_visibility,
     visibility_table,
 )
+from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS
 
 
 def test_a_record_takes_the_step_info_and_the_visibility_it_started_from():
@@ -61,7 +61,7 @@ def test_the_table_has_a_row_per_primitive_and_cover_and_rates_per_episode():
         [MotionRecord("push", True, 0.2), MotionRecord("push", True, 0.5), MotionRecord("grasp", False, 0.9, target_grasped=True)]
     )
     lines = visibility_table(counts, episodes=4).splitlines()
-    assert lines[0] == "| motion | target | " + " | ".join(f"visible {b}" for b in BAND_LABELS) + " | per episode |"
+    assert lines[0] == "| motion | target | " + " | ".join(f"visible {b}" for b in VISIBILITY_BAND_LABELS) + " | per episode |"
     assert lines[2] == "| push | covered | . | 1 | 1 | . | 0.50 |"
     assert lines[3] == "| grasp | uncovered | . | . | . | 1 (target 1) | 0.25 |"
     assert len(lines) == 4
