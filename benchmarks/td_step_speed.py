@@ -43,16 +43,26 @@ targets' all-rotation greedy pass grow with the batch (7.7x on 2 threads of an A
 
 
 def shipped_net_config(options: list[str]) -> dict:
-    """The shipped training config's ``[net_config]``, with ``KEY=VALUE`` options over it."""
-    import ast
+    """The shipped training config's ``[net_config]``, with ``KEY=VALUE`` options over it (a
+    value read as ``--env-option``'s are: a Python literal, else text).
+
+    Raises:
+        ValueError: an option without ``=`` or with a key that is no ``MPGNetConfig`` field.
+    """
+    from dataclasses import fields
 
     from mpg_agents.cli_input import read_config
+    from mpg_agents.evaluation.env_options import literal_or_text
     from mpg_agents.learning.train_runs import DEFAULT_CONFIG
+    from mpg_agents.network.mpgnet_config import MPGNetConfig
 
     net_config = dict(read_config(str(DEFAULT_CONFIG)).get("net_config", {}))
+    known = {f.name for f in fields(MPGNetConfig)}
     for text in options:
-        key, _, value = text.partition("=")
-        net_config[key.strip()] = ast.literal_eval(value.strip())
+        key, sep, value = text.partition("=")
+        if not sep or key.strip() not in known:
+            raise ValueError(f"--net-option takes KEY=VALUE with KEY an MPGNetConfig field ({', '.join(sorted(known))}), got {text!r}")
+        net_config[key.strip()] = literal_or_text(value)
     return net_config
 
 

@@ -23,12 +23,17 @@ def parse_env_option(text: str) -> tuple[str, Any]:
         raise ValueError(f"--env-option takes KEY=VALUE with KEY a keyword of the env, got {text!r}")
     if key in RESERVED:
         raise ValueError(f"--env-option {key}=... has its own flag: use --{key.replace('_', '-')}")
+    return key, literal_or_text(raw)
+
+
+def literal_or_text(raw: str) -> Any:
+    """A command-line option's value: the Python literal ``raw`` spells (``3``, ``0.5``,
+    ``True``, ``(0, 0.3)``), else ``raw`` itself as text (``camera``), stripped."""
     raw = raw.strip()
     try:
-        value = ast.literal_eval(raw)
+        return ast.literal_eval(raw)
     except (ValueError, SyntaxError):
-        value = raw
-    return key, value
+        return raw
 
 
 def env_keywords() -> tuple[str, ...]:
