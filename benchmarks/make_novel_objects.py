@@ -124,7 +124,7 @@ def _pybullet_licence() -> str:
     for f in files:
         if f.name == "LICENSE.txt":
             return Path(f.locate()).read_text().strip() + "\n"
-    raise SystemExit("pybullet's LICENSE.txt was not found: install pybullet (pip install 'mpg-envs[novel]')")
+    raise SystemExit("pybullet's LICENSE.txt was not found: install pybullet (pip install 'mpg-grasp[novel]')")
 
 
 if __name__ == "__main__":

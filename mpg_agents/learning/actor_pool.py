@@ -30,7 +30,7 @@ from mpg_envs.threads import one_thread_children
 from mpg_agents.learning.actors import Actor, ActorSpec, ActorStep, ActRequest
 from mpg_agents.learning.train_config import TrainConfig
 
-RAY_INSTALL = "pip install mpg[ray]"
+RAY_INSTALL = "pip install 'mpg-grasp[ray]'"
 """How to get Ray (the package's extra)."""
 
 

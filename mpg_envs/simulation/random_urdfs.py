@@ -5,7 +5,7 @@ each a link whose collision and visual geometry is the mesh ``NNN.obj`` (a few c
 at a uniform scale, under the zlib licence. By pybullet's own convention the folders whose
 number ends in 0 are the test objects (100), the others the training objects (900). The meshes
 are read from the installed ``pybullet`` package (the ``novel`` extra: ``pip install
-"mpg-envs[novel]"``) or from a folder the user names; they are never copied into this
+"mpg-grasp[novel]"``) or from a folder the user names; they are never copied into this
 repository. Loading goes through :func:`~mpg_envs.simulation.meshes.load_mesh_file`, so each
 object records its mesh path, its scale and the licence.
 """
@@ -94,7 +94,7 @@ def random_urdfs_folder() -> Path:
     if spec is None or not spec.submodule_search_locations:
         raise ModuleNotFoundError(
             "the random_urdfs objects come with pybullet, which is not installed: "
-            "pip install 'mpg-envs[novel]' (or pip install pybullet), or pass folder= a copy of "
+            "pip install 'mpg-grasp[novel]' (or pip install pybullet), or pass folder= a copy of "
             "pybullet_data/random_urdfs"
         )
     return Path(next(iter(spec.submodule_search_locations))) / "random_urdfs"

@@ -274,7 +274,7 @@ def test_random_urdfs_from_a_named_folder(tmp_path: Path, monkeypatch: pytest.Mo
         random_urdf_entries(root, "val")  # type: ignore[arg-type]
     # Without pybullet and without a folder: say how to get it.
     monkeypatch.setattr(random_urdfs.importlib.util, "find_spec", lambda name: None)
-    with pytest.raises(ModuleNotFoundError, match=r"pip install 'mpg-envs\[novel\]'.*or pass folder="):
+    with pytest.raises(ModuleNotFoundError, match=r"pip install 'mpg-grasp\[novel\]'.*or pass folder="):
         random_urdf_entries()
 
 

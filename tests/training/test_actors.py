@@ -81,10 +81,10 @@ def test_ray_backend_without_ray_names_the_extra(monkeypatch, tmp_path, capsys):
 
     monkeypatch.setattr(actor_pool, "ray_installed", lambda: False)
     assert check_actor_backend(TrainConfig(actors=2)) == "processes"  # auto: processes without Ray
-    with pytest.raises(ValueError, match=r"pip install mpg\[ray\]"):
+    with pytest.raises(ValueError, match=r"pip install 'mpg-grasp\[ray\]'"):
         check_actor_backend(TrainConfig(actors=2, actor_backend="ray"))
     code = train_main(["--env", "MPG-Stage2-v0", "--actors", "2", "--actor-backend", "ray", "--out", str(tmp_path / "run")])
-    assert code == 2 and "pip install mpg[ray]" in capsys.readouterr().err
+    assert code == 2 and "pip install 'mpg-grasp[ray]'" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()  # refused before anything was written
 
 
