@@ -1,8 +1,8 @@
 """The three motion primitives of the paper (Section III-B): move, push and grasp.
 
 Each takes ``(rotation, row, col)`` on the heightmap grid plus the current depth
-heightmap (for the local height ``h``) and runs the arm in simulation through dm-control's
-IK and the arm's own position actuators. Motions through free space above the clutter
+heightmap (for the local height ``h``) and runs the arm in simulation through its inverse
+kinematics and the arm's own position actuators. Motions through free space above the clutter
 (from the resting pose to above the action, back home, carrying a held object to its
 place) are shortcut by setting the joint angles directly, since nothing can touch there;
 every motion where contact can happen is simulated.

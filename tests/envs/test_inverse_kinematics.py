@@ -2,13 +2,15 @@
 solutions as dm-control's ``qpos_from_site_pose`` gave them."""
 
 import math
+import subprocess
+import sys
 
 import mujoco
 import numpy as np
 import pytest
 
 from mpg_envs.simulation.inverse_kinematics import damped_step, solve_site_pose
-from mpg_envs.simulation.robot import ArmIK, RobotConfig, UnreachablePoseError
+from mpg_envs.simulation.robot import TCP_SITE, ArmIK, RobotConfig, UnreachablePoseError, robot_spec, tcp_quat
 
 # A body on a slide joint along world x, a site at its origin: the site reaches x = q only.
 SLIDE = """
@@ -106,8 +108,6 @@ def test_the_arm_gets_the_joint_angles_dm_control_gave(ik, position, theta, seed
 
 
 def test_the_arm_reaches_the_pose_and_refuses_one_out_of_reach(ik):
-    from mpg_envs.simulation.robot import TCP_SITE, robot_spec, tcp_quat
-
     q = ik.solve(np.array([0.45, 0.1, 0.08]), 0.7)
     model = robot_spec().compile()
     data = mujoco.MjData(model)
@@ -118,3 +118,9 @@ def test_the_arm_reaches_the_pose_and_refuses_one_out_of_reach(ik):
     np.testing.assert_allclose(data.site_xmat[site].reshape(3, 3)[:, 1], [math.cos(0.7), math.sin(0.7), 0.0], atol=1e-7)
     with pytest.raises(UnreachablePoseError, match=r"IK failed for TCP position \[2.0, 0.0, 0.1\]"):
         ik.solve(np.array([2.0, 0.0, 0.1]), 0.0)
+
+
+def test_importing_the_envs_imports_no_dm_control():
+    code = "import mpg_envs, sys; assert not any(m.startswith('dm_control') for m in sys.modules)"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
