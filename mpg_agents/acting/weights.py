@@ -21,6 +21,7 @@ from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives
+from mpg_envs.simulation.mujoco_version import running_mujoco
 
 CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"
 
@@ -30,13 +31,15 @@ def checkpoint_metadata(
 ) -> dict[str, str]:
     """The safetensors metadata header: one JSON document under key ``"mpgnet"``; its
     ``"q_star"`` is where a checkpoint stores Q*_g (:mod:`mpg_agents.acting.grasp_threshold`), its
-    ``"package_version"`` the version of the package that wrote it (the env id, with its
-    version, a training run writes under ``extra``)."""
+    ``"package_version"`` the version of the package that wrote it and ``"mujoco_version"`` the
+    MuJoCo it ran on (a net trained on one MuJoCo major version acts on scenes of another; the
+    env id, with its version, a training run writes under ``extra``)."""
     from mpg_envs import __version__
 
     header = {
         "format": CHECKPOINT_FORMAT,
         "package_version": __version__,
+        "mujoco_version": running_mujoco(),
         "variant": net.config.variant,
         "primitives": list(net.primitives),
         "q_star": as_record(q_star),

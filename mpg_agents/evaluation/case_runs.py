@@ -24,6 +24,7 @@ import gymnasium as gym
 from mpg_agents.evaluation.evaluate import EpisodeRecord, env_id_of, run_episode
 from mpg_envs._version import __version__
 from mpg_envs.scenes.cases import Case, CaseSet, jitter_scene
+from mpg_envs.simulation.mujoco_version import running_mujoco
 
 CASE_SEED_STRIDE = 1000
 """Case ``c``'s runs are seeded from ``seed + CASE_SEED_STRIDE * c``; at most this many runs."""
@@ -104,6 +105,7 @@ class CaseRunResult:
         """JSON-ready data (wall time left out, so one seed gives one file)."""
         return {
             "package_version": __version__,
+            "mujoco_version": running_mujoco(),
             "policy": self.policy,
             "case_set": self.case_set,
             "env_id": self.env_id,

@@ -6,6 +6,13 @@ pair removes the scenes' own difficulty from the comparison (on this benchmark t
 moves a cell by more than a method does), and gives much narrower intervals than two
 independent 95% intervals side by side. The intervals are percentile bootstraps over the
 episode pairs (:func:`~mpg_agents.evaluation.stats.bootstrap_mean_interval` of the per-pair differences).
+
+The same seed makes another scene, and the same action another motion, on another MuJoCo major
+version (:mod:`mpg_envs.simulation.mujoco_version`), so files of different major versions are
+not pooled, and two sides of different major versions are compared only when asked to
+(``across_mujoco``: what the MuJoCo version itself changes). A file written before the MuJoCo
+version was recorded (its ``versions`` without ``"mujoco"``) was measured on MuJoCo 3.x and
+reads as ``"3.x"``.
 """
 
 from __future__ import annotations
@@ -21,6 +28,13 @@ import numpy as np
 
 from mpg_agents.evaluation.stats import bootstrap_mean_interval
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.simulation.mujoco_version import (
+    UNRECORDED_MUJOCO,
+    MuJoCoVersionError,
+    check_one_mujoco,
+    mujoco_major,
+    recorded_mujoco,
+)
 
 
 @dataclass(frozen=True)
@@ -31,6 +45,8 @@ class EvalRecords:
     env_id: str
     num_objects: int | None
     by_seed: dict[int, dict[str, Any]]
+    mujoco: str = UNRECORDED_MUJOCO
+    """The MuJoCo version the files record (``"<major>.x"`` when they name several of one major)."""
 
 
 def load_eval_records(paths: Sequence[str | Path]) -> EvalRecords:
@@ -39,12 +55,14 @@ def load_eval_records(paths: Sequence[str | Path]) -> EvalRecords:
     Raises:
         ValueError: no file, files of different policies, envs or object counts, or a seed
             that appears twice.
+        MuJoCoVersionError: files of different MuJoCo major versions.
     """
     if not paths:
         raise ValueError("no eval JSON file given")
     policy = env_id = None
     num_objects: int | None = None
     by_seed: dict[int, dict[str, Any]] = {}
+    mujoco: dict[str, str] = {}
     for i, path in enumerate(paths):
         data = json.loads(Path(path).read_text())
         if not isinstance(data.get("records"), list):
@@ -58,12 +76,16 @@ def load_eval_records(paths: Sequence[str | Path]) -> EvalRecords:
             policy, env_id, num_objects = cell
         elif cell != (policy, env_id, num_objects):
             raise ValueError(f"{path} is {cell}, the first file {(policy, env_id, num_objects)}: one policy and cell per side")
+        mujoco[str(path)] = recorded_mujoco(data.get("versions"))
         for record in data["records"]:
             seed = int(record["seed"])
             if seed in by_seed:
                 raise ValueError(f"episode seed {seed} appears twice (in {path})")
             by_seed[seed] = record
-    return EvalRecords(str(policy), str(env_id), num_objects, by_seed)
+    major = check_one_mujoco(mujoco, "pooling these files")
+    found = set(mujoco.values())
+    version = found.pop() if len(found) == 1 else f"{major}.x"
+    return EvalRecords(str(policy), str(env_id), num_objects, by_seed, version)
 
 
 def _policy_file(name: str) -> str:
@@ -89,6 +111,13 @@ class PairedComparison:
     primitive_differences: dict[str, float] = field(default_factory=dict)
     """Mean per-episode A minus B count of each primitive (they sum to the motions' difference);
     empty when a record does not say its primitives (files of older versions)."""
+    mujoco: tuple[str, str] = (UNRECORDED_MUJOCO, UNRECORDED_MUJOCO)
+    """The MuJoCo versions A and B were measured with."""
+
+    @property
+    def across_mujoco(self) -> bool:
+        """Whether A and B ran on different MuJoCo major versions."""
+        return mujoco_major(self.mujoco[0]) != mujoco_major(self.mujoco[1])
 
     def describe(self, name_a: str = "A", name_b: str = "B") -> str:
         lo, hi = self.success_interval
@@ -101,6 +130,11 @@ class PairedComparison:
             f"difference {self.motions_difference:+.2f} [{mlo:+.2f}, {mhi:+.2f}]\n"
             f"  fewer motions: {name_a} in {self.fewer_motions_a} episodes, {name_b} in {self.fewer_motions_b}"
             + (
+                f"\n  MuJoCo: {name_a} on {self.mujoco[0]}, {name_b} on {self.mujoco[1]}: different major "
+                "versions, so the difference is the simulator's as much as the policies'"
+                if self.across_mujoco else ""
+            )
+            + (
                 "\n  motions by primitive, difference per episode: "
                 + ", ".join(f"{p} {d:+.2f}" for p, d in self.primitive_differences.items())
                 if self.primitive_differences else ""
@@ -108,15 +142,24 @@ class PairedComparison:
         )
 
 
-def compare_paired(a: EvalRecords, b: EvalRecords, seed: int = 0) -> PairedComparison:
+def compare_paired(a: EvalRecords, b: EvalRecords, seed: int = 0, across_mujoco: bool = False) -> PairedComparison:
     """A minus B on the episodes (seeds) both sides played, with 95% paired-bootstrap intervals.
+    ``across_mujoco`` allows A and B of different MuJoCo major versions (to measure what the
+    MuJoCo version changes: the same policy on both, say).
 
     Raises:
         ValueError: the two sides ran different envs or object counts, or share fewer than two
             episode seeds.
+        MuJoCoVersionError: the two sides ran on different MuJoCo major versions and
+            ``across_mujoco`` is false.
     """
     if (a.env_id, a.num_objects) != (b.env_id, b.num_objects):
         raise ValueError(f"different cells: {a.env_id} with {a.num_objects} objects against {b.env_id} with {b.num_objects}")
+    if not across_mujoco:
+        try:
+            check_one_mujoco({"A": a.mujoco, "B": b.mujoco}, "this paired comparison")
+        except MuJoCoVersionError as exc:
+            raise MuJoCoVersionError(f"{exc} (across_mujoco=True, compare_evals.py --across-mujoco, pairs them anyway)") from None
     seeds = sorted(set(a.by_seed) & set(b.by_seed))
     if len(seeds) < 2:
         raise ValueError(f"the two sides share {len(seeds)} episode seeds; a paired comparison needs at least 2")
@@ -132,6 +175,7 @@ def compare_paired(a: EvalRecords, b: EvalRecords, seed: int = 0) -> PairedCompa
         motions_difference=float(d_motions.mean()), motions_interval=bootstrap_mean_interval(d_motions, seed=seed),
         fewer_motions_a=int((d_motions < 0).sum()), fewer_motions_b=int((d_motions > 0).sum()),
         primitive_differences=_primitive_differences(a, b, seeds),
+        mujoco=(a.mujoco, b.mujoco),
     )
 
 
@@ -159,16 +203,20 @@ def compare_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--a", nargs="+", required=True, help="mpg-eval --json files of policy A")
     parser.add_argument("--b", nargs="+", required=True, help="mpg-eval --json files of policy B")
     parser.add_argument("--names", help="two labels, comma-separated (default: the policies' names)")
+    parser.add_argument(
+        "--across-mujoco", action="store_true",
+        help="pair A and B of different MuJoCo major versions (refused otherwise): what the MuJoCo version changes",
+    )
     args = parser.parse_args(argv)
     try:
         a, b = load_eval_records(args.a), load_eval_records(args.b)
         names = args.names.split(",") if args.names else [a.policy, b.policy]
         if len(names) != 2:
             raise ValueError(f"--names takes two labels, got {args.names!r}")
-        result = compare_paired(a, b)
+        result = compare_paired(a, b, across_mujoco=args.across_mujoco)
     except (ValueError, FileNotFoundError, KeyError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"{a.env_id}, {a.num_objects} objects; A = {names[0]}, B = {names[1]}")
+    print(f"{a.env_id}, {a.num_objects} objects; A = {names[0]} (MuJoCo {a.mujoco}), B = {names[1]} (MuJoCo {b.mujoco})")
     print(result.describe(names[0], names[1]))
     return 0

@@ -28,6 +28,7 @@ from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, visibility_band
+from mpg_envs.simulation.mujoco_version import MUJOCO_KEY, running_mujoco
 
 UNREPORTED = "unreported"  # an env that does not (yet) put end_reason in the last step's info
 
@@ -100,7 +101,7 @@ class EvalResult:
     # visibility band at reset -> {"episodes", "successes", "rate", "interval"}
     success_by_visibility: dict[str, dict[str, Any]] = field(default_factory=dict)
     env_options: dict[str, Any] = field(default_factory=dict)  # keywords the env was made with
-    versions: dict[str, str] = field(default_factory=dict)  # package and env versions
+    versions: dict[str, str] = field(default_factory=dict)  # package, env and MuJoCo versions
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready data; wall time and the worker count are left out so one seed gives one file."""
@@ -285,10 +286,16 @@ def success_by_visibility(records: Sequence[EpisodeRecord]) -> dict[str, dict[st
 
 
 def versions(env_id: str) -> dict[str, str]:
-    """The package version and the env id's version (``v0`` of ``MPG-Occluded-v0``)."""
+    """The package version, the env id's version (``v0`` of ``MPG-Occluded-v0``) and the
+    MuJoCo version the episodes run on (``"mujoco"``: results depend on its major version, see
+    :mod:`mpg_envs.simulation.mujoco_version`; a file without it was measured on MuJoCo 3.x)."""
     import mpg_envs
 
-    return {"package": str(getattr(mpg_envs, "__version__", "unknown")), "env": env_id.rsplit("-", 1)[-1]}
+    return {
+        "package": str(getattr(mpg_envs, "__version__", "unknown")),
+        "env": env_id.rsplit("-", 1)[-1],
+        MUJOCO_KEY: running_mujoco(),
+    }
 
 
 def env_options_of(env: gym.Env) -> dict[str, Any]:

@@ -30,6 +30,7 @@ from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, summarise
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
+from mpg_envs.simulation.mujoco_version import MUJOCO_KEY
 
 
 @dataclass(frozen=True)
@@ -112,7 +113,9 @@ def run_table(
 def merged_result(paths: Sequence[str | Path]) -> EvalResult:
     """One cell from ``mpg-eval --json`` files of the same policy and cell run in seed blocks
     (:func:`mpg_agents.evaluation.comparison.load_eval_records`): their episodes in seed order, summarised
-    as one evaluation (the first seed is the cell's)."""
+    as one evaluation (the first seed is the cell's). Its ``versions`` are the files' (the first
+    file's package version, their one MuJoCo version: ``"3.x"`` for files that record none),
+    not this process's."""
     cell = load_eval_records(paths)
     first = json.loads(Path(paths[0]).read_text())
     fields = {f.name for f in dataclasses.fields(EpisodeRecord)} - {"index", "seconds"}
@@ -122,9 +125,10 @@ def merged_result(paths: Sequence[str | Path]) -> EvalResult:
         data["actions"] = tuple(tuple(a) if isinstance(a, list) else a for a in data.get("actions", ()))
         data["steps"] = tuple(MotionRecord.from_dict(m) for m in data.get("steps", ()))
         records.append(EpisodeRecord(index=index, **data))
-    return summarise(
+    result = summarise(
         records, first["policy"], cell.env_id, int(cell.num_objects or 0), min(cell.by_seed), 0.0, env_options=first.get("env_options", {})
     )
+    return dataclasses.replace(result, versions={**first.get("versions", {}), MUJOCO_KEY: cell.mujoco})
 
 
 def table_from_evals(

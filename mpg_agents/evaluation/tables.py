@@ -12,6 +12,10 @@ a seeded bootstrap for mean motions. :func:`rows_json` gives the same cells as d
 by the policy's label, each with the name the policy gave itself; :func:`tracks_rows` lays
 such cells of several tracks out as one table (track x policy x object count), and
 :func:`tracks_success_rows` their success rates as a policy x (track, object count) grid.
+A table holds cells of one MuJoCo major version (each cell's ``versions``; one recorded before
+the MuJoCo version was reads as 3.x): cells of two raise
+:class:`~mpg_envs.simulation.mujoco_version.MuJoCoVersionError`, since the same seeds make
+other scenes and motions on another major version.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 from mpg_agents.evaluation.evaluate import EvalResult
+from mpg_envs.simulation.mujoco_version import check_one_mujoco, recorded_mujoco
 
 ENV_ID = "MPG-Occluded-v0"
 
@@ -125,6 +130,19 @@ def _grasp_text(cell: Mapping[str, Any]) -> str:
     return f"{100 * cell['grasp_success_rate']:.0f}% of {cell['grasp_attempts']}"
 
 
+def check_table_mujoco(cells: Mapping[Any, Mapping[str, Any] | EvalResult]) -> int:
+    """The one MuJoCo major version of a table's cells (:func:`cell_json` data or results,
+    keyed by cell); raises :class:`~mpg_envs.simulation.mujoco_version.MuJoCoVersionError`
+    naming every cell's version when they span major versions."""
+    versions = {
+        " ".join(map(str, key)) if isinstance(key, tuple) else str(key): recorded_mujoco(
+            cell.versions if isinstance(cell, EvalResult) else cell.get("versions")
+        )
+        for key, cell in cells.items()
+    }
+    return check_one_mujoco(versions, "this table")
+
+
 def _header(objects: Sequence[int], strict_columns: bool) -> list[str]:
     header = [f"success, {n} obj." for n in objects] + [f"motions, {n} obj." for n in objects]
     if strict_columns:
@@ -157,7 +175,9 @@ def table_rows(
 ) -> tuple[list[str], list[list[str]], int]:
     """Header, body rows (the paper's first on a track that shows them, then the measured
     ones) and how many paper rows. A row is named ``labels[policy]`` where given, else by
-    the name the policy gave itself."""
+    the name the policy gave itself. Cells of two MuJoCo major versions raise
+    :class:`~mpg_envs.simulation.mujoco_version.MuJoCoVersionError`."""
+    check_table_mujoco(cells)
     header = ["Method"] + _header(objects, track.strict_columns)
     body = []
     if track.paper_rows:
@@ -184,7 +204,10 @@ def tracks_rows(
     with at least one cell, tracks in ``tracks``' order, policies in ``policies``' order;
     ``cells`` maps (track, policy label, objects) to :func:`cell_json`'s data. A cell not
     run is ``-``. Raises ``ValueError`` for a track without the strict columns (Table I's
-    rows have no mis-pick and grasp columns to share)."""
+    rows have no mis-pick and grasp columns to share), and
+    :class:`~mpg_envs.simulation.mujoco_version.MuJoCoVersionError` for cells of two MuJoCo
+    major versions."""
+    check_table_mujoco(cells)
     for name in tracks:
         if name not in TRACKS or not TRACKS[name].strict_columns:
             raise ValueError(f"tracks_rows lays out strict tracks only, got {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}")
@@ -207,7 +230,9 @@ def tracks_success_rows(
 ) -> tuple[list[str], list[list[str]]]:
     """The same cells as :func:`tracks_rows`, one row per policy with at least one cell and a
     column per (track, object count): success rate [95% interval] in mean motions, ``-``
-    where a cell was not run. Tracks with no cell at all get no column."""
+    where a cell was not run. Tracks with no cell at all get no column. Cells of two MuJoCo
+    major versions raise :class:`~mpg_envs.simulation.mujoco_version.MuJoCoVersionError`."""
+    check_table_mujoco(cells)
     columns = [(name, n) for name in tracks for n in objects if any((name, p, n) in cells for p in policies)]
     header = ["Method"] + [f"{TRACKS[name].scenes}, {n} obj." for name, n in columns]
     body = []

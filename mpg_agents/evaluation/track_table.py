@@ -22,6 +22,11 @@ checked the same way: eval files by their env, object count, seeds, env options 
 name the policy gave itself (a built-in's name, or the checkpoint's file name); a report's
 row by the report's env, seed, episodes, env options and the policy entry it ran under the
 label.
+
+Every cell of a table is of one MuJoCo major version (a cell file from before the version was
+recorded reads as 3.x); a run on MuJoCo 4 next to 3.x cells raises
+:class:`~mpg_envs.simulation.mujoco_version.MuJoCoVersionError` naming each cell's version.
+The report's ``mujoco`` lists the versions its cells record.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from mpg_agents.evaluation.evaluate import EvalResult, registered_options
 from mpg_agents.evaluation.policy_zoo import BUILTIN
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
 from mpg_agents.evaluation.tables import TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows
+from mpg_envs.simulation.mujoco_version import recorded_mujoco
 
 
 class CellMismatchError(ValueError):
@@ -338,12 +344,15 @@ def make_track_table(
         "rows": rows,
         "sources": sources,
         "missing": missing,
+        "mujoco": sorted({recorded_mujoco(cell.get("versions")) for cell in cells.values()}),
     }
     grid_header, grid_body = tracks_success_rows(tracks, labels, objects, cells)
     markdown = "\n\n".join([
         "Success [95% interval] in mean motions:", format_markdown(grid_header, grid_body),
         "Every figure:", format_markdown(header, body, text_columns=2),
     ])
+    if cells:
+        markdown += f"\n\nMeasured on MuJoCo {', '.join(report['mujoco'])}."
     if missing:
         counts = {name: sum(1 for m in missing if m[0] == name) for name in tracks}
         markdown += "\n\nNot run yet: " + "; ".join(f"{TRACKS[name].scenes} ({TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells" for name, k in counts.items() if k) + "."
