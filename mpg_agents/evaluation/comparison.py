@@ -217,6 +217,7 @@ def compare_main(argv: Sequence[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, KeyError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"{a.env_id}, {a.num_objects} objects; A = {names[0]} (MuJoCo {a.mujoco}), B = {names[1]} (MuJoCo {b.mujoco})")
+    on = f"MuJoCo {a.mujoco}" if a.mujoco == b.mujoco else f"MuJoCo {a.mujoco} (A) and {b.mujoco} (B)"
+    print(f"{a.env_id}, {a.num_objects} objects; A = {names[0]}, B = {names[1]}; {on}")
     print(result.describe(names[0], names[1]))
     return 0
