@@ -30,6 +30,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -232,11 +233,14 @@ def read_scene(
     preset (``.txt``, see :mod:`mpg_envs.scenes.vpg_scenes`); ``object_set_seed`` is used for the
     text files (ours carry their own). A mesh file whose digest differs from the one our file
     recorded raises, or with ``allow_changed_meshes`` warns."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise SceneFileError(f"scene file {path!r} is not a path; valid: a .json or .txt scene file's path (str or Path)")
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"scene file {str(path)!r} does not exist")
     if path.suffix.lower() == ".txt":
-        from mpg_envs.scenes.vpg_scenes import read_vpg_text  # it builds on this module's types
+        # An import cycle: vpg_scenes builds on this module's types.
+        from mpg_envs.scenes.vpg_scenes import read_vpg_text  # noqa: PLC0415
 
         return read_vpg_text(path, mesh_dir, object_set_seed)
     if path.suffix.lower() == ".json":
@@ -245,13 +249,14 @@ def read_scene(
 
 
 def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_meshes: bool = False) -> SceneFile:
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise SceneFileError(f"scene file {str(path)!r} is not readable JSON: {exc}") from exc
+    doc = json_document(path)
     if not isinstance(doc, dict) or doc.get("format") != SCENE_FORMAT or doc.get("version") != SCENE_VERSION:
         raise SceneFileError(f"scene file {str(path)!r}: not an {SCENE_FORMAT} v{SCENE_VERSION} file")
-    seed = int(doc.get("object_set_seed", 0))
+    seed = doc.get("object_set_seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise SceneFileError(f"scene file {str(path)!r}: object_set_seed is {json.dumps(seed)}; valid: a non-negative integer")
+    if not isinstance(doc.get("stage"), (str, type(None))):
+        raise SceneFileError(f"scene file {str(path)!r}: stage is {json.dumps(doc['stage'])}; valid: a stage name (a string) or null")
     blocks = packed = None
     folders: dict[str, dict[str, ObjectAsset]] = {}
     objects = []
@@ -263,6 +268,9 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
     for k, obj in enumerate(listed):
         try:
             name, source = obj["name"], obj["source"]
+            for key, value in (("name", name), ("source", source)):
+                if not isinstance(value, str):
+                    raise ValueError(f"{key} is {value!r}; valid: a string")
             position = _numbers(obj["position"], 3, "position", "three numbers [x, y, z] (m)")
             quat = _numbers(obj["quat"], 4, "quat", "four numbers [w, x, y, z], a unit quaternion")
             rgba = tuple(_numbers(obj["rgba"], 4, "rgba", "four numbers in [0, 1] [red, green, blue, alpha]", (0.0, 1.0)))
@@ -302,11 +310,32 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
         raise SceneFileError(f"scene file {str(path)!r} lists no objects")
     target = doc.get("target")
     if target is not None:
-        if not isinstance(target, int) or not 0 <= target < len(objects):
-            raise SceneFileError(f"scene file {str(path)!r}: target {target!r} is not an object index 0..{len(objects) - 1}")
+        if isinstance(target, bool) or not isinstance(target, int) or not 0 <= target < len(objects):
+            raise SceneFileError(f"scene file {str(path)!r}: target is {json.dumps(target)}; valid: an object index "
+                                 f"0..{len(objects) - 1} (an integer), or null for no target")
         if not objects[target].active:
             raise SceneFileError(f"scene file {str(path)!r}: the target {objects[target].label} is not in the scene (inactive)")
     return SceneFile(tuple(objects), target, str(path), doc.get("stage"), seed)
+
+
+def scene_text(path: Path, valid: str = "a VPG test case or Grasping the Invisible preset, one object per line") -> str:
+    """The text of a scene file, else a :class:`SceneFileError` naming the file: not readable,
+    or not UTF-8 text (a binary file; ``valid`` says what the file should be)."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SceneFileError(f"scene file {str(path)!r} cannot be read: {exc.strerror or exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise SceneFileError(f"scene file {str(path)!r} is not text (byte {exc.start} is not UTF-8); valid: {valid}") from exc
+
+
+def json_document(path: Path) -> object:
+    """The JSON document of a scene file, else a :class:`SceneFileError` naming the file (see
+    :func:`scene_text`; or not JSON)."""
+    try:
+        return json.loads(scene_text(path, f"an {SCENE_FORMAT} JSON file"))
+    except json.JSONDecodeError as exc:
+        raise SceneFileError(f"scene file {str(path)!r} is not readable JSON: {exc}") from exc
 
 
 def _numbers(value: object, count: int, key: str, valid: str, bounds: tuple[float, float] | None = None) -> np.ndarray:

@@ -14,8 +14,10 @@ cylinder leaning across two others), stacks stand, and nothing leaves the table.
 Before anything is placed the scene's poses and count are checked
 (:func:`~mpg_envs.scenes.scene_io.check_scene`); once placed, objects interpenetrating deeper than
 :data:`~mpg_envs.scenes.scene_io.PENETRATION_TOLERANCE_M` raise naming the two and the depth
-(:func:`interpenetrations`), unless the scene is a state the physics itself reached
-(``SceneFile.simulated``).
+(:func:`interpenetrations`), and so do objects sunk that deep into the table
+(:func:`sunk_into_table`), unless the scene is a state the physics itself reached
+(``SceneFile.simulated``). :func:`place_scene` does the checks and the placing alone (no
+settling): what checking a scene before running it needs.
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ import numpy as np
 
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.scenes.scene_io import (
-    PENETRATION_TOLERANCE_M, SceneFile, SceneFileError, SceneObject, check_scene, kept_target, objects_outside, resolve_outside,
+    BELOW_TABLE, PENETRATION_TOLERANCE_M, SceneFile, SceneFileError, SceneObject, check_scene, kept_target, objects_outside,
+    resolve_outside,
 )
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.world import World
@@ -56,21 +59,7 @@ def load_scene(
     ``drop_outside``, are left out with a warning (the target then is the first kept object
     for a VPG test case, else it raises).
     """
-    check_scene(scene)
-    dropped = objects_outside(scene, workspace)
-    resolve_outside(scene, dropped, workspace, drop_outside, "in the file")
-    world = build_world([obj.asset for obj in scene.objects])
-    for i, obj in enumerate(scene.objects):
-        if obj.active and i not in dropped:
-            world.set_object_pose(i, obj.position, obj.quat)
-    world.forward()
-    deep = [] if scene.simulated else interpenetrations(world, PENETRATION_TOLERANCE_M)
-    if deep:
-        names = [f"{scene.objects[a].label or f'object {a}'} and {scene.objects[b].label or f'object {b}'} by {1000 * d:.1f} mm"
-                 for a, b, d in deep]
-        raise SceneFileError(f"scene {scene.source!r}: objects interpenetrate: {'; '.join(names[:5])}"
-                             f"{f' (and {len(names) - 5} more pairs)' if len(names) > 5 else ''}; "
-                             f"at most {1000 * PENETRATION_TOLERANCE_M:g} mm is valid")
+    world, dropped = place_scene(build_world, scene, workspace, drop_outside)
     if scene.settle:
         world.settle(SETTLE_ROUNDS * world.physics.settle_max_steps)
         moved_out = sorted(set(world.objects_out_of_room().tolist()) | set(world.objects_outside_workspace().tolist()))
@@ -81,6 +70,62 @@ def load_scene(
         world.forward()
         dropped = dropped + moved_out
     return world, kept_target(scene, set(dropped))
+
+
+def place_scene(
+    build_world: Callable[[Sequence[ObjectAsset]], World],
+    scene: SceneFile,
+    workspace: Workspace,
+    drop_outside: bool,
+) -> tuple[World, list[int]]:
+    """Check ``scene``, build its world with ``build_world`` and place its objects at their
+    file poses (no settling); returns the world and the objects left out (outside the workspace,
+    with ``drop_outside``). What :func:`load_scene` does first, and all a scene needs to be
+    checked without running it.
+
+    Raises:
+        SceneFileError: a malformed pose, too many objects, objects outside the workspace
+            (without ``drop_outside``), or, unless the scene is a state the physics reached
+            (``SceneFile.simulated``), objects interpenetrating or sunk into the table deeper
+            than :data:`~mpg_envs.scenes.scene_io.PENETRATION_TOLERANCE_M`.
+    """
+    check_scene(scene)
+    dropped = objects_outside(scene, workspace)
+    resolve_outside(scene, dropped, workspace, drop_outside, "in the file")
+    world = build_world([obj.asset for obj in scene.objects])
+    for i, obj in enumerate(scene.objects):
+        if obj.active and i not in dropped:
+            world.set_object_pose(i, obj.position, obj.quat)
+    world.forward()
+    if scene.simulated:
+        return world, dropped
+    valid = f"at most {1000 * PENETRATION_TOLERANCE_M:g} mm is valid"
+    deep = interpenetrations(world, PENETRATION_TOLERANCE_M)
+    if deep:
+        names = [f"{_label(scene, a)} and {_label(scene, b)} by {1000 * d:.1f} mm" for a, b, d in deep]
+        raise SceneFileError(f"scene {scene.source!r}: objects interpenetrate: {'; '.join(names[:5])}"
+                             f"{f' (and {len(names) - 5} more pairs)' if len(names) > 5 else ''}; {valid}")
+    sunk = sunk_into_table(world, PENETRATION_TOLERANCE_M)
+    if sunk:
+        names = [f"{_label(scene, i)} by {1000 * d:.1f} mm" for i, d in sunk]
+        raise SceneFileError(f"scene {scene.source!r}: objects sunk into the table (its top is z = 0): {'; '.join(names)}; {valid}")
+    return world, dropped
+
+
+def _label(scene: SceneFile, i: int) -> str:
+    return scene.objects[i].label or f"object {i}"
+
+
+def sunk_into_table(world: World, tolerance: float = 0.0) -> list[tuple[int, float]]:
+    """``(object, depth in m)`` for each active object of ``world`` whose lowest point lies
+    deeper than ``tolerance`` below the table top (the plane z = 0), deepest first. An object
+    whose centre lies off the table's footprint (fallen to the floor) is not in it."""
+    sunk = []
+    for i in world.active_objects():
+        depth = -float(world.object_vertices(int(i))[:, 2].min())
+        if depth > tolerance and world.object_position(int(i))[2] >= BELOW_TABLE:
+            sunk.append((int(i), depth))
+    return sorted(sunk, key=lambda t: -t[1])
 
 
 def interpenetrations(world: World, tolerance: float = 0.0) -> list[tuple[int, int, float]]:

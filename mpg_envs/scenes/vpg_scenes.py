@@ -40,7 +40,7 @@ import numpy as np
 
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.objects import blocks_object_set, load_mesh_folder
-from mpg_envs.scenes.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject
+from mpg_envs.scenes.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject, scene_text
 
 GTI_COLOURS: dict[str, tuple[float, float, float]] = {
     name: (r / 255.0, g / 255.0, b / 255.0)
@@ -109,7 +109,7 @@ rotation from that block's frame to the VPG mesh's shape frame."""
 def read_vpg_text(path: Path, mesh_dir: str | Path | None, seed: int) -> SceneFile:
     """A VPG test case or a Grasping the Invisible preset (told apart by the first line:
     VPG's starts with a mesh file name, GTI's with an object name); see the module docstring."""
-    lines = [(n, line.split()) for n, line in enumerate(path.read_text().splitlines(), start=1)]
+    lines = [(n, line.split()) for n, line in enumerate(scene_text(path).splitlines(), start=1)]
     lines = [(n, fields) for n, fields in lines if fields and not fields[0].startswith("#")]
     if not lines:
         raise SceneFileError(f"scene file {str(path)!r} lists no objects")

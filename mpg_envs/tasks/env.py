@@ -25,7 +25,9 @@ from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRando
 from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.tasks.episode_sim import EpisodeSim
 from mpg_envs.tasks.rewards import StepOutcome
-from mpg_envs.tasks.scene_source import SceneRequest, arranged_start, drop_scene, scene_from_test_set
+from mpg_envs.tasks.scene_source import (
+    RESET_OPTIONS, SceneRequest, arranged_start, checked_reset_options, drop_scene, scene_from_test_set,
+)
 from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
 from mpg_envs.scenes.arranged import ArrangedScenes
 from mpg_envs.scenes.scene_io import MAX_OBJECTS, SceneFile, SceneFileError, read_scene
@@ -36,7 +38,6 @@ from mpg_envs.simulation.world import World
 
 __all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "InvalidSceneError", "MPGEnv", "StepEvaluation", "observation_space"]
 
-RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside", "num_objects")
 GraspScorer = Callable[[dict[str, np.ndarray]], float]
 
 
@@ -76,8 +77,8 @@ class MPGEnv(gym.Env):
     ``visible_fraction``, ``target``, ``num_motions``, ``is_success`` and, with
     ``visual_randomization`` on, the episode's drawn values; a step's also
     ``end_reason`` (``None`` until the last step, then one of :data:`END_REASONS`). ``step()`` after
-    the episode ended, before the first ``reset()`` or after ``close()`` raises ``RuntimeError``
-    until the next ``reset()``.
+    the episode ended, before the first ``reset()``, after a ``reset()`` that raised or after
+    ``close()`` raises ``RuntimeError`` until the next ``reset()`` that completes.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -158,19 +159,20 @@ class MPGEnv(gym.Env):
 
     # ------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        # A reset that raises leaves a half-built world: no episode until this one completes.
+        self._ended = "the last reset() raised; call reset() before step()"
+        self._obs = self._score = self.target = None
+        self.num_motions = 0
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
-        if unknown:
-            raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
+        options = checked_reset_options(options)
         self.num_objects = self._checked_num_objects(options.get("num_objects", self.default_num_objects))
         self.sim.visuals = None  # a drawn scene's start condition is judged unrandomized: the same scenes either way
         self._initialize_episode(seed, options)
-        self.num_motions, self._ended = 0, None
         self.sim.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
-        self._obs = self._observe()
-        self._score = None
-        return self._copy_obs(self._obs), self._reset_info()
+        obs = self._observe()
+        info = self._reset_info(obs)
+        self._obs, self._ended = obs, None  # the episode is open only now
+        return self._copy_obs(obs), info
 
     def step(self, action):
         if self._ended is not None:
@@ -281,7 +283,7 @@ class MPGEnv(gym.Env):
     def render(self):
         if self.render_mode != "rgb_array":
             return None
-        if self.world is None:
+        if self._obs is None:  # before the first reset, or after one that raised
             raise RuntimeError("call reset() before render()")
         from mpg_envs.perception.render import render_overview
 
@@ -337,7 +339,7 @@ class MPGEnv(gym.Env):
     def current_scene(self) -> SceneFile:
         """The current scene (every object's asset, pose and state, the target), as
         :func:`mpg_envs.scenes.scene_io.save_scene` writes it."""
-        if self.world is None:
+        if self._obs is None:  # before the first reset, or after one that raised
             raise RuntimeError("call reset() before current_scene()")
         return scene_of(self.world, self.target, self.stage.name, self.config.object_set_seed)
 
@@ -368,8 +370,8 @@ class MPGEnv(gym.Env):
             raise ValueError(f"num_objects must be an integer in {stage.min_objects}..{MAX_OBJECTS} for {stage.env_id}, got {n!r}")
         return int(n)
 
-    def _reset_info(self) -> dict[str, Any]:
-        occluded = bool(self._obs["occluded"][0])
+    def _reset_info(self, obs: dict[str, np.ndarray]) -> dict[str, Any]:
+        occluded = bool(obs["occluded"][0])
         return {
             "num_motions": 0,
             "occluded": occluded,

@@ -18,6 +18,8 @@ its parameters) must be the one the set records, else
 
 Both work on the episode's simulation (:class:`~mpg_envs.tasks.episode_sim.EpisodeSim`) and a
 :class:`SceneRequest` (what the reset asks for), never on the env itself.
+:func:`checked_reset_options` checks the options a reset is given (:data:`RESET_OPTIONS`), each
+of its type.
 """
 
 from __future__ import annotations
@@ -27,8 +29,11 @@ import functools
 import hashlib
 import inspect
 import json
+import os
 from dataclasses import asdict, dataclass
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
+
+import numpy as np
 
 from mpg_envs.scenes import generators
 
@@ -41,6 +46,9 @@ from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.tasks.episode_sim import EpisodeSim
 from mpg_envs.tasks.stages import StageSpec
+
+RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside", "num_objects")
+"""The options ``MPGEnv.reset(options=...)`` takes."""
 
 BURY_BELOW = 0.5
 """A visible-fraction band whose upper bound is at most this uses the buried generator."""
@@ -210,3 +218,21 @@ def arranged_start(sim: EpisodeSim, request: SceneRequest, arranged: ArrangedSce
             continue
         return target
     return None
+
+def checked_reset_options(options: Any) -> dict[str, Any]:
+    """A copy of ``reset``'s ``options``, each of its type, else a ``ValueError`` naming the option
+    and what is valid (``num_objects`` is checked against the stage by the env)."""
+    if options is not None and not isinstance(options, dict):
+        raise ValueError(f"reset options are {options!r}; valid: a dict with keys {sorted(RESET_OPTIONS)}, or None")
+    options = dict(options or {})
+    unknown = sorted(set(options) - set(RESET_OPTIONS), key=str)
+    if unknown:
+        raise ValueError(f"unknown reset options {unknown}; valid: {sorted(RESET_OPTIONS)}")
+    for key, types, valid in (
+        ("scene", (str, os.PathLike, SceneFile), "a scene file's path (str or Path) or a SceneFile"),
+        ("mesh_dir", (str, os.PathLike), "a folder's path (str or Path)"),
+        ("drop_outside", (bool, np.bool_), "True or False"),
+    ):
+        if options.get(key) is not None and not isinstance(options[key], types):
+            raise ValueError(f"reset option {key!r} is {options[key]!r}; valid: {valid}, or None")
+    return options

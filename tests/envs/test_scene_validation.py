@@ -102,6 +102,80 @@ def test_interpenetrating_objects_are_named_with_the_depth(scene_doc, tmp_path):
             load(env, edited(doc, tmp_path, overlap(shift)))
 
 
+def test_an_object_sunk_into_the_table_is_named_with_the_depth(scene_doc, tmp_path):
+    doc, env = scene_doc
+
+    def sink(d):
+        d["objects"][2]["position"][2] -= 0.034
+
+    with pytest.raises(SceneFileError, match=r"'.*edited\.json': objects sunk into the table \(its top is z = 0\): object 2 \('\w+'\) "
+                                             r"by 3[34]\.\d mm; at most 5 mm is valid$"):
+        load(env, edited(doc, tmp_path, sink))
+
+
+def test_sunk_into_table_measures_the_depth(blocks):
+    """A 'cube' block whose centre is 1 cm lower than its half height lies 1 cm in the table."""
+    from mpg_envs.scenes.scene_loading import sunk_into_table
+
+    cube = blocks["cube"] if "cube" in blocks else next(iter(blocks.values()))
+    half = -float(np.concatenate([v for v, _ in cube.parts])[:, 2].min())
+    world = World([cube, cube], robot_visual=False)
+    world.set_object_pose(0, (0.5, 0.0, half - 0.01), (1, 0, 0, 0))
+    world.set_object_pose(1, (0.6, 0.0, half), (1, 0, 0, 0))  # resting on the table
+    world.forward()
+    ((i, depth),) = sunk_into_table(world, PENETRATION_TOLERANCE_M)
+    assert i == 0 and depth == pytest.approx(0.01, abs=1e-6)
+    assert sunk_into_table(world, 0.011) == []
+
+
+def set_doc(key, value):
+    def edit(doc):
+        doc[key] = value
+    return edit
+
+
+@pytest.mark.parametrize("edit, message", [
+    (set_doc("target", True), r"target is true; valid: an object index 0\.\.\d+ \(an integer\), or null for no target"),
+    (set_obj(0, "name", ["cube"]), r"object 0 \(\['cube'\]\) is malformed: name is \['cube'\]; valid: a string"),
+    (set_obj(0, "source", 5), r"object 0 \('\w+'\) is malformed: source is 5; valid: a string"),
+    (set_doc("object_set_seed", "abc"), r"object_set_seed is \"abc\"; valid: a non-negative integer"),
+    (set_doc("object_set_seed", [1]), r"object_set_seed is \[1\]; valid: a non-negative integer"),
+    (set_doc("object_set_seed", None), r"object_set_seed is null; valid: a non-negative integer"),
+    (set_doc("object_set_seed", 1.7), r"object_set_seed is 1\.7; valid: a non-negative integer"),
+    (set_doc("stage", 2), r"stage is 2; valid: a stage name \(a string\) or null"),
+])
+def test_a_field_of_the_wrong_type_is_named_with_the_valid_type(scene_doc, tmp_path, edit, message):
+    doc, env = scene_doc
+    with pytest.raises(SceneFileError, match=r"^scene file '.*edited\.json': " + message + "$"):
+        load(env, edited(doc, tmp_path, edit))
+
+
+@pytest.mark.parametrize("name, valid", [
+    ("binary.txt", "a VPG test case or Grasping the Invisible preset, one object per line"),
+    ("binary.json", "an mpg-scene JSON file"),
+])
+def test_a_binary_scene_file_is_named(scene_doc, tmp_path, name, valid):
+    _, env = scene_doc
+    path = tmp_path / name
+    path.write_bytes(bytes(range(256)))
+    with pytest.raises(SceneFileError, match=rf"^scene file '.*{name}' is not text \(byte 128 is not UTF-8\); valid: {valid}$"):
+        load(env, str(path))
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"scene": 123}, r"reset option 'scene' is 123; valid: a scene file's path \(str or Path\) or a SceneFile, or None"),
+    ({"mesh_dir": 5}, r"reset option 'mesh_dir' is 5; valid: a folder's path \(str or Path\), or None"),
+    ({"drop_outside": "no"}, r"reset option 'drop_outside' is 'no'; valid: True or False, or None"),
+    ("scene.json", r"reset options are 'scene\.json'; valid: a dict with keys \['drop_outside', 'mesh_dir', 'num_objects', 'scene'\], or None"),
+])
+def test_a_reset_option_of_the_wrong_type_is_named(scene_doc, options, message):
+    _, env = scene_doc
+    with pytest.raises(ValueError, match=message):
+        env.reset(options=options)
+    with pytest.raises(SceneFileError, match=r"scene file 123 is not a path; valid: a \.json or \.txt scene file's path"):
+        read_scene(123)
+
+
 def test_too_many_objects_are_refused(scene_doc, tmp_path):
     doc, env = scene_doc
 

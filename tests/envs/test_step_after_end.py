@@ -69,3 +69,32 @@ def test_step_after_close_raises_and_reset_reopens(make_env):
 def test_use_test_set_must_be_a_bool(make_env, value):
     with pytest.raises(ValueError, match=rf"use_test_set must be True or False, got {value!r}"):
         make_env("MPG-Stage2-v0", use_test_set=value)
+
+
+def test_step_after_a_reset_that_raised_raises_until_a_reset_completes(make_env, tmp_path):
+    """A reset that raises (a missing file, objects inside each other) leaves no episode to step in:
+    not the old one, nor the half-built world of the new one."""
+    import json
+
+    from mpg_envs.scenes.scene_io import SceneFileError, save_scene
+
+    env = make_env("MPG-Stage2-v0")
+    env.reset(seed=0)
+    doc = json.loads(save_scene(env, tmp_path / "scene.json").read_text())
+    doc["objects"][1]["position"] = doc["objects"][0]["position"]
+    (tmp_path / "inside.json").write_text(json.dumps(doc))
+    raised = r"the last reset\(\) raised; call reset\(\) before "
+    for scene, error in ((tmp_path / "missing.json", FileNotFoundError), (tmp_path / "inside.json", SceneFileError)):
+        env.reset(seed=0)
+        with pytest.raises(error):
+            env.reset(options={"scene": str(scene)})
+        with pytest.raises(RuntimeError, match=raised + r"step\(\)"):
+            env.step(corner(env, "grasp"))
+        with pytest.raises(RuntimeError, match=raised + r"try_step\(\)"):
+            env.try_step(corner(env, "grasp"))
+        with pytest.raises(RuntimeError, match=r"call reset\(\) before current_scene\(\)"):
+            env.current_scene()
+        assert env.last_observation is None and env.target is None
+    env.reset(options={"scene": str(tmp_path / "scene.json")})
+    *_, info = env.step(corner(env, "grasp"))
+    assert info["num_motions"] == 1
