@@ -2,7 +2,9 @@
 
 Bad input (an unknown env id, a missing or foreign checkpoint, an unreadable config file, a bad
 setting, an output path that cannot be written, a run folder another process trains in) ends
-the command before any work with exit status 2 and one clear line on stderr.
+the command before any work with exit status 2 and one clear line on stderr. An evaluation in
+which some episodes (or case runs) raise keeps, prints and writes those that finished, names
+the failed ones in one line on stderr and exits with status 1.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import Any, Sequence
 from mpg_agents.acting.coordination import COORDINATIONS
 from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.evaluation.env_options import parse_env_options
+from mpg_agents.evaluation.failures import NothingFinished
 from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_output, fail, read_config
 
 
@@ -200,10 +203,23 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             return _eval_cases(args, dict(extra), env_options)
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra, tuple(env_options.items()))
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
-        result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend)
+        result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend, keep_going=True)
     except (UsageError, FileNotFoundError, ValueError) as exc:
         return fail(exc)
-    return _report(result, args.json)
+    except NothingFinished as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    return _report_run(result, args.json)
+
+
+def _report_run(result: Any, json_path: str | None) -> int:
+    """:func:`_report` of a run's result (what finished), then one line on stderr naming what
+    failed, if anything did: exit status 1."""
+    code = _report(result, json_path)
+    if result.failures:
+        print(f"error: {result.failures_line()}", file=sys.stderr)
+        return 1
+    return code
 
 
 def _report(result: Any, json_path: str | None) -> int:
@@ -219,7 +235,7 @@ def _report(result: Any, json_path: str | None) -> int:
 def _eval_cases(args: argparse.Namespace, policy_kwargs: dict[str, Any], env_options: dict[str, Any]) -> int:
     """``mpg-eval --cases``: every case of a set, ``--runs`` runs each, one row per case
     (strict retrieval unless ``--env-option wrong_grasp=...`` says otherwise)."""
-    from mpg_agents.evaluation.case_runs import run_case_set
+    from mpg_agents.evaluation.case_runs import run_case_set, without_output
     from mpg_envs.scenes.cases import load_cases
 
     if args.workers not in (None, 1) or args.ray_address is not None:
@@ -228,10 +244,10 @@ def _eval_cases(args: argparse.Namespace, policy_kwargs: dict[str, Any], env_opt
         raise UsageError(f"--runs must be >= 1, got {args.runs}")
     if args.peers is not None and not Path(args.peers).is_dir():
         raise UsageError(f"--peers {args.peers!r} is not a folder")
-    case_set = load_cases(args.cases, args.peers)
+    case_set = without_output(load_cases(args.cases, args.peers), args.json)  # a result written among the cases is none
     on_record = None if args.quiet else (lambda case, record: print(f"  {case.name}: {record.describe()}", flush=True))
     result = run_case_set(args.policy, case_set, args.runs, args.seed, args.env, env_options, policy_kwargs, on_record)
-    return _report(result, args.json)
+    return _report_run(result, args.json)
 
 
 # ----------------------------------------------------------------------- calibrate

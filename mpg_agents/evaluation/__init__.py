@@ -3,7 +3,8 @@
 The policies by name (:mod:`~mpg_agents.evaluation.policy_zoo`), episodes and the paper's
 metrics (:mod:`~mpg_agents.evaluation.evaluate`, with ``--env-option`` parsing in
 :mod:`~mpg_agents.evaluation.env_options`), evaluation jobs on Ray or a process pool
-(:mod:`~mpg_agents.evaluation.eval_runner`), intervals (:mod:`~mpg_agents.evaluation.stats`),
+(:mod:`~mpg_agents.evaluation.eval_runner`), episodes that raised, kept beside those that finished
+(:mod:`~mpg_agents.evaluation.failures`), intervals (:mod:`~mpg_agents.evaluation.stats`),
 paired comparisons (:mod:`~mpg_agents.evaluation.comparison`), the results tables and their runs
 (:mod:`~mpg_agents.evaluation.tables`, :mod:`~mpg_agents.evaluation.table_runs`, the track table
 cell by cell: :mod:`~mpg_agents.evaluation.track_table`), case sets

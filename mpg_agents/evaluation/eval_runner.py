@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
 from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, registered_options, run_episodes, summarise
+from mpg_agents.evaluation.failures import EpisodeFailure
 
 from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
 from mpg_envs.threads import one_thread_children
@@ -66,6 +67,7 @@ class ChunkResult:
     num_objects: int
     records: list[EpisodeRecord]
     seconds: float
+    failures: list[EpisodeFailure] = field(default_factory=list)  # episodes that raised (with keep_going)
 
 
 @dataclass
@@ -108,9 +110,10 @@ def _one_torch_thread() -> Iterator[None]:
 
 
 def run_chunk(
-    job: EvalJob, indices: Sequence[int], on_record: Callable[[EpisodeRecord], None] | None = None
+    job: EvalJob, indices: Sequence[int], on_record: Callable[[EpisodeRecord], None] | None = None, keep_going: bool = False
 ) -> ChunkResult:
-    """Build ``job``'s env and policy once and run the episodes ``indices`` on one thread."""
+    """Build ``job``'s env and policy once and run the episodes ``indices`` on one thread; with
+    ``keep_going`` an episode that raises is kept as a failure and the others still run."""
     import mpg_envs  # registers the envs in a fresh worker
     from mpg_agents.evaluation.policy_zoo import make_policy
 
@@ -122,20 +125,21 @@ def run_chunk(
         env = mpg_envs.make(job.env_id, **kwargs)
         try:
             policy = make_policy(job.policy, env, seed=job.seed, **dict(job.policy_kwargs))
-            records = run_episodes(policy, env, indices, job.seed, on_record=on_record)
+            failures: list[EpisodeFailure] | None = [] if keep_going else None
+            records = run_episodes(policy, env, indices, job.seed, on_record=on_record, failures=failures)
             name = getattr(policy, "name", type(policy).__name__)
             env_id, num_objects = env_id_of(env), int(env.unwrapped.num_objects)
         finally:
             env.close()
-    return ChunkResult(name, env_id, num_objects, records, time.perf_counter() - start)
+    return ChunkResult(name, env_id, num_objects, records, time.perf_counter() - start, failures or [])
 
 
-def _ray_chunk(job: EvalJob, indices: Sequence[int]) -> ChunkResult:
+def _ray_chunk(job: EvalJob, indices: Sequence[int], keep_going: bool = False) -> ChunkResult:
     """:func:`run_chunk` in a Ray worker, which keeps one compute thread for good."""
     from mpg_envs.threads import worker_init
 
     worker_init()
-    return run_chunk(job, indices)
+    return run_chunk(job, indices, keep_going=keep_going)
 
 
 def start_ray(workers: int | None = None, address: str | None = None, **init_kwargs: Any):
@@ -185,24 +189,26 @@ RecordHook = Callable[[EvalJob, EpisodeRecord], None]
 BACKENDS = ("ray", "processes")
 
 
-def _run_in_process(jobs: Sequence[EvalJob], on_record: RecordHook | None) -> tuple[list[list[ChunkResult]], list[float]]:
+def _run_in_process(jobs: Sequence[EvalJob], on_record: RecordHook | None, keep_going: bool) -> tuple[list[list[ChunkResult]], list[float]]:
     """Every job as one chunk, one after the other; the time each finished."""
     start = time.perf_counter()
     chunks, done_at = [], []
     for job in jobs:
         hook = None if on_record is None else (lambda r, job=job: on_record(job, r))
-        chunks.append([run_chunk(job, range(job.episodes), on_record=hook)])
+        chunks.append([run_chunk(job, range(job.episodes), on_record=hook, keep_going=keep_going)])
         done_at.append(time.perf_counter() - start)
     return chunks, done_at
 
 
-def _run_on_ray(ray: Any, jobs: Sequence[EvalJob], chunks_per_job: int, on_record: RecordHook | None) -> tuple[list[list[ChunkResult]], list[float]]:
+def _run_on_ray(
+    ray: Any, jobs: Sequence[EvalJob], chunks_per_job: int, on_record: RecordHook | None, keep_going: bool
+) -> tuple[list[list[ChunkResult]], list[float]]:
     """Every chunk of every job submitted at once, gathered as they finish; when each job finished."""
     start = time.perf_counter()
     chunks: list[list[ChunkResult]] = [[] for _ in jobs]
     done_at = [0.0] * len(jobs)
     remote = ray.remote(num_cpus=1)(_ray_chunk)
-    pending = {remote.remote(job, indices): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, chunks_per_job)}
+    pending = {remote.remote(job, indices, keep_going): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, chunks_per_job)}
     while pending:
         ready, _ = ray.wait(list(pending), num_returns=1)
         j = pending.pop(ready[0])
@@ -215,7 +221,9 @@ def _run_on_ray(ray: Any, jobs: Sequence[EvalJob], chunks_per_job: int, on_recor
     return chunks, done_at
 
 
-def _run_on_processes(jobs: Sequence[EvalJob], workers: int, on_record: RecordHook | None) -> tuple[list[list[ChunkResult]], list[float]]:
+def _run_on_processes(
+    jobs: Sequence[EvalJob], workers: int, on_record: RecordHook | None, keep_going: bool
+) -> tuple[list[list[ChunkResult]], list[float]]:
     """:func:`_run_on_ray` on a local pool of ``workers`` fresh processes (one thread each)."""
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -227,7 +235,9 @@ def _run_on_processes(jobs: Sequence[EvalJob], workers: int, on_record: RecordHo
         chunks: list[list[ChunkResult]] = [[] for _ in jobs]
         done_at = [0.0] * len(jobs)
         with ProcessPoolExecutor(workers, mp_context=mp.get_context("forkserver"), initializer=worker_init) as pool:
-            pending = {pool.submit(run_chunk, job, indices): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, workers)}
+            pending = {
+                pool.submit(run_chunk, job, indices, None, keep_going): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, workers)
+            }
             while pending:
                 finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
                 for future in finished:
@@ -247,13 +257,16 @@ def evaluate_jobs(
     ray_address: str | None = None,
     on_record: RecordHook | None = None,
     backend: str = "ray",
+    keep_going: bool = False,
 ) -> tuple[list[EvalResult], RunTiming]:
     """Run every job (all their chunks at once on Ray) and summarise each; results in job order.
 
     ``workers`` is how many chunks each job is split into (and a local Ray's CPU count);
     with ``ray_address`` and ``workers=None`` it is the cluster's CPU count. ``on_record``
     sees records as they arrive (in index order in-process, a chunk at a time on Ray).
-    ``backend`` is ``"ray"`` or ``"processes"`` (a local pool; no ``ray_address``).
+    ``backend`` is ``"ray"`` or ``"processes"`` (a local pool; no ``ray_address``). An episode
+    that raises ends the run, or with ``keep_going`` is kept in its result's ``failures`` while
+    the other episodes run (:class:`~mpg_agents.evaluation.failures.NothingFinished` when none finished).
     """
     _check_workers(workers, ray_address)
     if backend not in BACKENDS:
@@ -264,17 +277,17 @@ def evaluate_jobs(
         raise ValueError("no evaluation jobs given")
     startup = 0.0
     if workers == 1 and ray_address is None:
-        chunks, done_at = _run_in_process(jobs, on_record)
+        chunks, done_at = _run_in_process(jobs, on_record, keep_going)
         used_workers = 1
     elif backend == "processes":
         used_workers = int(workers)
-        chunks, done_at = _run_on_processes(jobs, used_workers, on_record)
+        chunks, done_at = _run_on_processes(jobs, used_workers, on_record, keep_going)
     else:
         start = time.perf_counter()
         with ray_session(workers, ray_address) as ray:
             startup = time.perf_counter() - start
             used_workers = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-            chunks, done_at = _run_on_ray(ray, jobs, used_workers, on_record)
+            chunks, done_at = _run_on_ray(ray, jobs, used_workers, on_record, keep_going)
     results = []
     for job, job_chunks, job_wall in zip(jobs, chunks, done_at):
         first = job_chunks[0]
@@ -283,6 +296,7 @@ def evaluate_jobs(
             summarise(
                 records, first.policy_name, first.env_id, first.num_objects, job.seed, job_wall, used_workers,
                 {**registered_options(job.env_id), **dict(job.env_kwargs)},  # a track's own keywords too
+                [f for c in job_chunks for f in c.failures],
             )
         )
     timing = RunTiming(
@@ -302,8 +316,9 @@ def evaluate_parallel(
     ray_address: str | None = None,
     on_record: Callable[[EpisodeRecord], None] | None = None,
     backend: str = "ray",
+    keep_going: bool = False,
 ) -> EvalResult:
     """One job through :func:`evaluate_jobs`."""
     hook = None if on_record is None else (lambda _job, r: on_record(r))
-    (result,), _ = evaluate_jobs([job], workers, ray_address, on_record=hook, backend=backend)
+    (result,), _ = evaluate_jobs([job], workers, ray_address, on_record=hook, backend=backend, keep_going=keep_going)
     return result

@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_agents.acting.episode_loop import episode_steps
+from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, describe_failures, failures_line
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.grid.actions import PRIMITIVES
@@ -102,6 +103,8 @@ class EvalResult:
     success_by_visibility: dict[str, dict[str, Any]] = field(default_factory=dict)
     env_options: dict[str, Any] = field(default_factory=dict)  # keywords the env was made with
     versions: dict[str, str] = field(default_factory=dict)  # package, env and MuJoCo versions
+    # episodes that raised instead of ending (seed and error; the metrics are over the others)
+    failures: list[EpisodeFailure] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready data; wall time and the worker count are left out so one seed gives one file."""
@@ -109,7 +112,12 @@ class EvalResult:
         for key in ("seconds_per_motion", "wall_seconds", "workers"):
             del data[key]
         data["records"] = [r.to_dict() for r in self.records]
+        data["failures"] = [f.to_dict() for f in self.failures]
         return data
+
+    def failures_line(self) -> str:
+        """One line naming the episodes that failed and why (``""`` when none did)."""
+        return failures_line(self.failures, self.episodes)
 
     def table(self) -> str:
         lo, hi = self.success_interval
@@ -119,7 +127,9 @@ class EvalResult:
         rows = [
             ("policy", self.policy),
             ("env", f"{self.env_id} ({self.num_objects} objects)" + "".join(f", {k}={v}" for k, v in self.env_options.items())),
-            ("episodes", f"{self.episodes} (seeds {self.seed}..{self.seed + self.episodes - 1})"),
+            ("episodes", f"{self.episodes} (seeds {self.seed}..{self.seed + self.episodes + len(self.failures) - 1}"
+                         + (f"; {len(self.failures)} more failed, left out)" if self.failures else ")")),
+            *((("failed", describe_failures(self.failures)),) if self.failures else ()),
             ("task success rate", f"{100 * self.task_success_rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"),
             ("average motion number", motions),
             ("  in successful episodes", "n/a" if self.average_motions_success is None else f"{self.average_motions_success:.2f}"),
@@ -227,15 +237,24 @@ def summarise(
     wall_seconds: float,
     workers: int = 1,
     env_options: dict[str, Any] | None = None,
+    failures: Sequence[EpisodeFailure] = (),
 ) -> EvalResult:
-    """The metrics over ``records`` (episodes 0..n-1 of one evaluation, in any order);
-    ``env_options``: the keywords the env was made with, for the record."""
+    """The metrics over ``records`` (with ``failures``, the episodes that raised: episodes
+    0..n-1 of one evaluation once each, in any order); ``env_options``: the keywords the env
+    was made with, for the record.
+
+    Raises:
+        NothingFinished: every episode failed (the message lists why).
+    """
     ordered = sorted(records, key=lambda r: r.index)
+    failed = sorted(failures, key=lambda f: f.index)
+    if not ordered and failed:
+        raise NothingFinished(f"all {len(failed)} episodes failed: {describe_failures(failed)}")
     if not ordered:
         raise ValueError("no episode records to summarise")
-    indices = [r.index for r in ordered]
-    if indices != list(range(len(ordered))):
-        raise ValueError(f"episode records must be episodes 0..{len(ordered) - 1} once each, got indices {indices}")
+    indices = sorted([r.index for r in ordered] + [f.index for f in failed])
+    if indices != list(range(len(indices))):
+        raise ValueError(f"episode records must be episodes 0..{len(indices) - 1} once each, got indices {indices}")
     motions = [r.motions for r in ordered]
     success_motions = [r.motions for r in ordered if r.success]
     successes = sum(r.success for r in ordered)
@@ -270,6 +289,7 @@ def summarise(
         success_by_visibility=success_by_visibility(ordered),
         env_options=dict(env_options or {}),
         versions=versions(env_id),
+        failures=failed,
     )
 
 
@@ -330,12 +350,21 @@ def run_episodes(
     on_reset: Callable[[int, dict], None] | None = None,
     on_step: Callable[[int, float, dict], None] | None = None,
     reset_options: dict[str, Any] | None = None,
+    failures: list[EpisodeFailure] | None = None,
 ) -> list[EpisodeRecord]:
     """Records of the episodes ``indices`` (each seeded ``seed + index``, reset with
-    ``reset_options``) on one env and policy."""
+    ``reset_options``) on one env and policy. An episode that raises ends the run, or with a
+    ``failures`` list is appended to it (:class:`~mpg_agents.evaluation.failures.EpisodeFailure`)
+    and the run goes on with the next episode."""
     records = []
     for index in indices:
-        record = run_episode(policy, env, index, seed, on_reset=on_reset, on_step=on_step, reset_options=reset_options)
+        try:
+            record = run_episode(policy, env, index, seed, on_reset=on_reset, on_step=on_step, reset_options=reset_options)
+        except Exception as exc:
+            if failures is None:
+                raise
+            failures.append(EpisodeFailure.of(exc, index, seed + index))
+            continue
         records.append(record)
         if on_record is not None:
             on_record(record)
