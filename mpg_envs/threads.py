@@ -165,7 +165,7 @@ def num_threads(requested: int | None = None) -> int:
 
 def set_torch_threads(requested: int | None = None) -> int:
     """Set torch's intra-op threads to :func:`num_threads` (``requested``) and return the count."""
-    import torch
+    import torch  # noqa: PLC0415 - an optional extra (agents): mpg_envs never imports it
 
     n = num_threads(requested)
     if torch.get_num_threads() != n:

@@ -118,7 +118,7 @@ def register() -> tuple[str, ...]:
     Call it in the driver before building the algorithm (RLlib ships the creators to
     the env runners itself).
     """
-    from ray.tune.registry import register_env
+    from ray.tune.registry import register_env  # noqa: PLC0415 - Ray is an optional extra
 
     for env_id in ENV_IDS:
         register_env(env_id, lambda config, env_id=env_id: make_env(env_id, config))

@@ -22,6 +22,7 @@ ray per pixel centre with ``mujoco.mj_multiRay`` and sees only the geom groups o
 from __future__ import annotations
 
 import functools
+import multiprocessing
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -32,6 +33,7 @@ import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.perception.ray_culling import pixels_under_boxes, world_boxes
+from mpg_envs.threads import num_threads, requested_threads
 
 VISIBLE_GEOM_GROUPS: tuple[int, ...] = (0, 1)
 """Geom groups seen by the heightmaps: the table (0) and the objects (1)."""
@@ -147,10 +149,6 @@ def _default_threads() -> int:
     and 1 in a ``multiprocessing`` child (an ``AsyncVectorEnv``/``SubprocVecEnv`` worker)
     unless those variables ask for more: two workers with 2 ray-cast threads each would
     fight over 2 cores."""
-    import multiprocessing
-
-    from mpg_envs.threads import num_threads, requested_threads
-
     explicit = requested_threads() is not None or os.environ.get("OMP_NUM_THREADS", "").strip()
     if multiprocessing.parent_process() is not None and not explicit:
         return 1

@@ -118,7 +118,7 @@ def open_gl(create: Callable[[], T], purpose: str = "Rendering") -> T:
 
 def make_renderer(model: mujoco.MjModel, height: int, width: int, purpose: str = "Rendering") -> mujoco.Renderer:
     """A ``mujoco.Renderer``, or :class:`RenderUnavailableError` (:func:`open_gl`)."""
-    import mujoco
+    import mujoco  # noqa: PLC0415 - MuJoCo reads MUJOCO_GL at import: after choose_gl_backend
 
     return open_gl(lambda: mujoco.Renderer(model, height=height, width=width), purpose)
 

@@ -368,7 +368,8 @@ class OraclePolicy:
         which object each pixel shows (-1: the table; its own caster, so trials never touch
         the env's cameras or generator)."""
         if self._ids_model is not world.model:
-            from mpg_envs.perception.heightmap import RaycastHeightmapper
+            # Start-up time: the caster loads mujoco, which this module does not.
+            from mpg_envs.perception.heightmap import RaycastHeightmapper  # noqa: PLC0415
 
             if self._ids_caster is not None:
                 self._ids_caster.close()

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.perception.footprint import footprint_mask
 from mpg_envs.simulation.robot import ArmIK, UnreachablePoseError, gripper_states
 from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
 from mpg_envs.simulation.world import World, WorldCheckpoint
@@ -243,8 +244,6 @@ class Primitives:
     def _free_place(self, held: int, target: int | None) -> tuple[float, float] | None:
         """The most open spot of the workspace clear of the target, or ``None``."""
         world, cfg, ws = self.world, self.config, self.world.workspace
-        from mpg_envs.perception.footprint import footprint_mask
-
         others = [i for i in world.active_objects() if i != held]
         geoms = np.concatenate([world.object_geom_ids[i] for i in others]) if others else np.array([], dtype=int)
         occupied = footprint_mask(ws, world.model, world.data, geoms) if geoms.size else np.zeros(ws.shape, np.uint8)

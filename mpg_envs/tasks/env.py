@@ -21,6 +21,7 @@ from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.tasks.config import OBS_MODES, EnvConfig, config_of, observation_space
 from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 from mpg_envs.perception.occlusion import change_detected, check_band
+from mpg_envs.perception.render import render_overview
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
 from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.tasks.episode_sim import EpisodeSim
@@ -285,8 +286,6 @@ class MPGEnv(gym.Env):
             return None
         if self._obs is None:  # before the first reset, or after one that raised
             raise RuntimeError("call reset() before render()")
-        from mpg_envs.perception.render import render_overview
-
         if self._renderer is None or self._renderer.model is not self.world.model:
             if self._renderer is not None:
                 self._renderer.close()

@@ -20,6 +20,9 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
+from mpg_envs.perception.camera import CameraConfig, CameraHeightmapper, add_cameras
+from mpg_envs.perception.footprint import footprint_mask
+from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.perception.occlusion import is_occluded, visible_fraction
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, randomized_raycast
 from mpg_envs.simulation.assets import ObjectAsset
@@ -110,8 +113,6 @@ class EpisodeSim:
             return self.world
         hook = None
         if self.obs_mode == "camera":
-            from mpg_envs.perception.camera import CameraConfig, add_cameras
-
             cam_cfg = self.camera_config or CameraConfig()
             hook = lambda spec: add_cameras(spec, cam_cfg)  # noqa: E731
         c = self.config
@@ -120,8 +121,6 @@ class EpisodeSim:
         self.executor = Primitives(world, c.primitives, self.ik)
         self._close_views()  # heightmappers are bound to one compiled model
         if self.obs_mode == "raycast":
-            from mpg_envs.perception.heightmap import RaycastHeightmapper
-
             # The thread count is chosen once per env (choosing samples the machine's load).
             self._raycaster = RaycastHeightmapper(world.model, c.workspace, num_threads=self._raycast_threads)
             self._raycast_threads = self._raycaster.num_threads
@@ -149,8 +148,6 @@ class EpisodeSim:
         rng = self.random if self.visuals is None else self.visuals.noise_rng(motion)
         if self.obs_mode == "camera":
             if self._camera is None:
-                from mpg_envs.perception.camera import CameraConfig, CameraHeightmapper
-
                 self._camera = CameraHeightmapper(world.model, self.camera_config or CameraConfig(), self.config.workspace)
             return self._camera.heightmaps(world.data, rng, self.visuals)
         if self.visuals is not None:
@@ -162,8 +159,6 @@ class EpisodeSim:
         heightmaps as those cameras would (``raycast_misregistration``); else ``None``."""
         if self.visuals is None or not self.visuals.raycast_misregistration:
             return None
-        from mpg_envs.perception.camera import CameraConfig
-
         return np.array([cam.position for cam in (self.camera_config or CameraConfig()).cameras], dtype=float)
 
     def _occlusion_depth(self, maps) -> np.ndarray:
@@ -179,16 +174,12 @@ class EpisodeSim:
                 return self._raycaster(self._built().data).depth  # the same reason: a misplaced view
             return maps.depth
         if self._occlusion_caster is None:
-            from mpg_envs.perception.heightmap import RaycastHeightmapper
-
             self._occlusion_caster = RaycastHeightmapper(self._built().model, self.config.workspace, num_threads=self._raycast_threads)
         return self._occlusion_caster(self._built().data).depth
 
     def target_view(self, depth: np.ndarray, target: int | None) -> tuple[np.ndarray, bool]:
         """The mask heightmap of ``target`` (of every object when ``mask_all_objects`` or no
         target) and whether the target is occluded in ``depth``."""
-        from mpg_envs.perception.footprint import footprint_mask
-
         world = self._built()
         ws = self.config.workspace
         if self.mask_all_objects or target is None:
