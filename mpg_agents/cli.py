@@ -21,6 +21,7 @@ from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.evaluation.env_options import parse_env_options
 from mpg_agents.evaluation.failures import NothingFinished
 from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_output, fail, read_config
+from mpg_envs.files import WriteFailed, write_text_whole
 
 
 def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
@@ -126,7 +127,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         summary = learner.run()
         print(json.dumps({**json_safe(summary), "q_star": as_record(learner.policy.q_star)}))  # the Q*_g its weights carry
         return 0
-    except (UsageError, FileNotFoundError, ValueError, RunFolderBusy) as exc:  # also another architecture, a run folder in use
+    except (UsageError, FileNotFoundError, ValueError, RunFolderBusy, WriteFailed) as exc:  # also another architecture, a run folder in use, a full disk
         return fail(exc)
     except KeyboardInterrupt:
         print("interrupted: state saved, run the same command to resume", file=sys.stderr)
@@ -176,7 +177,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         check_env_id(args.env)
         if args.seed < 0:
             raise UsageError(f"--seed must be >= 0, got {args.seed}")
-        check_output(args.json, "--json")
+        check_output(args.json, "--json", {"the --policy checkpoint": None if args.policy in BUILTIN else args.policy,
+                                           "the --cases file": args.cases})
         if args.device is not None:
             resolve_device(args.device)  # CUDA asked for where there is none: say so before any episode
         if args.policy not in BUILTIN:
@@ -223,11 +225,14 @@ def _report_run(result: Any, json_path: str | None) -> int:
 
 
 def _report(result: Any, json_path: str | None) -> int:
-    """Print a result's table and, with ``--json``, write its ``to_dict()``."""
+    """Print a result's table and, with ``--json``, write its ``to_dict()`` (whole or not at all)."""
     print(result.table())
     if json_path:
         path = Path(json_path)
-        path.write_text(json.dumps(result.to_dict(), indent=1, sort_keys=True))
+        try:
+            write_text_whole(path, json.dumps(result.to_dict(), indent=1, sort_keys=True))
+        except WriteFailed as exc:
+            return fail(exc)
         print(f"metrics written to {path.resolve()}")
     return 0
 
@@ -279,7 +284,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         check_env_id(args.env)
         if args.seed < 0:
             raise UsageError(f"--seed must be >= 0, got {args.seed}")
-        check_output(args.json, "--json")
+        check_output(args.json, "--json", {"the --policy checkpoint": None if args.policy == "shipped" else args.policy})
         if args.policy != "shipped":
             check_checkpoint(args.policy)
         if args.episodes < 1:
@@ -305,7 +310,10 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         record = {"policy": args.policy, "env_id": args.env, "num_objects": args.num_objects, "seed": args.seed,
                   "grasp_fingers": net.net_config.grasp_fingers,
                   **calibration_dict(measured)}
-        path.write_text(json.dumps(record, indent=1))
+        try:
+            write_text_whole(path, json.dumps(record, indent=1))
+        except WriteFailed as exc:
+            return fail(exc)
         print(f"written to {path.resolve()}")
     return 0
 
@@ -331,13 +339,13 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
         check_checkpoint(args.src)
-        check_output(args.dst, "dst")
+        check_output(args.dst, "dst", {"the source checkpoint": args.src})
         settings = _net_settings(args)
         primitives = tuple(p.strip() for p in args.primitives.split(",")) if args.primitives else None
         dst = export_weights(args.src, args.dst, primitives=primitives, half=not args.float32, settings=settings,
                              coordination=args.coordination, q_star=args.q_star, grasp_retries=args.grasp_retries)
         header = read_checkpoint_header(dst)
-    except (UsageError, FileNotFoundError, ValueError) as exc:
+    except (UsageError, FileNotFoundError, ValueError, WriteFailed) as exc:
         return fail(exc)
     q_star = "none (never calibrated)" if header["q_star"] is None else f"{header['q_star']:.4f}"
     print(f"{dst}: {dst.stat().st_size / 1000:.0f} kB, branches {header['primitives']}, Q*_g {q_star}, "
@@ -348,28 +356,30 @@ def export_main(argv: Sequence[str] | None = None) -> int:
 
 # ----------------------------------------------------------------------------- plot
 def plot_main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="mpg-plot", description="Learning curves of a run (or pipeline) directory to PNG.")
+    parser = argparse.ArgumentParser(prog="mpg-plot", description="Learning curves of a run (or pipeline) directory to a picture (PNG by default).")
     parser.add_argument("run", nargs="+", help="a run directory (holding progress.csv) or a pipeline directory (Stage*/progress.csv); "
                         "several with --stage: that stage of each on one axis")
-    parser.add_argument("--out", help="PNG path (default: RUN/curves.png; required with several runs)")
+    parser.add_argument("--out", help="picture path, its suffix the format: .png, .pdf, .svg, ... (default: RUN/curves.png; required with several runs)")
     parser.add_argument("--window", type=int, default=200, help="iterations per grasp-success point (paper: 200)")
     parser.add_argument("--stage", help="compare this stage (e.g. Stage5) of the runs given")
     parser.add_argument("--labels", help="comma-separated legend labels, one per run (default: the folder names)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.learning.plotting import plot_compare, plot_run
+        import warnings
 
-        check_output(args.out, "--out")
-        if args.stage or len(args.run) > 1:
-            if not args.stage or not args.out:
-                raise ValueError("comparing runs needs --stage and --out")
-            labels = args.labels.split(",") if args.labels else [Path(r).name for r in args.run]
-            if len(labels) != len(args.run):
-                raise ValueError(f"--labels names {len(labels)} runs, {len(args.run)} given")
-            out = plot_compare(list(zip(labels, args.run)), args.stage, args.out, args.window)
-        else:
-            out = plot_run(args.run[0], args.out, args.window)
-    except (UsageError, FileNotFoundError, ValueError) as exc:
+        from mpg_agents.learning.plotting import check_image_path, plot_runs
+
+        try:
+            check_image_path(args.out)
+        except ValueError as exc:
+            raise UsageError(f"--out {exc}") from None
+        check_output(args.out, "--out", {f"the progress.csv of {r}": str(Path(r) / "progress.csv") for r in args.run})
+        with warnings.catch_warnings(record=True) as notes:  # e.g. a cut last row: said below, one line each
+            warnings.simplefilter("always")
+            out = plot_runs(args.run, args.out, args.window, args.stage, args.labels.split(",") if args.labels else None)
+        for note in notes:
+            print(f"warning: {note.message}", file=sys.stderr)
+    except (UsageError, FileNotFoundError, ValueError, WriteFailed) as exc:
         return fail(exc)
     print(f"learning curves written to {out}")
     return 0

@@ -4,11 +4,12 @@ checkpoints; bad input is a :class:`UsageError`, reported on one line with exit 
 from __future__ import annotations
 
 import json
-import os
 import sys
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
+
+from mpg_envs.files import WriteFailed, check_writable, same_file
 
 __all__ = ["UsageError", "check_checkpoint", "check_env_id", "check_output", "fail", "read_config"]
 
@@ -45,20 +46,33 @@ def check_env_id(env_id: str) -> None:
     import mpg_envs
 
     if env_id not in gym.registry:
-        raise UsageError(f"unknown env id {env_id!r}; valid: {', '.join(mpg_envs.ENV_IDS)}")
+        tracks = [k for k in gym.registry if k.startswith("MPG-") and k not in mpg_envs.ENV_IDS]  # the tracks
+        raise UsageError(f"unknown env id {env_id!r}; valid: {', '.join([*mpg_envs.ENV_IDS, *tracks])}")
 
 
-def check_output(path: str | None, flag: str) -> None:
-    """An output file's path, checked before any work: a file in a folder that exists and may be written."""
+def check_output(path: str | None, flag: str, inputs: Mapping[str, str | None] | None = None) -> None:
+    """An output file's path, checked before any work: a regular file (or a new one) in a folder
+    that exists and takes a new file (one is made and removed there: a read-only folder, a full
+    disk or ``/proc`` is refused here, not after the work), and no file the command reads.
+
+    Args:
+        path: the output (``None``: none asked for).
+        flag: how the message names it, e.g. ``"--json"``.
+        inputs: the files the command reads, by what they are (``{"the --policy checkpoint":
+            "v.safetensors"}``); an output that is one of them (through a link or another
+            spelling too) is refused, as it would overwrite it.
+    """
     if path is None:
         return
-    p, parent = Path(path), Path(path).parent
-    if p.is_dir():
+    for what, source in (inputs or {}).items():
+        if source is not None and same_file(path, source):
+            raise UsageError(f"{flag} {path!r} is {what}; write it to another file")
+    if Path(path).is_dir():
         raise UsageError(f"{flag} {path!r} is a folder; give a file path")
-    if not parent.is_dir():
-        raise UsageError(f"{flag} {path!r}: the folder {str(parent)!r} does not exist; create it first")
-    if not os.access(parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
-        raise UsageError(f"{flag} {path!r} cannot be written (permission denied)")
+    try:
+        check_writable(path)
+    except WriteFailed as exc:
+        raise UsageError(f"{flag} {path!r}: {exc.reason}") from None
 
 
 def check_checkpoint(path: str | None) -> None:

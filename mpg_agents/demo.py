@@ -26,6 +26,8 @@ import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
 from mpg_agents.acting.device import DEVICES, resolve_device
+from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, fail
+from mpg_envs.files import WriteFailed, check_folder_writable, write_bytes_whole
 from mpg_envs.perception.render import RenderUnavailableError
 
 DEMO_ENV = "MPG-OccludedHard-v0"
@@ -107,6 +109,43 @@ class QMapsOfFirstEpisode:
         return self.policy.act(obs)
 
 
+def png_bytes(image: np.ndarray) -> bytes:
+    """``image`` (RGB) as the bytes of a PNG file."""
+    encoded, data = cv2.imencode(".png", cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    if not encoded:
+        raise ValueError("could not encode the scene picture as PNG")
+    return data.tobytes()
+
+
+def check_arguments(args: argparse.Namespace) -> str:
+    """The demo's arguments, checked before any work; returns the device to use.
+
+    Raises:
+        UsageError: a count or seed out of range, an unknown env id or policy (the valid ones
+            named), or an ``--out`` that is a file or where no file can be written.
+        ValueError: a device that is not there (CUDA asked for where there is none).
+    """
+    from mpg_agents.evaluation.policy_zoo import BUILTIN
+
+    if args.episodes < 1:
+        raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
+    if args.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {args.seed}")
+    check_env_id(args.env)
+    if args.policy not in BUILTIN:
+        if not Path(args.policy).exists():
+            raise UsageError(f"unknown policy {args.policy!r}; valid: {', '.join(BUILTIN)} or the path of a .safetensors checkpoint")
+        check_checkpoint(args.policy)
+    device = resolve_device(args.device)
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise UsageError(f"--out {args.out!r} is a file; give a folder (made if missing)")
+    try:
+        check_folder_writable(args.out)
+    except WriteFailed as exc:
+        raise UsageError(f"--out {args.out!r}: no picture can be written there ({exc.reason})") from None
+    return str(device)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="MPG demo: a policy on a few seeded scenes.")
     parser.add_argument("--policy", default="shipped", help="shipped (the trained checkpoint), oracle, random, grasp-only or a checkpoint path")
@@ -118,12 +157,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps_<k>.png (default demo_out)")
     parser.add_argument("--device", choices=DEVICES, default="auto", help="a network policy's device: auto (default: CUDA when available), cpu or cuda")
     args = parser.parse_args(argv)
-    if Path(args.out).exists() and not Path(args.out).is_dir():
-        parser.error(f"--out {args.out!r} is a file; give a folder (made if missing)")
     try:
-        device = resolve_device(args.device)
-    except ValueError as exc:
-        parser.error(str(exc))
+        device = check_arguments(args)
+    except (UsageError, ValueError) as exc:
+        return fail(exc)
 
     from mpg_agents.evaluation.policy_zoo import make_policy
     from mpg_agents.evaluation.evaluate import evaluate
@@ -134,12 +171,16 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(args.env, render_mode="rgb_array")
-    policy = make_policy(args.policy, env, device=str(device))
+    try:
+        policy = make_policy(args.policy, env, device=str(device))
+    except ValueError as exc:  # a checkpoint of another architecture or action space
+        env.close()
+        return fail(exc)
     print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}, {threads} torch threads, {device}")
 
     def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
         if episode == 0:
-            cv2.imwrite(str(out / "scene.png"), cv2.cvtColor(scene_picture(env, obs), cv2.COLOR_RGB2BGR))
+            write_bytes_whole(out / "scene.png", png_bytes(scene_picture(env, obs)))
 
     def on_step(episode: int, reward: float, info: dict) -> None:
         print(
@@ -149,7 +190,11 @@ def main(argv: list[str] | None = None) -> int:
 
     if hasattr(policy, "save_qmaps"):
         policy = QMapsOfFirstEpisode(policy, out)
-    result = evaluate(policy, env, args.episodes, args.seed, on_reset=on_reset, on_step=on_step)
+    try:
+        result = evaluate(policy, env, args.episodes, args.seed, on_reset=on_reset, on_step=on_step)
+    except WriteFailed as exc:  # a picture the disk refused: no "pictures in" over a folder without them
+        env.close()
+        return fail(exc)
     grasps = "n/a" if result.grasp_success_rate is None else f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
     print(
         f"task success {round(result.task_success_rate * args.episodes)}/{args.episodes} "

@@ -17,7 +17,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 LAYERS = {
-    "mpg_envs": ("_version", "threads", "settings_fields", "grid", "perception", "simulation", "scenes", "tasks", "policies", "integrations"),
+    "mpg_envs": ("_version", "threads", "settings_fields", "files", "grid", "perception", "simulation", "scenes", "tasks", "policies", "integrations"),
     "mpg_agents": ("network", "acting", "evaluation", "learning", "sb3", "cli_input", "cli", "demo"),
 }
 """Each package's layers, lowest first: a subpackage, or a module at the package's top."""

@@ -39,6 +39,7 @@ from torch import nn
 
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+from mpg_envs.files import write_text_whole
 
 if TYPE_CHECKING:
     from mpg_agents.acting.agent import MPGAgent
@@ -218,7 +219,7 @@ def write_calibration(
         "quantile": c.quantile, "q_star_before": as_record(q_star_before),
         "q_star": c.q_star, "target_grasp_q": list(c.target_grasp_q), "history": history,
     }
-    path.write_text(json.dumps(record, indent=1))
+    write_text_whole(path, json.dumps(record, indent=1))  # a full disk keeps the old history
     return record
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -20,6 +19,7 @@ from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_envs.files import same_file, write_bytes_whole
 from mpg_envs.grid.actions import check_primitives
 from mpg_envs.simulation.mujoco_version import running_mujoco
 
@@ -53,26 +53,20 @@ def checkpoint_metadata(
 def save_mpgnet(
     net: MPGNet, path: str | Path, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> None:
-    """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header;
-    through a temporary file swapped in, so a process killed meanwhile leaves the old file whole."""
-    from safetensors.torch import save_file
+    """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header,
+    whole or not at all (:func:`mpg_envs.files.write_bytes_whole`): a process killed meanwhile,
+    or a full disk, leaves the old file whole.
+
+    Raises:
+        mpg_envs.files.WriteFailed: the file cannot be written (one line naming it and why).
+    """
+    from safetensors.torch import save
 
     state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
     check_finite(state, f"the MPGNet to be written to {path}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    save_file(state, str(tmp), metadata=checkpoint_metadata(net, q_star, extra))
-    chmod_by_umask(tmp)
-    os.replace(tmp, path)
-
-
-def chmod_by_umask(path: str | Path) -> None:
-    """Give ``path`` the mode a plain ``open()`` would (0666 less the umask): safetensors
-    writes through a private temporary file and leaves 0600."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(path, 0o666 & ~umask)
+    write_bytes_whole(path, save(state, metadata=checkpoint_metadata(net, q_star, extra)))
 
 
 def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
@@ -218,7 +212,7 @@ def export_weights(
     """
     if grasp_retries is not None and (isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0):
         raise ValueError(f"grasp_retries must be a non-negative integer (0: never push instead), got {grasp_retries!r}")
-    if Path(dst).exists() and Path(dst).samefile(src):
+    if same_file(dst, src):
         raise ValueError(f"the copy {str(dst)!r} is the source checkpoint {str(src)!r}; write it to another file")
     settings = dict(settings or {})
     weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 import torch
 
+from mpg_envs.files import write_bytes_whole
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, decode_action
 from mpg_envs.grid.workspace import rotation_angle, rotation_direction
 
@@ -175,8 +176,10 @@ def save_qmap_png(
     image = np.concatenate([image, _colorbar(image.shape[0], lo, hi)], axis=1)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), image):
-        raise OSError(f"could not write {path}")
+    encoded, data = cv2.imencode(path.suffix or ".png", image)  # the format the suffix names, as cv2.imwrite
+    if not encoded:
+        raise ValueError(f"could not encode the Q maps for {path} in the format of its suffix")
+    write_bytes_whole(path, data.tobytes())  # whole or not at all: a full disk is a WriteFailed naming it
     return path
 
 

@@ -26,6 +26,7 @@ from mpg_agents.learning.run_folder import RunLock, prepare_run_folder
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.training_stages import TRAINING_STAGES, TrainingStage
 from mpg_agents.acting.weights import read_checkpoint_header
+from mpg_envs.files import write_text_whole
 
 
 @dataclass
@@ -66,7 +67,7 @@ def _run_stages(cfg: PipelineConfig, out: Path, init: str | None, log: Callable[
             learner = Learner(stage_cfg, stage, stage_dir, init=weights, log=log, resume_anyway=resume_anyway)
             log(f"{stage.name}: {learner.steps} iterations, training {learner.trainable}, init {weights}")
             result = json_safe(learner.run())
-            done.write_text(json.dumps(result))
+            write_text_whole(done, json.dumps(result))
         summary[stage.name] = result
         weights = str(stage_dir / "weights.safetensors")
         if stage.calibrates_q_star:
@@ -75,7 +76,7 @@ def _run_stages(cfg: PipelineConfig, out: Path, init: str | None, log: Callable[
     summary["final_weights"] = weights
     # The record ships beside its weights: paths inside the run are written relative to it.
     record = {**summary, "final_weights": _relative_to(weights, out)}
-    (out / "pipeline.json").write_text(json.dumps(json_safe(record), indent=1))
+    write_text_whole(out / "pipeline.json", json.dumps(json_safe(record), indent=1))
     return summary
 
 

@@ -3,26 +3,129 @@
 from __future__ import annotations
 
 import csv
+import io
+import warnings
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from mpg_agents.learning.train_log import CSV_COLUMNS
+from mpg_envs.files import written_whole
 
-def read_progress(path: Path) -> dict[str, np.ndarray]:
-    """Columns of a ``progress.csv`` as arrays (empty cells become NaN)."""
-    with open(path, newline="") as fh:
-        rows = list(csv.DictReader(fh))
+
+PLOTTED_COLUMNS = ("iteration", "episode", "primitive", "loss", "epsilon", "target_grasped", "num_motions")
+"""The ``progress.csv`` columns the curves are drawn from (``is_success`` too, where a log has it)."""
+
+TEXT_COLUMNS = ("primitive", "how")
+"""The columns of words; every other column of :data:`~mpg_agents.learning.train_log.CSV_COLUMNS` holds numbers."""
+
+
+def read_progress(path: str | Path) -> dict[str, np.ndarray]:
+    """Columns of a ``progress.csv`` as arrays (numbers as floats, empty cells NaN; words as text).
+
+    A last row cut short at the end of the file (the row a running training is writing) is left
+    out with a warning naming it; any other damage is an error.
+
+    Raises:
+        ValueError: one line naming the file and what is wrong: not text, no iterations yet,
+            a column the curves need missing, a row with too few or too many fields, or a
+            number column (``iteration``, ``loss``, ...) holding something else.
+    """
+    path = Path(path)
+    raw = path.read_bytes()
+    nul = raw.find(b"\0")
+    if nul >= 0:
+        raise ValueError(f"{path} is not a text CSV file (binary data at byte {nul}); mpg-train writes progress.csv as text")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path} is not a text CSV file (byte {exc.start} is not UTF-8); mpg-train writes progress.csv as text") from None
+    try:
+        rows = list(csv.reader(io.StringIO(text, newline="")))
+    except csv.Error as exc:
+        raise ValueError(f"{path} is not a readable CSV file: {exc}") from None
     if not rows:
+        raise ValueError(f"{path} is empty; mpg-train writes a header row first")
+    header = rows[0]
+    missing = [c for c in PLOTTED_COLUMNS if c not in header]
+    if missing:
+        raise ValueError(f"{path} lacks the columns {', '.join(missing)} that the curves are drawn from "
+                         f"(its header: {','.join(header)[:80]!r}); mpg-train's progress.csv has them")
+    body = rows[1:]
+    if body and len(body[-1]) < len(header) and not text.endswith(("\n", "\r")):
+        warnings.warn(f"{path} line {len(rows)}: the last row is cut short (a training still writing it?); left out", stacklevel=2)
+        body = body[:-1]
+    if not body:
         raise ValueError(f"{path} has no iterations yet")
+    for n, row in enumerate(body, start=2):
+        if len(row) != len(header):
+            raise ValueError(f"{path} line {n}: {len(row)} fields where the header has {len(header)} (a truncated or damaged row)")
     out: dict[str, np.ndarray] = {}
-    for key in rows[0]:
-        values = [r[key] for r in rows]
-        try:
-            out[key] = np.array([float(v) if v != "" else np.nan for v in values])
-        except ValueError:
+    for k, key in enumerate(header):
+        values = [r[k] for r in body]
+        if key in TEXT_COLUMNS:
             out[key] = np.array(values)
+            continue
+        try:
+            out[key] = np.array([float(v) if v.strip() != "" else np.nan for v in values])
+        except ValueError:
+            if key in CSV_COLUMNS:
+                n, bad = next((i, v) for i, v in enumerate(values, start=2) if v.strip() != "" and not _is_number(v))
+                raise ValueError(f"{path} line {n}: {key} is {bad!r}, not a number") from None
+            out[key] = np.array(values)  # a column of someone else's: kept as text
+    iterations = out["iteration"]
+    bad = np.flatnonzero(~np.isfinite(iterations) | (iterations != np.round(iterations)) | (iterations < 0))
+    if bad.size:
+        raise ValueError(f"{path} line {int(bad[0]) + 2}: iteration is {body[int(bad[0])][header.index('iteration')]!r}, "
+                         "not a whole number >= 0")
     return out
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+PICTURE_FORMATS = ("png", "pdf", "svg", "jpg", "jpeg", "webp", "tif", "tiff", "gif", "eps", "ps")
+"""The picture formats ``mpg-plot`` writes, by suffix (those matplotlib has here)."""
+
+
+def check_image_path(out: str | Path | None) -> None:
+    """A picture's path whose suffix names a format the figures can be written in (``.png``,
+    ``.pdf``, ``.svg``, ...): the file is written at exactly that path (``None``: the default,
+    ``curves.png``).
+
+    Raises:
+        ValueError: no suffix, or one no format has (the valid ones listed).
+    """
+    if out is None:
+        return
+    valid, suffix = image_suffixes(), Path(out).suffix
+    if suffix.lower() not in valid:
+        said = f"its suffix {suffix!r} names no format the curves are written in" if suffix else "it has no suffix to name the picture's format"
+        raise ValueError(f"{str(out)!r}: {said}; end it with one of {', '.join(valid)} (e.g. {Path(out).stem or 'curves'}.png)")
+
+
+def image_suffixes() -> tuple[str, ...]:
+    """The suffixes of the :data:`PICTURE_FORMATS` matplotlib writes here (``.png`` first)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    kinds = Figure().canvas.get_supported_filetypes()
+    return tuple("." + k for k in PICTURE_FORMATS if k in kinds)
+
+
+def _save(fig, out: Path) -> None:
+    """Write ``fig`` to exactly ``out``, whole or not at all, in the format its suffix names."""
+    check_image_path(out)
+    with written_whole(out) as tmp:
+        fig.savefig(tmp, dpi=100, format=out.suffix[1:].lower())
 
 
 def _window_means(at: np.ndarray, values: np.ndarray, last: int, window: int) -> tuple[np.ndarray, np.ndarray]:
@@ -136,8 +239,10 @@ def plot_run(run: str | Path, out: str | Path | None = None, window: int = 200) 
             ax.legend(fontsize=8)
     fig.tight_layout()
     out = Path(out) if out is not None else run / "curves.png"
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
+    try:
+        _save(fig, out)
+    finally:
+        plt.close(fig)
     return out
 
 
@@ -177,6 +282,22 @@ def plot_compare(runs: Sequence[tuple[str, str | Path]], stage: str, out: str | 
             ax.legend(fontsize=8)
     fig.tight_layout()
     out = Path(out)
-    fig.savefig(out, dpi=100)
-    plt.close(fig)
+    try:
+        _save(fig, out)
+    finally:
+        plt.close(fig)
     return out
+
+
+def plot_runs(runs: Sequence[str | Path], out: str | Path | None = None, window: int = 200, stage: str | None = None,
+              labels: Sequence[str] | None = None) -> Path:
+    """``mpg-plot``: one run or pipeline (:func:`plot_run`), or ``stage`` of several runs on one
+    axis (:func:`plot_compare`, labelled by ``labels`` or the folder names); returns the picture's path."""
+    if not stage and len(runs) == 1:
+        return plot_run(runs[0], out, window)
+    if not stage or not out:
+        raise ValueError("comparing runs needs --stage and --out")
+    labels = list(labels) if labels else [Path(r).name for r in runs]
+    if len(labels) != len(runs):
+        raise ValueError(f"--labels names {len(labels)} runs, {len(runs)} given")
+    return plot_compare(list(zip(labels, runs)), stage, out, window)

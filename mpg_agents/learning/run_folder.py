@@ -1,6 +1,8 @@
 """A run folder and who may write it: the folder itself, its lock, and whether a resume may go on.
 
-- :func:`prepare_run_folder`: the run folder exists as a folder (a file at that path is an error).
+- :func:`prepare_run_folder`: the run folder exists as a folder (a file at that path is an error)
+  and is new, empty or a run of this project (:func:`is_run_folder`): a run rewrites and deletes
+  files in its folder, so a folder holding anything else is refused, nothing in it touched.
 - :class:`RunLock`: one process owns a run folder while it trains. The lock is an exclusive
   ``fcntl.flock`` on ``run.lock``, which names the owner (pid, host, start time); a second process
   refuses with :class:`RunFolderBusy` naming it. The kernel drops the lock when its owner dies
@@ -30,16 +32,39 @@ class RunFolderBusy(RuntimeError):
     """Another live process owns the run folder (its pid and host are in the message)."""
 
 
+RUN_MARKS = (LOCK_NAME, "state/FORMAT", "state.old/FORMAT", "pipeline.json")
+"""Files that only a run of this project writes in its folder: the lock (taken before anything
+else is written, by a single stage and a pipeline alike) and a saved state or a pipeline's
+record (runs older than the lock)."""
+
+BEFORE_A_RUN = ("train.log",)
+"""What a folder may hold before its run starts: ``mpg-train-runs`` opens its log there first."""
+
+
+def is_run_folder(folder: str | Path) -> bool:
+    """Whether ``folder`` may take a run: it is empty, holds only :data:`BEFORE_A_RUN`, or holds
+    a run of this project (one of :data:`RUN_MARKS`), which it resumes."""
+    folder = Path(folder)
+    names = {p.name for p in folder.iterdir()}
+    return names <= set(BEFORE_A_RUN) or any((folder / mark).is_file() for mark in RUN_MARKS)
+
+
 def prepare_run_folder(out: str | Path) -> Path:
-    """``out`` as a folder, made if missing.
+    """``out`` as a folder, made if missing; one that exists must be a run folder (:func:`is_run_folder`).
 
     Raises:
-        ValueError: ``out`` (or a folder above it) is a file.
+        ValueError: ``out`` (or a folder above it) is a file, or ``out`` holds files of no run
+            of this project (named; nothing in it is touched).
     """
     out = Path(out)
     for part in (out, *out.parents):
         if part.exists() and not part.is_dir():
             raise ValueError(f"run folder {str(out)!r}: {str(part)!r} is a file, not a folder; give --out a folder path")
+    if out.is_dir() and not is_run_folder(out):
+        held = sorted(p.name + ("/" if p.is_dir() else "") for p in out.iterdir())
+        shown = ", ".join(held[:5]) + (f" and {len(held) - 5} more" if len(held) > 5 else "")
+        raise ValueError(f"run folder {str(out)!r} is not empty and holds no run of this project ({shown}); "
+                         "a run would overwrite them: give a new or empty folder, or an earlier run's folder to resume it")
     out.mkdir(parents=True, exist_ok=True)
     return out
 

@@ -6,7 +6,9 @@ A run directory holds ``weights.safetensors`` (the online MPGNet, usable on its 
 its scalar settings in JSON), the replay buffer (``replay.npz``: each distinct compressed
 observation once, transitions as indices into them), the random generators and the
 counters (:class:`Counters`, JSON). Everything is written to a temporary folder first and
-swapped in whole, so a run killed while saving still has its previous state.
+swapped in whole, so a run killed while saving still has its previous state; a save the disk
+refuses removes the temporary folder and raises :class:`~mpg_envs.files.WriteFailed` naming the
+file, the previous state kept.
 """
 
 from __future__ import annotations
@@ -19,13 +21,13 @@ from typing import Any
 
 import numpy as np
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file, save
 
 from mpg_agents.acting.grasp_threshold import from_header
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.learning.replay import Frame, PrioritizedHeightmapReplayBuffer
-from mpg_agents.acting.weights import chmod_by_umask
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
+from mpg_envs.files import WriteFailed, write_bytes_whole, write_text_whole, written_whole
 
 STATE_FORMAT = "mpg-train-state-v1"
 
@@ -87,7 +89,8 @@ def save_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
         for key in keys:
             kind, blob = frame.planes[key]
             arrays[f"f{k}/{key}/{kind}"] = np.frombuffer(blob, dtype=np.uint8)
-    np.savez(path, **arrays)
+    with written_whole(path) as tmp:
+        np.savez(tmp, **arrays)
 
 
 def load_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
@@ -128,9 +131,8 @@ def save_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
                 tensors[f"{pid}/{name}"] = value.detach().cpu().contiguous()
             else:
                 scalars["state"][str(pid)][name] = value
-    save_file(tensors, str(folder / "optimizer.safetensors"))
-    chmod_by_umask(folder / "optimizer.safetensors")
-    (folder / "optimizer.json").write_text(json.dumps(scalars))
+    write_bytes_whole(folder / "optimizer.safetensors", save(tensors))
+    write_text_whole(folder / "optimizer.json", json.dumps(scalars))
 
 
 def load_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
@@ -144,13 +146,24 @@ def load_optimizer(optimizer: torch.optim.Optimizer, folder: Path) -> None:
 
 
 def write_state(run_dir: Path, writer) -> None:
-    """Call ``writer(tmp_folder)`` and swap the result in as ``run_dir/state`` atomically."""
+    """Call ``writer(tmp_folder)`` and swap the result in as ``run_dir/state`` atomically.
+
+    Raises:
+        WriteFailed: the disk refused a file (the temporary folder is removed, the previous
+            state kept).
+    """
     tmp = run_dir / "state.tmp"
     if tmp.exists():
         shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
-    writer(tmp)
-    (tmp / "FORMAT").write_text(STATE_FORMAT)
+    try:
+        tmp.mkdir(parents=True)
+        writer(tmp)
+        write_text_whole(tmp / "FORMAT", STATE_FORMAT)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(exc, OSError) and not isinstance(exc, WriteFailed):
+            raise WriteFailed(tmp, exc.strerror or str(exc)) from None
+        raise
     final = run_dir / "state"
     old = run_dir / "state.old"
     if final.exists():
@@ -190,9 +203,9 @@ def save_run_state(
         save_optimizer(optimizer, tmp)
         save_replay(replay, tmp / "replay.npz")
         rngs = {"numpy": rng.bit_generator.state, "replay": replay.rng_state, "torch": torch.get_rng_state().tolist()}
-        (tmp / "rng.json").write_text(json.dumps(rngs))
-        (tmp / "counters.json").write_text(json.dumps(counters))
-        (tmp / "config.json").write_text(json.dumps(config))
+        write_text_whole(tmp / "rng.json", json.dumps(rngs))
+        write_text_whole(tmp / "counters.json", json.dumps(counters))
+        write_text_whole(tmp / "config.json", json.dumps(config))
 
     write_state(run_dir, writer)
 

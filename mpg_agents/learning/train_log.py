@@ -20,6 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
+from mpg_envs.files import write_text_whole
+
 CSV_COLUMNS = [
     "iteration", "episode", "primitive", "how", "reward", "loss", "epsilon", "grasp_success", "target_grasped",
     "is_success", "num_motions", "grasp_success_rate", "decide_s", "act_s", "iteration_s",
@@ -55,8 +57,9 @@ class IterationRecord:
 
 def rewind_progress(path: str | Path, iteration: int) -> int:
     """Rewrite ``progress.csv`` to its header and the rows of iterations 1..``iteration``, each
-    once, in order (rows after it, a half-written last row and repeats are dropped); written to
-    a temporary file and swapped in, so a kill meanwhile leaves the old file. Returns the rows
+    once, in order (rows after it, a half-written last row and repeats are dropped); written
+    whole or not at all (:func:`mpg_envs.files.write_text_whole`), so a kill or a full disk
+    meanwhile leaves the old file. Returns the rows
     kept; warns naming the iterations of 1..``iteration`` it lacks (a log written before its
     rows were made durable with the state, or edited by hand).
     """
@@ -78,12 +81,7 @@ def rewind_progress(path: str | Path, iteration: int) -> int:
     writer = csv.writer(text)
     writer.writerow(CSV_COLUMNS)
     writer.writerows(rows[it] for it in sorted(rows))
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
-        f.write(text.getvalue())
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    write_text_whole(path, text.getvalue())
     return len(rows)
 
 
