@@ -15,6 +15,10 @@ mesh file to convex parts, meant to run in a worker process
 * an open or non-manifold surface goes to coacd with its manifold preprocess on; its volume is
   that of the parts.
 
+Without coacd (``use_coacd=False``, the fallback when it crashed, failed or ran out of time) a
+closed mesh whose convex hull is close to it (:func:`hull_close_enough`) becomes its hull; an
+open surface or a clearly concave body is refused.
+
 coacd is never given several disconnected bodies at once (that is what segfaults it).
 """
 
@@ -32,6 +36,23 @@ from mpg_envs.simulation.assets import MIN_PART_VOLUME, Part, convex_part, mesh_
 CONVEX_VOLUME_RATIO = 0.97
 """A closed body whose volume is at least this fraction of its convex hull's volume is
 treated as convex (one part, its hull); anything else is decomposed with coacd."""
+
+HULL_FALLBACK_RATIO = 1.1
+"""When convex decomposition failed or ran out of time, a closed mesh whose convex hull's volume
+is at most this multiple of the mesh's own volume is used as its hull (one part, at most 10%
+more volume to collide with: a near-convex shape keeps its grasps); above it the mesh is refused.
+An open surface has no volume to compare, so it is always refused."""
+
+
+def hull_close_enough(volume: float, hull_volume: float) -> bool:
+    """Whether a solid of ``volume`` may stand in as its convex hull of ``hull_volume``:
+    ``hull_volume <= HULL_FALLBACK_RATIO * volume`` (both positive).
+
+    >>> hull_close_enough(1.0, 1.1), hull_close_enough(1.0, 1.11), hull_close_enough(0.0, 1.0)
+    (True, False, False)
+    """
+    return volume > 0 and hull_volume <= HULL_FALLBACK_RATIO * volume
+
 
 OVERLAP_TOLERANCE = 0.02
 """Convex bodies that overlap by at most this fraction of their union's volume are kept as the
@@ -93,7 +114,8 @@ class Solid:
     volume: float
     """The solid's volume (m^3): of the union of the mesh's bodies, or of the parts if open."""
     method: str
-    """How the parts were made: ``"hull"``, ``"bodies"``, ``"coacd"`` or ``"coacd-preprocess"``."""
+    """How the parts were made: ``"hull"``, ``"bodies"``, ``"coacd"``, ``"coacd-preprocess"`` or
+    ``"hull-fallback"`` (a near-convex mesh as its hull, without coacd)."""
 
 
 def load_mesh(path: str, scale: float) -> trimesh.Trimesh:
@@ -120,7 +142,8 @@ def solid_from_mesh_file(
     another process can send it without this module being imported to read the request.
 
     With ``use_coacd=False`` only meshes that need no decomposition are accepted (a convex
-    mesh, or separate convex bodies): the fallback when coacd crashed or hung.
+    mesh, separate convex bodies, or a closed mesh close to its hull: :func:`hull_close_enough`):
+    the fallback when coacd crashed, failed or hung.
 
     Raises:
         ValueError: the file cannot be read, is empty or flat (zero volume), or needs coacd
@@ -147,7 +170,10 @@ def _solid(path: str, scale: float, seed: int, params: CoacdParams, use_coacd: b
     pieces = mesh.split(only_watertight=False)
     if not all(piece.is_watertight for piece in pieces):
         if not use_coacd:
-            raise ValueError(f"mesh file {path!r}: an open surface needs convex decomposition (coacd), which failed")
+            raise ValueError(
+                f"mesh file {path!r}: an open surface needs convex decomposition (it has no volume to compare with "
+                "its convex hull)"
+            )
         # Not a closed surface: let coacd remesh it into a manifold before decomposing.
         parts = decompose(mesh, seed, params, preprocess=True)
         return _checked(path, Solid(parts, sum(mesh_volume(v, f) for v, f in parts), "coacd-preprocess"))
@@ -168,7 +194,12 @@ def _solid(path: str, scale: float, seed: int, params: CoacdParams, use_coacd: b
     if volume >= CONVEX_VOLUME_RATIO * hull_volume:
         return _checked(path, Solid([convex_part(mesh.vertices)], volume, "hull"))
     if not use_coacd:
-        raise ValueError(f"mesh file {path!r}: a concave body needs convex decomposition (coacd), which failed")
+        if hull_close_enough(volume, hull_volume):
+            return _checked(path, Solid([convex_part(mesh.vertices)], volume, "hull-fallback"))
+        raise ValueError(
+            f"mesh file {path!r}: a concave solid needs convex decomposition (its convex hull is "
+            f"{hull_volume / volume:.2f} x its volume, over the {HULL_FALLBACK_RATIO:g} a hull may stand in for)"
+        )
     parts: list[Part] = []
     for piece in union.split(only_watertight=False) if len(bodies) > 1 else [union]:
         if float(piece.volume) >= CONVEX_VOLUME_RATIO * float(piece.convex_hull.volume):

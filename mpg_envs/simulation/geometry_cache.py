@@ -81,14 +81,22 @@ def cached_solid(
     """Like :func:`cached_parts`, with the solid's volume and a note: ``generate`` returns
     ``(parts, volume, note)``. Entries without a volume (written by :func:`cached_parts`)
     count as missing."""
+    cached = read_cached_solid(folder, label, key_data)
+    if cached is not None:
+        return cached
     path = _cache_path(folder, label, key_data)
-    cached = _read_cache(path)
-    if cached is not None and cached.volume is not None:
-        return CachedSolid(cached.parts, cached.com, cached.volume, cached.note)
     raw_parts, volume, note = generate()
     parts, com = centre_parts(raw_parts)
     _write_cache(path, parts, com, volume=float(volume), note=note)
     return CachedSolid(parts, com, float(volume), note)
+
+
+def read_cached_solid(folder: Path, label: str, key_data: dict[str, Any]) -> CachedSolid | None:
+    """What :func:`cached_solid` would read for ``key_data``, or ``None`` (nothing is made)."""
+    cached = _read_cache(_cache_path(folder, label, key_data))
+    if cached is None or cached.volume is None:
+        return None
+    return CachedSolid(cached.parts, cached.com, cached.volume, cached.note)
 
 
 @dataclass(frozen=True)

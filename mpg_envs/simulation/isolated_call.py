@@ -10,6 +10,7 @@ raises :class:`WorkerCrashedError`; a call that runs past its limit kills the wo
 raises :class:`WorkerTimeoutError`; an exception inside the call is re-raised as
 :class:`WorkerCallError` with its type and message. The next call starts a fresh worker. The
 worker imports modules with the caller's ``sys.path`` of the moment, so it runs the same code.
+:class:`WorkerPool` holds several workers so that threads can run such calls in parallel.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import struct
 import subprocess
 import sys
 import threading
+from collections.abc import Mapping
 from typing import IO, Any
 
 _HEADER = struct.Struct("<Q")  # message length prefix
@@ -85,9 +87,13 @@ def _describe_exit(returncode: int | None) -> str:
 
 
 class IsolatedWorker:
-    """One child Python process that runs calls one at a time (thread-safe; POSIX and Windows)."""
+    """One child Python process that runs calls one at a time (thread-safe; POSIX and Windows).
 
-    def __init__(self) -> None:
+    ``env``: variables added to the child's environment (e.g. one compute thread each).
+    """
+
+    def __init__(self, env: Mapping[str, str] | None = None) -> None:
+        self._env = dict(env) if env else None
         self._process: subprocess.Popen[bytes] | None = None
         self._owner = os.getpid()
         self._lock = threading.Lock()
@@ -143,6 +149,13 @@ class IsolatedWorker:
         with self._lock:
             self._stop()
 
+    def kill(self) -> None:
+        """Kill the worker process now, from any thread, even while a call runs there (that call
+        raises :class:`WorkerCrashedError`); a later call starts a new one."""
+        process = self._process
+        if process is not None and self._owner == os.getpid() and process.poll() is None:
+            process.kill()
+
     def _ensure_started(self) -> subprocess.Popen[bytes]:
         if self._owner != os.getpid():
             # A forked child (a vector env's worker) must not share the parent's pipes.
@@ -152,7 +165,10 @@ class IsolatedWorker:
         # Each request carries the caller's sys.path, so the worker imports this very copy of
         # mpg_envs (and whatever the caller can import).
         self._process = subprocess.Popen(
-            [sys.executable, os.path.abspath(__file__)], stdin=subprocess.PIPE, stdout=subprocess.PIPE
+            [sys.executable, os.path.abspath(__file__)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            env=None if self._env is None else {**os.environ, **self._env},
         )
         self.starts += 1
         return self._process
@@ -170,6 +186,96 @@ class IsolatedWorker:
                     stream.close()
                 except OSError:
                     pass
+
+
+class WorkerPool:
+    """Up to ``size`` :class:`IsolatedWorker` processes shared by threads: :meth:`call` runs on
+    a free one, so up to ``size`` calls run at once, each isolated and timed as by
+    :meth:`IsolatedWorker.call`.
+
+    The pool grows on demand: a call takes a free worker, and creates a new one (``env`` as for
+    :class:`IsolatedWorker`; it starts on its first call) only when none has come free within
+    ``grow_after_s`` seconds and fewer than ``size`` exist. So quick calls stay on the workers
+    already running (a process start costs about a second of imports), while slow ones spread
+    out. ``first`` (e.g. :func:`shared_worker`, already warm) is the pool's first worker; it is
+    not stopped by :meth:`close`, which stops the others (also on leaving a ``with`` block).
+    """
+
+    def __init__(
+        self, size: int, env: Mapping[str, str] | None = None, *, first: IsolatedWorker | None = None, grow_after_s: float = 0.0
+    ) -> None:
+        if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+            raise ValueError(f"size must be a positive integer (worker processes), got {size!r}")
+        if not (isinstance(grow_after_s, (int, float)) and grow_after_s >= 0):
+            raise ValueError(f"grow_after_s must be a number of seconds >= 0, got {grow_after_s!r}")
+        self.size = size
+        """The most workers the pool holds."""
+        self._env = env
+        self._first = first
+        self._grow_after_s = float(grow_after_s)
+        self._workers: list[IsolatedWorker] = [] if first is None else [first]
+        self._free: queue.Queue[IsolatedWorker] = queue.Queue()
+        self._lock = threading.Lock()
+        self._killed = False
+        for worker in self._workers:
+            self._free.put(worker)
+
+    @property
+    def workers(self) -> int:
+        """How many workers the pool has made use of so far (``first`` included)."""
+        return len(self._workers)
+
+    @property
+    def starts(self) -> int:
+        """Worker processes started so far, all workers together (``first``'s included)."""
+        return sum(worker.starts for worker in self._workers)
+
+    def call(self, target: str, args: tuple[Any, ...], time_limit_s: float) -> Any:
+        """``target(*args)`` on a free worker; see :meth:`IsolatedWorker.call`.
+
+        Raises:
+            WorkerCrashedError: also when the pool was killed (:meth:`kill`).
+        """
+        worker = self._take()
+        try:
+            if self._killed:
+                raise WorkerCrashedError(f"the worker pool was stopped before {target} could run")
+            return worker.call(target, args, time_limit_s)
+        finally:
+            self._free.put(worker)
+
+    def close(self) -> None:
+        """Stop the workers the pool created (a later call starts one again)."""
+        for worker in self._workers:
+            if worker is not self._first:
+                worker.close()
+
+    def kill(self) -> None:
+        """Kill every worker process now, ``first`` included (:meth:`IsolatedWorker.kill`): calls
+        running end with :class:`WorkerCrashedError`, later ones raise it at once. For stopping
+        threads that wait on the pool (an interrupted load); :meth:`close` still follows."""
+        self._killed = True
+        for worker in list(self._workers):
+            worker.kill()
+
+    def _take(self) -> IsolatedWorker:
+        if self._workers:
+            try:
+                return self._free.get(timeout=self._grow_after_s) if self._grow_after_s else self._free.get_nowait()
+            except queue.Empty:
+                pass
+        with self._lock:
+            if len(self._workers) < self.size:
+                worker = IsolatedWorker(self._env)
+                self._workers.append(worker)
+                return worker
+        return self._free.get()
+
+    def __enter__(self) -> WorkerPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 _SHARED: IsolatedWorker | None = None

@@ -1,10 +1,13 @@
-"""Objects from mesh files: one file (:func:`load_mesh_file`) or a folder (:func:`load_mesh_folder`).
+"""Objects from mesh files: one file (:func:`load_mesh_file`, in steps: :class:`MeshJob`).
 
 Each mesh becomes an :class:`~mpg_envs.simulation.assets.ObjectAsset` made of convex parts
 (:mod:`mpg_envs.simulation.decomposition`: its bodies, their union, coacd where needed). That
 work runs in a worker process with a time limit (:mod:`mpg_envs.simulation.isolated_call`), so
 a native crash or hang becomes a :class:`MeshLoadError` naming the file, never a dead
-interpreter; a mesh made of separate convex bodies falls back to one part per body. Geometry is
+interpreter; when coacd crashes, fails or runs out of time, a mesh made of separate convex
+bodies falls back to one part per body and a closed mesh close to its convex hull
+(:data:`HULL_FALLBACK_RATIO`) to that hull, with a warning. Folders of meshes are
+:mod:`mpg_envs.simulation.mesh_folder`'s. Geometry is
 cached on disk (:mod:`mpg_envs.simulation.geometry_cache`); colour, mass and friction are not
 cached: they are cheap and derived from the geometry at load time.
 
@@ -28,25 +31,28 @@ from typing import Literal
 import numpy as np
 import trimesh
 
-from mpg_envs.simulation.assets import DEFAULT_FRICTION, TABLEAU_10, WOOD_DENSITY, ObjectAsset, check_seed, make_asset
-from mpg_envs.simulation.decomposition import CONVEX_VOLUME_RATIO, CoacdParams, Solid, decompose
-from mpg_envs.simulation.geometry_cache import CachedSolid, cached_solid, resolve_cache_dir
+from mpg_envs.simulation.assets import DEFAULT_FRICTION, TABLEAU_10, WOOD_DENSITY, ObjectAsset, check_seed, make_asset, mesh_volume
+from mpg_envs.simulation.decomposition import CONVEX_VOLUME_RATIO, HULL_FALLBACK_RATIO, CoacdParams, Solid, decompose
+from mpg_envs.simulation.geometry_cache import CachedSolid, cached_solid, read_cached_solid, resolve_cache_dir
 from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange, FitError, fit_scale
-from mpg_envs.simulation.isolated_call import IsolatedCallError, WorkerCallError, WorkerTimeoutError, shared_worker
+from mpg_envs.simulation.isolated_call import (
+    IsolatedCallError, IsolatedWorker, WorkerCallError, WorkerPool, WorkerTimeoutError, shared_worker,
+)  # fmt: skip
 
 __all__ = [
     "CONVEX_VOLUME_RATIO",
     "DEFAULT_TIME_LIMIT_S",
+    "HULL_FALLBACK_RATIO",
     "MESH_SUFFIXES",
     "CoacdParams",
+    "MeshJob",
     "MeshLoadError",
     "decompose",
     "load_mesh_file",
-    "load_mesh_folder",
 ]
 
 MESH_SUFFIXES = (".obj", ".stl")
-"""File types :func:`load_mesh_folder` reads (case-insensitive)."""
+"""File types a mesh folder's loader reads (case-insensitive)."""
 
 DEFAULT_TIME_LIMIT_S = 180.0
 """Seconds one mesh's decomposition may take in the worker before it is stopped."""
@@ -86,7 +92,11 @@ def load_mesh_file(
     The mesh is loaded with ``trimesh`` (``force="mesh"``), multiplied by ``scale``, cleaned
     (coincident opposite faces removed) and made into convex parts
     (:func:`~mpg_envs.simulation.decomposition.solid_from_mesh_file`), in a worker process
-    that may run at most ``time_limit_s`` seconds. The object frame is the mesh frame shifted
+    that may run at most ``time_limit_s`` seconds. If that decomposition crashes, fails or
+    runs out of time, the mesh is made without it: separate convex bodies as one part each, a
+    closed mesh close to its convex hull
+    (:data:`~mpg_envs.simulation.decomposition.HULL_FALLBACK_RATIO`) as its hull, with a
+    warning naming the file and why. The object frame is the mesh frame shifted
     to the parts' centre of mass. The mass is ``density`` times the solid's volume (the union
     of its bodies, so overlapping parts count once), clamped to
     :data:`~mpg_envs.simulation.assets.MASS_RANGE`, unless ``mass`` is given.
@@ -113,132 +123,187 @@ def load_mesh_file(
 
     Raises:
         MeshLoadError: the file cannot be read or is empty, flat or degenerate, cannot be
-            fitted, or its decomposition crashed or ran past ``time_limit_s`` with no
+            fitted, or its decomposition crashed, failed or ran past ``time_limit_s`` with no
             fallback; the message names the file and what is valid.
         ValueError: a bad argument (named).
     """
-    seed = check_seed(seed)
-    _check_positive("scale", scale)
-    _check_positive("time_limit_s", time_limit_s)
-    if mass is not None:
-        _check_positive("mass", mass)
-    extent_range = _extent_range(fit)
-    path = Path(path).expanduser()
-    params = coacd_params or CoacdParams()
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise MeshLoadError(f"mesh file {str(path)!r}: cannot read it ({exc})") from exc
-    # Fit first on the vertices' box, so the parts are made at the size they will have (the
-    # smallest-part threshold is absolute), then again on the parts' box (hull-exact, but
-    # coacd's hulls may reach a little further).
-    first = 1.0 if extent_range is None else _fit(path, scale, _vertex_extents(path, data) * scale, extent_range)
-    key_data = {
-        "kind": "mesh_file",
-        "pipeline": MESH_PIPELINE_VERSION,
-        "suffix": path.suffix.lower(),
-        "sha256": hashlib.sha256(data).hexdigest(),
-        "scale": float(scale * first),
-        "seed": seed,
-        "convex_ratio": CONVEX_VOLUME_RATIO,
-        "coacd": dataclasses.asdict(params),
-    }
-    solid = cached_solid(
-        resolve_cache_dir(cache_dir),
-        f"mesh-{path.stem}",
-        key_data,
-        lambda: _isolated_solid(path, scale * first, seed, params, time_limit_s),
-    )
-    if solid.note:
-        warnings.warn(f"mesh file {str(path)!r}: {solid.note}", RuntimeWarning, stacklevel=2)
-    second = 1.0
-    if extent_range is not None:
-        second = _fit(path, scale, np.ptp(np.concatenate([v for v, _ in solid.parts]), axis=0), extent_range)
-        solid = _scaled(solid, second)
-    return make_asset(
-        name if name is not None else path.stem,
-        solid.parts,
-        rgba,
-        density,
-        mass,
-        friction,
-        str(path),
-        solid.com,
-        volume=solid.volume,
-        scale=float(scale) * first * second,
-        licence=licence,
-    )
+    job = MeshJob.prepare(
+        path, seed, cache_dir, scale, mass, fit=fit, density=density, friction=friction,
+        coacd_params=coacd_params, time_limit_s=time_limit_s, licence=licence,
+    )  # fmt: skip
+    return job.asset(job.solid(shared_worker()), name=name, rgba=rgba)
 
 
-def load_mesh_folder(
-    folder: str | os.PathLike[str],
-    seed: int = 0,
-    cache_dir: str | os.PathLike[str] | None = None,
-    scale: float = 1.0,
-    mass: float | None = None,
-    *,
-    fit: Fit = "none",
-    density: float = WOOD_DENSITY,
-    friction: float = DEFAULT_FRICTION,
-    coacd_params: CoacdParams | None = None,
-    time_limit_s: float = DEFAULT_TIME_LIMIT_S,
-) -> list[ObjectAsset]:
-    """Every OBJ/STL mesh of a folder (not recursive) as an object, sorted by file name.
+@dataclasses.dataclass(frozen=True)
+class MeshJob:
+    """One mesh file read and checked, in steps: :meth:`solid` (its convex parts from the cache
+    or a worker process: the slow step, safe to run in threads) and :meth:`asset` (the object;
+    any warning is given here). :func:`load_mesh_file` runs both; a folder's meshes run their
+    :meth:`solid` steps in parallel (:mod:`mpg_envs.simulation.mesh_folder`)."""
 
-    Each file is loaded by :func:`load_mesh_file` (same arguments). The object's name is the
-    file stem; its colour is ``TABLEAU_10[i % 10]`` for the ``i``-th file in sorted order
-    (colours or textures carried by the files are ignored, so every set looks alike and masks
-    stay easy to tell apart).
+    path: Path
+    scale: float
+    """The caller's scale (before any fit)."""
+    first_fit: float
+    """The fit's factor from the vertices' box (1 without a fit)."""
+    extent_range: ExtentRange | None
+    seed: int
+    cache_dir: Path
+    params: CoacdParams
+    time_limit_s: float
+    key_data: dict
+    mass: float | None
+    density: float
+    friction: float
+    licence: str
 
-    Raises:
-        FileNotFoundError: ``folder`` does not exist.
-        NotADirectoryError: ``folder`` is not a folder.
-        ValueError: no mesh in the folder, or a bad argument.
-        MeshLoadError: a mesh that cannot be used (see :func:`load_mesh_file`; names the file).
-    """
-    root = Path(folder).expanduser()
-    if not root.exists():
-        raise FileNotFoundError(f"mesh folder {str(root)!r} does not exist")
-    if not root.is_dir():
-        raise NotADirectoryError(f"mesh folder {str(root)!r} is not a folder")
-    files = sorted(
-        (p for p in root.iterdir() if p.suffix.lower() in MESH_SUFFIXES and not p.name.startswith(".")),
-        key=lambda p: p.name,
-    )
-    if not files:
-        raise ValueError(f"mesh folder {str(root)!r} holds no {'/'.join(MESH_SUFFIXES)} files")
-    return [
-        load_mesh_file(
-            path, seed, cache_dir, scale, mass, fit=fit, rgba=TABLEAU_10[index % len(TABLEAU_10)],
-            density=density, friction=friction, coacd_params=coacd_params, time_limit_s=time_limit_s,
+    @classmethod
+    def prepare(
+        cls,
+        path: str | os.PathLike[str],
+        seed: int = 0,
+        cache_dir: str | os.PathLike[str] | None = None,
+        scale: float = 1.0,
+        mass: float | None = None,
+        *,
+        fit: Fit = "none",
+        density: float = WOOD_DENSITY,
+        friction: float = DEFAULT_FRICTION,
+        coacd_params: CoacdParams | None = None,
+        time_limit_s: float = DEFAULT_TIME_LIMIT_S,
+        licence: str = "",
+    ) -> MeshJob:
+        """Check the arguments (those of :func:`load_mesh_file`), read the file and fit its vertices' box.
+
+        Raises:
+            MeshLoadError: the file cannot be read, or its vertices cannot be fitted.
+            ValueError: a bad argument (named).
+        """
+        seed = check_seed(seed)
+        _check_positive("scale", scale)
+        _check_positive("time_limit_s", time_limit_s)
+        _check_positive("density", density)
+        _check_positive("friction", friction)
+        if mass is not None:
+            _check_positive("mass", mass)
+        extent_range = _extent_range(fit)
+        path = Path(path).expanduser()
+        params = coacd_params or CoacdParams()
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise MeshLoadError(f"mesh file {str(path)!r}: cannot read it ({exc})") from exc
+        # Fit first on the vertices' box, so the parts are made at the size they will have (the
+        # smallest-part threshold is absolute), then again on the parts' box (hull-exact, but
+        # coacd's hulls may reach a little further).
+        first = 1.0 if extent_range is None else _fit(path, scale, _vertex_extents(path, data) * scale, extent_range)
+        key_data = {
+            "kind": "mesh_file",
+            "pipeline": MESH_PIPELINE_VERSION,
+            "suffix": path.suffix.lower(),
+            "sha256": hashlib.sha256(data).hexdigest(),
+            "scale": float(scale * first),
+            "seed": seed,
+            "convex_ratio": CONVEX_VOLUME_RATIO,
+            "coacd": dataclasses.asdict(params),
+        }
+        return cls(
+            path, float(scale), first, extent_range, seed, resolve_cache_dir(cache_dir), params, float(time_limit_s),
+            key_data, mass, float(density), float(friction), licence,
         )  # fmt: skip
-        for index, path in enumerate(files)
-    ]
+
+    def solid(self, worker: IsolatedWorker | WorkerPool) -> CachedSolid:
+        """The mesh's convex parts, from the cache or made by ``worker`` (no warning here).
+
+        A fallback made because the decomposition ran out of time is cached for that time limit
+        only (how far coacd gets depends on the machine's load): a larger ``time_limit_s`` tries
+        the decomposition again.
+
+        Raises:
+            MeshLoadError: the mesh cannot be made into convex parts, even by the fallback.
+        """
+        label = f"mesh-{self.path.stem}"
+        timed_out_key = {**self.key_data, "fallback_after_time_limit_s": self.time_limit_s}
+        for key in (self.key_data, timed_out_key):
+            cached = read_cached_solid(self.cache_dir, label, key)
+            if cached is not None:
+                return cached
+        parts, volume, note, timed_out = _isolated_solid(
+            self.path, self.scale * self.first_fit, self.seed, self.params, self.time_limit_s, worker
+        )
+        return cached_solid(self.cache_dir, label, timed_out_key if timed_out else self.key_data, lambda: (parts, volume, note))
+
+    def asset(
+        self, solid: CachedSolid, *, name: str | None = None, rgba: tuple[float, float, float, float] = TABLEAU_10[0]
+    ) -> ObjectAsset:
+        """The object made of ``solid`` (from :meth:`solid`), fitted again on its parts' box; a
+        fallback's note is warned about (``RuntimeWarning`` naming the file).
+
+        Raises:
+            MeshLoadError: the parts cannot be fitted.
+        """
+        path = self.path
+        if solid.note:
+            warnings.warn(f"mesh file {str(path)!r}: {solid.note}", RuntimeWarning, stacklevel=3)
+        second = 1.0
+        if self.extent_range is not None:
+            second = _fit(path, self.scale, np.ptp(np.concatenate([v for v, _ in solid.parts]), axis=0), self.extent_range)
+            solid = _scaled(solid, second)
+        return make_asset(
+            name if name is not None else path.stem,
+            solid.parts,
+            rgba,
+            self.density,
+            self.mass,
+            self.friction,
+            str(path),
+            solid.com,
+            volume=solid.volume,
+            scale=self.scale * self.first_fit * second,
+            licence=self.licence,
+        )
 
 
-def _isolated_solid(path: Path, scale: float, seed: int, params: CoacdParams, time_limit_s: float) -> tuple[list, float, str]:
-    """The mesh's solid from the worker: (parts, volume, note); a fallback is noted."""
-    worker = shared_worker()
+def _isolated_solid(
+    path: Path, scale: float, seed: int, params: CoacdParams, time_limit_s: float, worker: IsolatedWorker | WorkerPool
+) -> tuple[list, float, str, bool]:
+    """The mesh's solid from the worker: (parts, volume, note, whether coacd ran out of time);
+    a fallback is noted."""
     fields = dataclasses.asdict(params)  # plain data: a crashing stand-in need not import anything
+    timed_out = False
     try:
         solid: Solid = worker.call(SOLID_ENTRY, (str(path), float(scale), seed, fields, True), time_limit_s)
-        return solid.parts, solid.volume, ""
+        return solid.parts, solid.volume, "", False
     except WorkerCallError as exc:
-        raise _as_load_error(path, exc) from exc
+        if exc.exc_type == "ValueError":  # the file itself is unusable: no fallback helps
+            raise _as_load_error(path, exc) from exc
+        failure = f"failed ({exc.exc_type}: {exc.exc_message})"
     except IsolatedCallError as exc:
         failure = _failure_text(exc, time_limit_s)
-    # Retry without coacd: a mesh of separate convex bodies still loads, one part per body.
+        timed_out = isinstance(exc, WorkerTimeoutError)
+    # Retry without coacd: separate convex bodies, or a near-convex mesh as its hull.
     try:
         solid = worker.call(SOLID_ENTRY, (str(path), float(scale), seed, fields, False), time_limit_s)
     except IsolatedCallError as exc:
-        reason = _as_load_error(path, exc) if isinstance(exc, WorkerCallError) else _failure_text(exc, time_limit_s)
-        raise MeshLoadError(
-            f"mesh file {str(path)!r}: convex decomposition {failure}, and the fallback without it failed "
-            f"({reason}); a mesh of separate convex bodies, or one that coacd can decompose, is needed"
-        ) from exc
-    note = f"convex decomposition {failure}; using the hulls of its {len(solid.parts)} convex bodies instead"
-    warnings.warn(f"mesh file {str(path)!r}: {note}", RuntimeWarning, stacklevel=4)
-    return solid.parts, solid.volume, note
+        if isinstance(exc, WorkerCallError) and exc.exc_type == "ValueError":
+            tail = f"no fallback applies: {exc.exc_message.removeprefix(f'mesh file {str(path)!r}: ')}"
+        elif isinstance(exc, WorkerCallError):
+            tail = f"the fallback without it failed ({exc.exc_type}: {exc.exc_message})"
+        else:
+            tail = f"the fallback without it {_failure_text(exc, time_limit_s)}"
+        hint = "; a larger time_limit_s may let it finish" if timed_out else ""
+        raise MeshLoadError(f"mesh file {str(path)!r}: convex decomposition {failure}, and {tail}{hint}") from exc
+    if solid.method == "hull-fallback":
+        hull_volume = sum(mesh_volume(v, f) for v, f in solid.parts)
+        note = (
+            f"convex decomposition {failure}; using its convex hull instead ({hull_volume / solid.volume:.3f} x its volume, "
+            f"within the {HULL_FALLBACK_RATIO:g} allowed)"
+        )
+    else:
+        note = f"convex decomposition {failure}; using the hulls of its {len(solid.parts)} convex bodies instead"
+    if timed_out:
+        note += "; a larger time_limit_s tries the decomposition again"
+    return solid.parts, solid.volume, note, timed_out
 
 
 def _failure_text(exc: IsolatedCallError, time_limit_s: float) -> str:

@@ -7,9 +7,9 @@ meshes. The pieces live in modules of their own and are re-exported here:
 * :mod:`mpg_envs.simulation.assets` -- the :class:`ObjectAsset` type, colours and material defaults;
 * :mod:`mpg_envs.simulation.blocks` -- the generated "blocks" set (:func:`blocks_object_set`);
 * :mod:`mpg_envs.simulation.families` -- the procedural sets (:func:`family_object_set`);
-* :mod:`mpg_envs.simulation.meshes` -- mesh folders and coacd decomposition (:func:`load_mesh_folder`);
-* :mod:`mpg_envs.simulation.meshes` -- mesh files and folders (:func:`load_mesh_file`, :func:`load_mesh_folder`),
-  decomposed in a worker process (:mod:`~mpg_envs.simulation.decomposition`,
+* :mod:`mpg_envs.simulation.meshes` -- mesh files (:func:`load_mesh_file`) and
+  :mod:`mpg_envs.simulation.mesh_folder` -- folders of them, in parallel, a mesh that fails skipped
+  with a warning (:func:`load_mesh_folder`, :class:`MeshFolderObjects`), decomposed in worker processes (:mod:`~mpg_envs.simulation.decomposition`,
   :mod:`~mpg_envs.simulation.isolated_call`) and fitted to the gripper (:mod:`~mpg_envs.simulation.gripper_fit`);
 * :mod:`mpg_envs.simulation.random_urdfs` -- pybullet's ``random_urdfs`` objects (:func:`load_random_urdfs`);
   its test split ships packed as the set ``"random_urdfs_test"`` (:mod:`~mpg_envs.simulation.object_packs`),
@@ -30,7 +30,8 @@ from mpg_envs.simulation.bodies import OBJECT_CONDIM, OBJECT_GEOM_GROUP, ROLLING
 from mpg_envs.simulation.families import FAMILY_SEED_RANGES, PROCEDURAL_SETS, family_object_set
 from mpg_envs.simulation.geometry_cache import CACHE_FORMAT_VERSION, default_cache_dir
 from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange, fit_scale
-from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, MeshLoadError, load_mesh_file, load_mesh_folder
+from mpg_envs.simulation.mesh_folder import MeshFolderObjects, SkippedMesh, load_mesh_folder
+from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, MeshLoadError, load_mesh_file
 from mpg_envs.simulation.object_packs import load_object_pack
 from mpg_envs.simulation.random_urdfs import (
     RANDOM_URDFS_LICENCE, TEST_SET_NAME, is_test_object, load_random_urdfs, random_urdf_entries, test_pack_path,
@@ -52,6 +53,7 @@ __all__ = [
     "ExtentRange",
     "MASS_RANGE",
     "MESH_SUFFIXES",
+    "MeshFolderObjects",
     "MeshLoadError",
     "MIN_PART_VOLUME",
     "OBJECT_CONDIM",
@@ -60,6 +62,7 @@ __all__ = [
     "PROCEDURAL_SETS",
     "Part",
     "RANDOM_URDFS_LICENCE",
+    "SkippedMesh",
     "ROLLING_FRICTION",
     "TABLEAU_10",
     "TORSIONAL_FRICTION",
