@@ -239,6 +239,22 @@ def test_a_run_folder_is_new_empty_or_one_of_ours(tmp_path):
 
 
 # ------------------------------------------------------------------------------ 3. a full disk
+def test_a_run_state_the_disk_refuses_keeps_the_previous_one(tmp_path):
+    from mpg_agents.learning.run_state import STATE_FORMAT, state_folder, write_state
+
+    write_state(tmp_path, lambda folder: write_text_whole(folder / "counters.json", '{"iteration": 4}'))
+
+    def disk_full(folder: Path) -> None:
+        write_text_whole(folder / "counters.json", '{"iteration": 6}')
+        raise OSError(errno.ENOSPC, ENOSPC, str(folder / "replay.npz"))
+
+    with pytest.raises(WriteFailed, match=f"cannot write '.*state.tmp': {ENOSPC}"):
+        write_state(tmp_path, disk_full)
+    assert state_folder(tmp_path) == tmp_path / "state" and (tmp_path / "state" / "FORMAT").read_text() == STATE_FORMAT
+    assert (tmp_path / "state" / "counters.json").read_text() == '{"iteration": 4}'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["state"]  # no state.tmp left
+
+
 def test_eval_json_on_a_full_disk_keeps_the_old_file(full_disk, capsys, monkeypatch):
     out = full_disk.folder / "out.json"
     out.write_text('{"old": true}')
