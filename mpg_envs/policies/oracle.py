@@ -123,6 +123,8 @@ class OraclePolicy:
             self.reset()  # a new episode even if the caller did not say so
         self._episode_motions = env.num_motions
         self._obs = env.last_observation if obs is None else obs
+        if getattr(env, "target_spec", "mask") != "mask":  # the policy is shown less: plan on the simulator's view
+            self._obs = self._simulator_view(env, self._obs)
         depth = np.asarray(self._obs["depth"])
         primitive, rotation, row, col, plan = self._choose(env, depth)
         self.memory.record(primitive, rotation, row, col, depth)
@@ -377,6 +379,12 @@ class OraclePolicy:
             self._ids_model = world.model
         hm = self._ids_caster.heightmaps(world.data)
         return hm.depth.astype(np.float32), world.object_of_geom(hm.geom_id)
+
+    def _simulator_view(self, env, obs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``obs`` with the target's whole footprint and cover flag as ``target_spec="mask"``
+        shows them (judged on the oracle's own clean view of the simulator)."""
+        mask, occluded = env.sim.target_view(self.view(env.world)[0], env.target)
+        return {**obs, "mask": mask, "occluded": np.array([int(occluded)], dtype=np.int8)}
 
     @staticmethod
     def _clip_pixel(world, xy: np.ndarray) -> tuple[int, int]:

@@ -30,6 +30,7 @@ from mpg_envs.tasks.scene_source import (
     RESET_OPTIONS, SceneRequest, arranged_start, checked_reset_options, drop_scene, scene_from_test_set,
 )
 from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
+from mpg_envs.tasks.target_spec import SIMULATOR_KEYS, TargetNaming, target_observation_space
 from mpg_envs.scenes.arranged import ArrangedScenes
 from mpg_envs.scenes.scene_io import MAX_OBJECTS, SceneFile, SceneFileError, read_scene
 from mpg_envs.scenes.scene_loading import load_scene, scene_of
@@ -65,7 +66,8 @@ class MPGEnv(gym.Env):
     retrieval, a mis-pick ends the episode), ``visible_range`` (a band of the target's visible fraction at
     reset), ``use_test_set`` (True or False: load the shipped scenes of the test seeds, or generate every scene),
     ``arranged`` (a share of generated resets starting from a drawn arrangement of blocks, with its own
-    object count and start: :class:`~mpg_envs.scenes.arranged.ArrangedScenes`; off by default).
+    object count and start: :class:`~mpg_envs.scenes.arranged.ArrangedScenes`; off by default),
+    ``target_spec`` (how the policy is told the target, :mod:`mpg_envs.tasks.target_spec`).
 
     Reset: a generated scene has exactly ``num_objects`` objects, all resting inside the
     workspace, and meets the start condition (the stage's occlusion or surround, the visible
@@ -100,6 +102,7 @@ class MPGEnv(gym.Env):
         use_test_set: bool = True,
         visual_randomization: Any = None,
         arranged: Any = None,
+        target_spec: str = "mask",
     ):
         config = config_of(config)  # a dict of EnvConfig fields too (a registered track's)
         self.stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
@@ -144,7 +147,9 @@ class MPGEnv(gym.Env):
         self.primitives = stage_spec.primitives
         size = config.workspace.shape
         self.action_space = PixelActionSpace(self.primitives, size=size[0])
-        self.observation_space = observation_space(config.workspace)
+        self.naming = TargetNaming(target_spec, stage_spec, config, obs_mode, camera_config, self.visual_randomization)
+        self.target_spec = self.naming.spec
+        self.observation_space = target_observation_space(self.target_spec, config.workspace)
         # The arm's visual meshes matter only to pictures: leave them out unless something renders.
         visual = render_mode is not None or obs_mode == "camera"
         self.sim = EpisodeSim(
@@ -170,10 +175,11 @@ class MPGEnv(gym.Env):
         self.sim.visuals = None  # a drawn scene's start condition is judged unrandomized: the same scenes either way
         self._initialize_episode(seed, options)
         self.sim.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
+        self.naming.start_episode(self.sim, self.target, seed, self.np_random)  # exemplar: colours and query
         obs = self._observe()
-        info = self._reset_info(obs)
+        info = {**self._reset_info(obs), **self.naming.reset_info()}
         self._obs, self._ended = obs, None  # the episode is open only now
-        return self._copy_obs(obs), info
+        return self._copy_obs(self.naming.public(obs)), info
 
     def step(self, action):
         if self._ended is not None:
@@ -200,8 +206,9 @@ class MPGEnv(gym.Env):
         )
         info = {**action_info(primitive, rotation, row, col, result), **evaluation.info()}
         info.update(num_motions=self.num_motions, sim_warnings=sim_warnings, end_reason=end_reason)
+        info.update(self.naming.step_info(evaluation.wrong_grasp, result.grasped_object))
         self._ended = None if end_reason is None else f"the episode has ended ({end_reason}); call reset() before step()"
-        return self._copy_obs(self._obs), reward, bool(terminated), bool(truncated), info
+        return self._copy_obs(self.naming.public(self._obs)), reward, bool(terminated), bool(truncated), info
 
     # ------------------------------------------------------------ task hooks
     def _initialize_episode(self, seed: int | None, options: dict[str, Any]) -> None:
@@ -298,6 +305,7 @@ class MPGEnv(gym.Env):
             self._renderer.close()
             self._renderer = None
         self.sim.close()
+        self.naming.close()
 
     # ------------------------------------------------------------ helpers
     @property
@@ -327,7 +335,7 @@ class MPGEnv(gym.Env):
     def last_observation(self) -> dict[str, np.ndarray] | None:
         """A copy of the last observation returned by ``reset`` or ``step`` (``None`` before
         the first reset)."""
-        return None if self._obs is None else self._copy_obs(self._obs)
+        return None if self._obs is None else self._copy_obs(self.naming.public(self._obs))
 
     def _load_scene_file(self, scene: SceneFile, drop_outside: bool) -> None:
         """Build the world of a scene file in ``sim`` (:func:`mpg_envs.scenes.scene_loading.load_scene`)."""
@@ -343,7 +351,7 @@ class MPGEnv(gym.Env):
         return scene_of(self.world, self.target, self.stage.name, self.config.object_set_seed)
 
     def _observe(self) -> dict[str, np.ndarray]:
-        obs, self._visible = self.sim.observe(self.target, self.num_motions)
+        obs, self._visible = self.sim.observe(self.target, self.num_motions, top_mask=self.naming.top_mask)
         return obs
 
     def _grasp_score(self, obs: dict[str, np.ndarray]) -> float:
@@ -351,7 +359,7 @@ class MPGEnv(gym.Env):
         if self.grasp_scorer is None:
             return 0.0
         if self._score is None or self._score[0] is not obs:
-            self._score = (obs, float(self.grasp_scorer(self._copy_obs(obs))))
+            self._score = (obs, float(self.grasp_scorer(self._copy_obs({k: obs[k] for k in SIMULATOR_KEYS}))))
         return self._score[1]
 
     def _check_physics(self) -> dict[str, int]:

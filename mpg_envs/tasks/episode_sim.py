@@ -22,7 +22,7 @@ import numpy as np
 
 from mpg_envs.perception.camera import CameraConfig, CameraHeightmapper, add_cameras
 from mpg_envs.perception.footprint import footprint_mask
-from mpg_envs.perception.heightmap import RaycastHeightmapper
+from mpg_envs.perception.heightmap import RaycastHeightmapper, geom_colors
 from mpg_envs.perception.occlusion import is_occluded, visible_fraction
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, randomized_raycast
 from mpg_envs.simulation.assets import ObjectAsset
@@ -94,6 +94,7 @@ class EpisodeSim:
         self._occlusion_caster = None  # camera mode: the clean view the occlusion flag is judged on
         self._camera = None
         self._raycast_threads = config.raycast_threads
+        self._painted = False  # paint_objects was called: the ray casts read the model's colours live
 
     # ------------------------------------------------------------ the world
     def initialize_episode(self, random_state: np.random.Generator) -> None:
@@ -152,7 +153,28 @@ class EpisodeSim:
             return self._camera.heightmaps(world.data, rng, self.visuals)
         if self.visuals is not None:
             return randomized_raycast(self._raycaster, world.data, self.visuals, rng, camera_centres=self._camera_centres())
+        if self._painted:
+            return self._raycaster(world.data, geom_colors(world.model))
         return self._raycaster(world.data)
+
+    def paint_objects(self, rgba: Sequence[Sequence[float]]) -> None:
+        """Give object ``i`` of the current world the colour ``rgba[i]`` (RGBA in [0, 1]) in every
+        view from now on: colours only, the physics is unchanged. It stays on the world until
+        painted again (a reused world keeps the last colours).
+
+        Raises:
+            ValueError: not one colour of four values in [0, 1] per object.
+        """
+        world = self._built()
+        colours = np.asarray(rgba, dtype=float)
+        if colours.shape != (world.num_objects, 4) or not np.all((colours >= 0.0) & (colours <= 1.0)):
+            raise ValueError(
+                f"paint_objects needs one RGBA colour in [0, 1] per object ({world.num_objects}, 4), "
+                f"got shape {colours.shape}"
+            )
+        for geoms, colour in zip(world.object_geom_ids, colours):
+            world.model.geom_rgba[geoms] = colour
+        self._painted = True
 
     def _camera_centres(self) -> np.ndarray | None:
         """The camera mode's calibrated camera centres, where the ray-cast path places its
@@ -201,9 +223,27 @@ class EpisodeSim:
             return None
         return visible_fraction(mask, maps.geom_id, world.object_geom_ids[target])
 
-    def observe(self, target: int | None, motion: int = 0) -> tuple[dict[str, np.ndarray], float | None]:
+    def top_mask(self, maps, mask: np.ndarray, target: int | None) -> np.ndarray:
+        """The pixels of the footprint ``mask`` where the target (every object, when
+        ``mask_all_objects`` or no target) is the top surface in ``maps``: what a modal
+        segmenter would give; empty while it is hidden."""
+        world = self._built()
+        if maps.geom_id is None:
+            raise ValueError("the heightmaps carry no geom ids: the pixels where the target shows are unknown")
+        if self.mask_all_objects or target is None:
+            ids = [world.object_geom_ids[i] for i in world.active_objects()]
+        else:
+            ids = [world.object_geom_ids[target]] if world.active[target] else []
+        geoms = np.concatenate(ids) if ids else np.zeros(0, dtype=int)
+        return ((np.asarray(mask) > 0) & np.isin(maps.geom_id, geoms)).astype(np.uint8)
+
+    def observe(
+        self, target: int | None, motion: int = 0, *, top_mask: bool = False
+    ) -> tuple[dict[str, np.ndarray], float | None]:
         """The observation of the current state for ``target`` (colour, depth, mask, the
-        occlusion flag) after ``motion`` motions, and the target's visible fraction."""
+        occlusion flag) after ``motion`` motions, and the target's visible fraction. With
+        ``top_mask`` the observation also holds ``top_mask``: the mask's pixels where the target
+        is the top surface (:meth:`top_mask`)."""
         hm = self.heightmaps(motion)
         mask, occluded = self.target_view(self._occlusion_depth(hm), target)
         obs = {
@@ -212,6 +252,8 @@ class EpisodeSim:
             "mask": mask,
             "occluded": np.array([int(occluded)], dtype=np.int8),
         }
+        if top_mask:
+            obs["top_mask"] = self.top_mask(hm, mask, target)
         return obs, self.visible_fraction(hm, mask, target)
 
     # ------------------------------------------------------------ try and undo

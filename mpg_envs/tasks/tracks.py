@@ -61,6 +61,39 @@ TRACKS: dict[str, TrackSpec] = {
             "ending in 0) fitted to the gripper, shipped as convex parts with the test scenes "
             "(no pybullet needed)",
         ),
+        TrackSpec(
+            "MPG-OccludedHardVisible-v0",
+            "OccludedHard",
+            {"target_spec": "visible"},
+            "the hard track with the target's mask cut down to the pixels where it is the top surface "
+            "(empty while it is hidden), as a modal segmenter gives; the same scenes seed for seed",
+        ),
+        TrackSpec(
+            "MPG-OccludedHardExemplar-v0",
+            "OccludedHard",
+            {"target_spec": "exemplar"},
+            "the hard track with the target named by pictures of it alone (query_color, query_depth) "
+            "instead of a mask: the same scenes seed for seed, recoloured so that one object answers "
+            "the query and look-alikes of its colour or shape surround it",
+        ),
+        TrackSpec(
+            "MPG-OccludedHardNovelExemplar-v0",
+            "OccludedHard",
+            {
+                "object_set": "random_urdfs_test",
+                "config": {"scene_tries": NOVEL_SCENE_TRIES, "generator": NOVEL_GENERATOR},
+                "target_spec": "exemplar",
+            },
+            "the unseen-object track with the target named by pictures of it alone, its scenes "
+            "recoloured as the blocks' exemplar track's",
+        ),
+        TrackSpec(
+            "MPG-OccludedHardCameraExemplar-v0",
+            "OccludedHard",
+            {"obs_mode": "camera", "visual_randomization": True, "target_spec": "exemplar"},
+            "the camera track with the target named by pictures of it alone, taken through the same "
+            "cameras with the episode's visual randomization; needs OpenGL",
+        ),
     )
 }
 """Track id -> spec; registered by ``import mpg_envs`` beside the stages' ids."""

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import sys
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+
+import mpg_envs  # noqa: F401  (registers the ids)
 
 RESET_CASES: tuple[tuple[str, int], ...] = (
     *((f"MPG-Stage{i}-v0", s) for i in range(1, 6) for s in (0, 1)),
@@ -54,10 +56,6 @@ def digest(value: Any) -> str:
 
 def reset_digests(env_id: str, seed: int, **kwargs: Any) -> list[str]:
     """Digests of ``env_id``'s reset observation and info at ``seed`` (made with ``kwargs``)."""
-    import gymnasium as gym
-
-    import mpg_envs  # noqa: F401  (registers the ids)
-
     env = gym.make(env_id, **kwargs)
     try:
         obs, info = env.reset(seed=seed)
@@ -67,7 +65,6 @@ def reset_digests(env_id: str, seed: int, **kwargs: Any) -> list[str]:
 
 
 def main(path: str) -> None:
-    os.environ.setdefault("MUJOCO_GL", "egl")
     record = {f"{env_id}@{seed}": reset_digests(env_id, seed) for env_id, seed in RESET_CASES}
     with open(path, "w") as f:
         json.dump(record, f, indent=1, sort_keys=True)
