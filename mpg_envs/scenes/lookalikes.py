@@ -39,7 +39,12 @@ def shape_key(asset: ObjectAsset) -> tuple[str, str]:
     return (asset.source, asset.name)
 
 
-def exemplar_colours(shapes: Sequence[Hashable], target: int, rng: np.random.Generator, palette_size: int = len(PALETTE)) -> tuple[int, ...]:
+def exemplar_colours(
+    shapes: Sequence[Hashable],
+    target: int,
+    rng: np.random.Generator,
+    palette_size: int = len(PALETTE),
+) -> tuple[int, ...]:
     """Palette indices of the objects of a scene whose shapes are ``shapes`` (one key per
     object, equal keys for equal shapes) and whose target is ``shapes[target]``, drawn from
     ``rng`` by the module's rule.
@@ -69,7 +74,9 @@ def exemplar_colours(shapes: Sequence[Hashable], target: int, rng: np.random.Gen
     return tuple(colours)
 
 
-def shared_looks(shapes: Sequence[Hashable], colours: Sequence[int], target: int, other: int) -> tuple[str, ...]:
+def shared_looks(
+    shapes: Sequence[Hashable], colours: Sequence[int], target: int, other: int
+) -> tuple[str, ...]:
     """What object ``other`` shares with the target (``"colour"``, ``"shape"``, in
     :data:`LOOKS` order; empty when nothing: not a look-alike)."""
     shared = []
@@ -84,7 +91,11 @@ def rule_breaks(shapes: Sequence[Hashable], colours: Sequence[int], target: int)
     """How a scene's colours break the rule (empty when they keep it): another object of the
     target's shape and colour, or a scene with objects of another shape none of which has the
     target's colour."""
-    breaks = [f"object {i} has the target's shape and colour" for i in range(len(shapes)) if i != target and len(shared_looks(shapes, colours, target, i)) == 2]
+    breaks = [
+        f"object {i} has the target's shape and colour"
+        for i in range(len(shapes))
+        if i != target and len(shared_looks(shapes, colours, target, i)) == 2
+    ]
     unlike = [i for i in range(len(shapes)) if shapes[i] != shapes[target]]
     if unlike and all(colours[i] != colours[target] for i in unlike):
         breaks.append("no object of another shape has the target's colour")

@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpg_envs.scenes.lookalikes import PALETTE, exemplar_colours, rule_breaks, shape_key, shared_looks
+from mpg_envs.scenes.lookalikes import (
+    PALETTE,
+    exemplar_colours,
+    rule_breaks,
+    shape_key,
+    shared_looks,
+)
 
 
 class Scripted:
@@ -58,7 +64,10 @@ def test_the_rule_holds_on_random_scenes():
 
 
 def test_rule_breaks_names_both_breaks():
-    assert rule_breaks(["a", "a", "b"], [1, 1, 2], 0) == ["object 1 has the target's shape and colour", "no object of another shape has the target's colour"]
+    assert rule_breaks(["a", "a", "b"], [1, 1, 2], 0) == [
+        "object 1 has the target's shape and colour",
+        "no object of another shape has the target's colour",
+    ]
 
 
 def test_bad_input_is_refused():
