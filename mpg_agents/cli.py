@@ -215,6 +215,15 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
 
 
 def _report_run(result: Any, json_path: str | None) -> int:
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    except RuntimeError as exc:
+        from mpg_envs.scenes.test_sets import TestSetError
+
+        if isinstance(exc, TestSetError):  # a stale or changed shipped test set: what to do is in its line
+            return fail(exc)
+        raise
     """:func:`_report` of a run's result (what finished), then one line on stderr naming what
     failed, if anything did: exit status 1."""
     code = _report(result, json_path)

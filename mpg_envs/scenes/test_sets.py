@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import functools
 import json
+import zipfile
+import zlib
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
@@ -31,14 +33,28 @@ import numpy as np
 
 from mpg_envs.scenes.generators import GeneratorConfig
 from mpg_envs.simulation.assets import ObjectAsset
+from mpg_envs.simulation.families import FAMILY_SEED_RANGES
 from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 from mpg_envs.grid.workspace import Workspace
 
 GENERATOR_VERSION = 1
 """Version of scene generation the shipped sets were made with."""
 
-TEST_SEED_START = 500000
+TEST_SEEDS: range = FAMILY_SEED_RANGES["test"]
+"""The held-out test env seeds (500000-699999; tuning seeds start at 700000): every test set's
+seeds lie here, and a reset of any other seed never reads a test-set file."""
+
+TEST_SEED_START = TEST_SEEDS.start
 """The held-out test seeds start here (Table I's evaluations use 500000 onwards)."""
+
+VISIBLE_FRACTION_TOLERANCE = 1e-4
+"""How far a test scene's visible fraction at reset may lie from the one its set records. The
+sets store it as float32 (about 1e-8 off) and a reset rebuilds the scene bit for bit, so an
+unchanged set matches to that; one pixel of a target's footprint (at most a few thousand
+pixels) is more than this, and a target moved 1 cm changes it by several hundredths."""
+
+LFS_POINTER_START = b"version https://git-lfs.github.com/spec/"
+"""How a Git LFS pointer file begins (what a clone without ``git lfs`` holds instead of a set)."""
 
 TEST_SET_WORKSPACE = Workspace()
 """Test sets are made, and apply, on the default workspace only."""
@@ -60,9 +76,20 @@ def test_set_name(stage_test_set: str, object_set: str) -> str | None:
 test_set_name.__test__ = False  # type: ignore[attr-defined]  # not a pytest test
 
 
-class StaleTestSetError(RuntimeError):
+class TestSetError(RuntimeError):
+    """A shipped test set that cannot be used as it is (stale, or its scenes changed)."""
+
+    __test__ = False  # not a pytest test class
+
+
+class StaleTestSetError(TestSetError):
     """A test set was made by another scene generator (code, parameters or version) than the
     running code's: its scenes are not the ones this code drops for its seeds."""
+
+
+class ChangedTestSetError(TestSetError):
+    """A test scene, rebuilt at its reset, is not the scene its set was made with: the target's
+    visible fraction there is not the recorded one (the file was changed since it was made)."""
 
 
 @dataclass(frozen=True)
@@ -142,6 +169,24 @@ class TestSet:
             f"--envs {env_id} --objects {self.num_objects}` (or reset with use_test_set=False to drop every scene)."
         )
 
+    def check_visible_fraction(self, seed: int, measured: float | None) -> None:
+        """Raise :class:`ChangedTestSetError`, naming the set, the seed and both values, unless
+        ``measured`` (the target's visible fraction in the rebuilt scene of ``seed``, on a clean
+        ray cast) is the recorded one within :data:`VISIBLE_FRACTION_TOLERANCE`."""
+        recorded = float(self.visible_fraction[self._index[int(seed)]])  # type: ignore[attr-defined]
+        if measured is not None and abs(measured - recorded) <= VISIBLE_FRACTION_TOLERANCE:
+            return
+        shown = "none (no target in view)" if measured is None else f"{measured:.6f}"
+        made_with = self.meta.get("mujoco_version", "an unrecorded version")
+        raise ChangedTestSetError(
+            f"test set {self.name}_{self.num_objects}: the scene of seed {seed} is not the one the set was made with "
+            f"(the target's visible fraction at reset is {shown}, the set records {recorded:.6f}, tolerance "
+            f"{VISIBLE_FRACTION_TOLERANCE:g}); restore the file {self.name}_{self.num_objects}.npz (reinstall the "
+            f"package, or `git checkout -- mpg_envs/test_scenes/{self.name}_{self.num_objects}.npz`) or regenerate it "
+            f"with `python benchmarks/make_test_sets.py --envs {self.meta.get('env_id', '<its env id>')} --objects "
+            f"{self.num_objects}` (the set was made with MuJoCo {made_with})"
+        )
+
     def save(self, path: str | Path) -> Path:
         """Write the set as a compressed ``.npz``."""
         path = Path(path)
@@ -167,23 +212,55 @@ def generator_meta(generator: GeneratorConfig) -> dict[str, str]:
 
 
 def load_test_set(path: str | Path) -> TestSet:
-    """Read a test-set file; raises ``ValueError`` naming the file when it is not one."""
-    with np.load(Path(path), allow_pickle=False) as data:
-        meta = dict(zip(data["meta_keys"].tolist(), data["meta_values"].tolist()))
-        if meta.get("format") != FORMAT:
-            raise ValueError(f"{path}: not an {FORMAT} file")
-        assets = data["assets"]
+    """Read a test-set file; raises ``ValueError`` naming the file when it is not one (a Git
+    LFS pointer, a truncated or foreign file, missing arrays, seeds outside :data:`TEST_SEEDS`)."""
+    path = Path(path)
+    with open(path, "rb") as file:
+        head = file.read(len(LFS_POINTER_START))
+    if head == LFS_POINTER_START:
+        raise ValueError(
+            f"{path}: a Git LFS pointer, not the test set itself; fetch the file with `git lfs pull` "
+            f"(in the repository's folder), or reinstall the package"
+        )
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in _ARRAYS if key in data.files}
+    except FileNotFoundError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:
+        raise ValueError(f"{path}: not a readable {FORMAT} file (truncated or damaged: {exc}); reinstall the package or regenerate it") from exc
+    except ValueError as exc:  # numpy's: a file that is no .npz (it would read it as a pickle), object arrays
+        raise ValueError(f"{path}: not an {FORMAT} file ({exc})") from exc
+    missing = [key for key in _ARRAYS if key not in arrays]
+    if missing:
+        raise ValueError(f"{path}: not an {FORMAT} file (no {', '.join(missing)})")
+    meta = dict(zip(arrays["meta_keys"].tolist(), arrays["meta_values"].tolist()))
+    if meta.get("format") != FORMAT or "name" not in meta:
+        raise ValueError(f"{path}: not an {FORMAT} file")
+    seeds, assets = arrays["seeds"], arrays["assets"]
+    if seeds.ndim != 1 or assets.ndim != 2:
+        raise ValueError(f"{path}: not an {FORMAT} file (seeds of shape {seeds.shape}, assets of shape {assets.shape})")
+    outside = [int(seed) for seed in seeds if int(seed) not in TEST_SEEDS]
+    if outside:
+        raise ValueError(f"{path}: seeds {outside[:3]} lie outside the test seeds {TEST_SEEDS.start}-{TEST_SEEDS.stop - 1}")
+    try:
         return TestSet(
             name=meta["name"],
             num_objects=assets.shape[1],
-            seeds=data["seeds"],
+            seeds=seeds,
             assets=assets,
-            positions=data["positions"],
-            quats=data["quats"],
-            targets=data["targets"],
-            visible_fraction=data["visible_fraction"],
+            positions=arrays["positions"],
+            quats=arrays["quats"],
+            targets=arrays["targets"],
+            visible_fraction=arrays["visible_fraction"],
             meta=meta,
         )
+    except ValueError as exc:  # arrays of mismatched shapes
+        raise ValueError(f"{path}: {exc}") from exc
+
+
+_ARRAYS = ("seeds", "assets", "positions", "quats", "targets", "visible_fraction", "meta_keys", "meta_values")
+"""The arrays of a test-set file (what :meth:`TestSet.save` writes)."""
 
 
 def shipped_set_path(name: str, num_objects: int) -> Path:

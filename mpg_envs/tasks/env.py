@@ -27,7 +27,7 @@ from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.tasks.episode_sim import EpisodeSim
 from mpg_envs.tasks.rewards import StepOutcome
 from mpg_envs.tasks.scene_source import (
-    RESET_OPTIONS, SceneRequest, arranged_start, checked_reset_options, drop_scene, scene_from_test_set,
+    RESET_OPTIONS, SceneRequest, arranged_start, check_test_scene, checked_reset_options, drop_scene, scene_from_test_set,
 )
 from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
 from mpg_envs.tasks.target_spec import SIMULATOR_KEYS, TargetNaming, target_observation_space
@@ -177,6 +177,8 @@ class MPGEnv(gym.Env):
         self.sim.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
         self.naming.start_episode(self.sim, self.target, seed, self.np_random)  # exemplar: colours and query
         obs = self._observe()
+        if self._test_seed is not None:  # a scene changed in its test set's file is refused (check_test_scene)
+            check_test_scene(self.sim, self.scene_request, self._test_seed, self.target, self._visible)
         info = {**self._reset_info(obs), **self.naming.reset_info()}
         self._obs, self._ended = obs, None  # the episode is open only now
         return self._copy_obs(self.naming.public(obs)), info
@@ -214,6 +216,7 @@ class MPGEnv(gym.Env):
     def _initialize_episode(self, seed: int | None, options: dict[str, Any]) -> None:
         """Build this episode's world and target in ``sim``: a scene file, else the shipped
         test set's scene of ``seed``, else objects dropped afresh (:mod:`mpg_envs.tasks.scene_source`)."""
+        self._test_seed: int | None = None  # the seed of a shipped test scene built here
         self.sim.initialize_episode(self.np_random)
         scene = options.get("scene")
         if scene is not None:
@@ -225,6 +228,7 @@ class MPGEnv(gym.Env):
         fixed = scene_from_test_set(request, seed)
         if fixed is not None:
             self._load_scene_file(fixed, drop_outside=False)
+            self._test_seed = seed  # reset() checks the scene against its set once it has observed it
             return
         # The share is drawn only with the option on: without it, episodes are as they were.
         if self.arranged is not None and self.sim.random.random() < self.arranged.share:

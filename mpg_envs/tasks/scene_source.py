@@ -14,7 +14,9 @@ when none is made in ``EnvConfig.scene_tries`` draws.
 (:mod:`mpg_envs.scenes.test_sets`), used only with the settings the set was generated with, and
 only if the set was made by this code: :func:`generator_digest` (the code that drops scenes and
 its parameters) must be the one the set records, else
-:class:`~mpg_envs.scenes.test_sets.StaleTestSetError` says how to regenerate it.
+:class:`~mpg_envs.scenes.test_sets.StaleTestSetError` says how to regenerate it. Once loaded,
+:func:`check_test_scene` compares the target's visible fraction with the recorded one
+(:class:`~mpg_envs.scenes.test_sets.ChangedTestSetError` for a scene changed in its file).
 
 Both work on the episode's simulation (:class:`~mpg_envs.tasks.episode_sim.EpisodeSim`) and a
 :class:`SceneRequest` (what the reset asks for), never on the env itself.
@@ -31,12 +33,13 @@ import inspect
 import json
 import os
 from dataclasses import asdict, dataclass
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
 from mpg_envs.scenes import generators
 
+from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.perception.occlusion import in_band, surrounded_sectors
 from mpg_envs.scenes.arranged import ArrangedScenes, ArrangementError, arrangement_scene, check_settled
 from mpg_envs.scenes.arrangement_draw import draw_arrangement
@@ -49,6 +52,9 @@ from mpg_envs.tasks.stages import StageSpec
 
 RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside", "num_objects")
 """The options ``MPGEnv.reset(options=...)`` takes."""
+
+if TYPE_CHECKING:
+    from mpg_envs.scenes.test_sets import TestSet
 
 BURY_BELOW = 0.5
 """A visible-fraction band whose upper bound is at most this uses the buried generator."""
@@ -139,21 +145,58 @@ def scene_from_test_set(request: SceneRequest, seed: int | None) -> SceneFile | 
     """The shipped test-set scene of ``seed`` for ``request``, or ``None`` when the stage has
     no test set for its object count, the seed is not in it, or the request's settings differ
     from those the set was generated with (its scenes would not be the env's)."""
+    test_set = _test_set_of(request, seed)
+    if test_set is None:
+        return None
+    test_set.check_made_by(generator_digest(request))
+    return test_set.scene(seed, request.object_set)
+
+
+def check_test_scene(sim: EpisodeSim, request: SceneRequest, seed: int, target: int | None, observed: float | None) -> None:
+    """Raise :class:`~mpg_envs.scenes.test_sets.ChangedTestSetError` (naming the set, the seed
+    and both values) unless the target's visible fraction in ``sim``'s world, just built from
+    :func:`scene_from_test_set`'s scene of ``seed``, is the one its set records: a scene changed
+    in its file since the set was made (a target moved 1 cm) is refused at its reset.
+
+    Measured on a clean ray cast, as the set was: ``observed``, the fraction the reset's own
+    observation measured, when that is one (ray-cast mode without visual randomization), so
+    the check costs nothing; else a one-off clean ray cast of the world (:func:`clean_visible_fraction`)."""
+    test_set = _test_set_of(request, seed)
+    if test_set is None:
+        raise ValueError(f"seed {seed} has no shipped test scene for {request.stage.env_id} at {request.num_objects} objects")
+    clean = sim.obs_mode == "raycast" and sim.visuals is None
+    test_set.check_visible_fraction(seed, observed if clean else clean_visible_fraction(sim, target))
+
+
+def clean_visible_fraction(sim: EpisodeSim, target: int | None) -> float | None:
+    """``target``'s visible fraction in a top-down ray cast of ``sim``'s world, without visual
+    randomization (what a test set records); ``None`` without a target."""
+    world = sim.world
+    if world is None:
+        raise RuntimeError("no world yet: build the scene first")
+    with RaycastHeightmapper(world.model, sim.config.workspace, num_threads=1) as caster:
+        maps = caster(world.data)
+    mask, _ = sim.target_view(maps.depth, target)
+    return sim.visible_fraction(maps, mask, target)
+
+
+def _test_set_of(request: SceneRequest, seed: int | None) -> TestSet | None:
+    """The shipped test set holding ``seed``'s scene for ``request`` (see
+    :func:`scene_from_test_set`), or ``None``. Only a test seed reads a set's file."""
     stage, config = request.stage, request.config
     if seed is None or not request.use_test_set or stage.test_set is None:
         return None
     if config.object_set_seed != 0 or request.visible_range != stage.visible_range:
         return None
-    from mpg_envs.scenes.test_sets import TEST_SET_WORKSPACE, find_test_set, test_set_name
+    from mpg_envs.scenes.test_sets import TEST_SEEDS, TEST_SET_WORKSPACE, find_test_set, test_set_name
 
     name = test_set_name(stage.test_set, request.object_set_name)  # the object set's own sets
-    if config.workspace != TEST_SET_WORKSPACE or name is None:
+    if config.workspace != TEST_SET_WORKSPACE or name is None or int(seed) not in TEST_SEEDS:
         return None
     test_set = find_test_set(name, request.num_objects)
     if test_set is None or not test_set.has_seed(seed) or config.generator != test_set.generator_config:
         return None
-    test_set.check_made_by(generator_digest(request))
-    return test_set.scene(seed, request.object_set)
+    return test_set
 
 
 def generator_digest(request: SceneRequest) -> str:
@@ -218,6 +261,7 @@ def arranged_start(sim: EpisodeSim, request: SceneRequest, arranged: ArrangedSce
             continue
         return target
     return None
+
 
 def checked_reset_options(options: Any) -> dict[str, Any]:
     """A copy of ``reset``'s ``options``, each of its type, else a ``ValueError`` naming the option
