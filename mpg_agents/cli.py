@@ -20,7 +20,7 @@ from mpg_agents.acting.coordination import COORDINATIONS
 from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.evaluation.env_options import parse_env_options
 from mpg_agents.evaluation.failures import NothingFinished
-from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_output, fail, read_config
+from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_net_setting, check_output, check_q_star_flag, fail, read_config
 from mpg_envs.files import WriteFailed, write_text_whole
 
 
@@ -50,7 +50,9 @@ def _add_net_setting_arguments(parser: argparse.ArgumentParser, prefix: str) -> 
 
 
 def _net_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """``MPGNetConfig`` field -> value of the :func:`_add_net_setting_arguments` options given."""
+    """``MPGNetConfig`` field -> value of the :func:`_add_net_setting_arguments` options given
+    (a :class:`UsageError` for a ``--target-margin`` outside its range)."""
+    check_net_setting("--target-margin", "target_margin_px", args.target_margin)
     given = (("grasp_region", args.grasp_region), ("target_margin_px", args.target_margin),
              ("move_region", args.move_region), ("grasp_fingers", args.grasp_fingers),
              ("move_fingers", args.move_fingers))
@@ -103,6 +105,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.learning.train_config import TrainConfig, json_safe
         from mpg_agents.learning import training_stages as ts
 
+        check_q_star_flag(args.q_star)
         base, stages = training_settings(args.config)
         flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name, None) is not None}
         base = replace(base, **flags)
@@ -197,6 +200,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
                 raise UsageError(f"--grasp-retries must be >= 0, got {args.grasp_retries}")
             extra += (("grasp_retries", args.grasp_retries),)
         if args.q_star is not None:
+            check_q_star_flag(args.q_star)
             extra += (("q_star", args.q_star),)
         if args.device is not None:
             extra += (("device", args.device),)
@@ -211,10 +215,6 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     except NothingFinished as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    return _report_run(result, args.json)
-
-
-def _report_run(result: Any, json_path: str | None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
@@ -224,6 +224,10 @@ def _report_run(result: Any, json_path: str | None) -> int:
         if isinstance(exc, TestSetError):  # a stale or changed shipped test set: what to do is in its line
             return fail(exc)
         raise
+    return _report_run(result, args.json)
+
+
+def _report_run(result: Any, json_path: str | None) -> int:
     """:func:`_report` of a run's result (what finished), then one line on stderr naming what
     failed, if anything did: exit status 1."""
     code = _report(result, json_path)
@@ -348,6 +352,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.acting.weights import export_weights, read_checkpoint_header
 
         check_checkpoint(args.src)
+        check_q_star_flag(args.q_star)
         check_output(args.dst, "dst", {"the source checkpoint": args.src})
         settings = _net_settings(args)
         primitives = tuple(p.strip() for p in args.primitives.split(",")) if args.primitives else None

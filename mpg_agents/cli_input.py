@@ -11,7 +11,7 @@ from typing import Any, Mapping
 
 from mpg_envs.files import WriteFailed, check_writable, same_file
 
-__all__ = ["UsageError", "check_checkpoint", "check_env_id", "check_output", "fail", "read_config"]
+__all__ = ["UsageError", "check_checkpoint", "check_env_id", "check_net_setting", "check_output", "check_q_star_flag", "fail", "read_config"]
 
 
 class UsageError(Exception):
@@ -76,14 +76,44 @@ def check_output(path: str | None, flag: str, inputs: Mapping[str, str | None] |
 
 
 def check_checkpoint(path: str | None) -> None:
-    """An existing MPGNet safetensors checkpoint (its header readable), else a :class:`UsageError`."""
+    """An existing MPGNet safetensors checkpoint, else a :class:`UsageError`: its header readable
+    and whole (:func:`~mpg_agents.acting.weights.read_checkpoint_header`: config, branches, a
+    Q*_g in range) and its tensors stored in the types it was written with
+    (:func:`~mpg_agents.acting.weights.check_tensor_dtypes`); no tensor data is read."""
     if path is None:
         return
     if not Path(path).is_file():
         raise UsageError(f"checkpoint {path!r} does not exist")
-    from mpg_agents.acting.weights import read_checkpoint_header
+    from mpg_agents.acting.weights import check_tensor_dtypes, read_checkpoint_header
 
     try:
-        read_checkpoint_header(path)
+        check_tensor_dtypes(path, read_checkpoint_header(path))
+    except ValueError as exc:  # each names the file and what is wrong with it
+        raise UsageError(str(exc)) from exc
     except Exception as exc:  # safetensors raises its own types for foreign files
         raise UsageError(f"{path!r} is not an MPGNet safetensors checkpoint: {exc}") from exc
+
+
+def check_q_star_flag(value: float | None, flag: str = "--q-star") -> None:
+    """A Q*_g given on the command line, in :func:`~mpg_agents.acting.grasp_threshold.q_star_range`,
+    else a :class:`UsageError` naming ``flag`` and the valid range (``None``: not given)."""
+    from mpg_agents.acting.grasp_threshold import check_in_range
+
+    try:
+        check_in_range(value, flag)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def check_net_setting(flag: str, field: str, value: Any) -> None:
+    """A network setting given on the command line (``field`` of ``MPGNetConfig``, e.g.
+    ``target_margin_px`` from ``--target-margin``) checked as the configuration checks it, before
+    any work; a :class:`UsageError` names ``flag`` and what is valid (``None``: not given)."""
+    if value is None:
+        return
+    from mpg_agents.network.mpgnet_config import MPGNetConfig
+
+    try:
+        MPGNetConfig(**{field: value})
+    except ValueError as exc:
+        raise UsageError(f"{flag} {value}: {exc}") from None

@@ -19,6 +19,8 @@ estimate. NaN is refused everywhere (:func:`check_q_star`); it is no way to say 
 - **Override**: a value given by hand (``mpg-train``/``mpg-eval``/``mpg-export --q-star``):
   :func:`check_override`, :func:`starting_q_star`, :func:`exported_q_star` (an export keeps
   training's value on record).
+- **Range**: :func:`q_star_range`, the values a threshold on the Q of grasps can mean (from the
+  rewards); a header, an override and an estimate outside it are refused (:func:`check_in_range`).
 - **Record**: ``calibration.json``, every in-scene measurement of a stage
   (:func:`write_calibration`), and the one number of a pipeline's ``pipeline.json``
   (:func:`as_record`).
@@ -29,6 +31,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass
+from numbers import Real
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
@@ -39,6 +42,8 @@ from torch import nn
 
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+from mpg_envs.tasks.rewards import RewardConfig
+from mpg_envs.tasks.stages import STAGES
 from mpg_envs.files import write_text_whole
 
 if TYPE_CHECKING:
@@ -60,6 +65,37 @@ def check_q_star(value: float | None) -> float | None:
     if math.isnan(q_star):
         raise ValueError("Q*_g must be a number, or None for no Q*_g yet; got NaN")
     return q_star
+
+
+def q_star_range(reward: RewardConfig = RewardConfig()) -> tuple[float, float]:
+    """``(low, high)``: the Q*_g values that mean a threshold, ``low < q_star <= high``.
+
+    Q*_g is compared with the Q of grasps, and a grasp's Q lies in what the rewards allow. A
+    grasp earns ``reward.success`` or 0, or (strict retrieval) ``reward.wrong_object``, which ends
+    the episode; a failed grasp's 0 is followed by a discounted best Q no lower. So no grasp's Q
+    lies below ``low = min(0, wrong_object)`` (-1): a Q*_g there passes every grasp. A Q
+    estimates a return: at most the highest reward (``success``, ``improved``) for every motion
+    of the longest episode of the registered stages, whatever the discount: ``high`` = 15 x 1.
+    (The paper's discount 0.5 bounds returns at 2, but learned Q overshoots it: calibrations of
+    this code's runs gave up to 6.3.)
+    """
+    low = min(0.0, reward.wrong_object)
+    high = max(reward.success, reward.improved) * max(stage.max_motions for stage in STAGES.values())
+    return float(low), float(high)
+
+
+def check_in_range(q_star: float | None, what: str = "Q*_g") -> float | None:
+    """``q_star`` (``None`` passes: no Q*_g) when it lies in :func:`q_star_range`; else a
+    ``ValueError`` saying ``what`` it is (e.g. ``"--q-star"``) and the valid range."""
+    if q_star is None:
+        return None
+    low, high = q_star_range()
+    if isinstance(q_star, bool) or not isinstance(q_star, Real) or not low < q_star <= high:
+        raise ValueError(
+            f"{what} is {q_star!r}; valid: a number in ({low:g}, {high:g}] (a grasp's Q lies in what the rewards "
+            f"allow: at or below {low:g} every grasp passes, and no return exceeds {high:g})"
+        )
+    return float(q_star)
 
 
 def format_q_star(q_star: float | None) -> str:
@@ -107,13 +143,16 @@ def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = 0.5) -> f
     quantile lets the workflow take more of the grasps that do succeed.
 
     Raises:
-        ValueError: ``quantile`` outside [0, 1], or no grasp to take a quantile of.
+        ValueError: ``quantile`` outside [0, 1], no grasp to take a quantile of, or a quantile
+            outside :func:`q_star_range` (a diverged grasp net: no weights header may carry it).
     """
     if not 0.0 <= quantile <= 1.0:
         raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
     if len(target_grasp_q) == 0:
         raise ValueError("Q*_g needs the Q of at least one grasp that took the target")
-    return float(np.quantile(target_grasp_q, quantile))
+    q_star = float(np.quantile(target_grasp_q, quantile))
+    check_in_range(q_star, f"the Q*_g estimated from {len(target_grasp_q)} grasps that took the target (a diverged grasp net?)")
+    return q_star
 
 
 @dataclass(frozen=True)
@@ -235,12 +274,11 @@ def check_override(q_star: float) -> float:
     """A Q*_g given by hand (``--q-star``), as a float.
 
     Raises:
-        ValueError: it is not a finite number.
+        ValueError: it is not a number in :func:`q_star_range`.
     """
-    q_star = float(q_star)
-    if not math.isfinite(q_star):
-        raise ValueError(f"q_star must be a finite number, got {q_star!r}")
-    return q_star
+    if isinstance(q_star, bool) or not isinstance(q_star, Real):
+        raise ValueError(f"q_star must be a number, got {q_star!r}")
+    return check_in_range(float(q_star), "q_star")
 
 
 def starting_q_star(override: float | None, checkpoint: float | None) -> float | None:
@@ -259,7 +297,7 @@ def exported_q_star(
     as ``q_star_from_training`` (a copy of a copy keeps the first).
 
     Raises:
-        ValueError: ``override`` is not a finite number.
+        ValueError: ``override`` is not a number in :func:`q_star_range`.
     """
     extra = dict(extra)
     if override is None:

@@ -1,20 +1,22 @@
 """MPGNet's weight file: safetensors tensors with one JSON header (architecture, Q*_g, extras).
 
 Never unpickles anything. ``read_checkpoint_header`` reads the header alone (what the CLIs
-check before building a network; a Q*_g that is not a finite number or ``null`` is refused);
-``load_mpgnet_weights`` checks the architecture first and names any mismatch, and refuses
-tensors with NaN or infinite values; ``save_mpgnet`` refuses to write them.
+check before building a network): its ``config`` and ``primitives`` must be there, ``extra`` a
+mapping, and Q*_g a number in :func:`~mpg_agents.acting.grasp_threshold.q_star_range` or
+``null``. ``check_tensor_dtypes`` reads each tensor's stored type (no tensor data): a file
+re-saved with other types (float weights as int32) is refused. ``load_mpgnet_weights`` checks
+both and the architecture first and names any mismatch, and refuses tensors with NaN or
+infinite values; ``save_mpgnet`` refuses to write them.
 """
 
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from mpg_agents.acting.coordination import check_coordination
-from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, exported_q_star
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, check_in_range, exported_q_star
 from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
@@ -94,10 +96,67 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
             f"{path}: unsupported checkpoint format {header.get('format') if isinstance(header, dict) else header!r}, "
             f"expected {CHECKPOINT_FORMAT!r}"
         )
+    for field in ("config", "primitives"):
+        if field not in header:
+            raise ValueError(f"{path}: its header has no {field!r} ({HEADER_FIELDS[field]}); it was not written by save_mpgnet/save_weights")
+    if not isinstance(header["config"], dict):
+        raise ValueError(f"{path}: its header's 'config' is a {type(header['config']).__name__}; valid: {HEADER_FIELDS['config']}")
+    primitives = header["primitives"]
+    if not isinstance(primitives, list) or not all(isinstance(p, str) for p in primitives):
+        raise ValueError(f"{path}: its header's 'primitives' is {primitives!r}; valid: {HEADER_FIELDS['primitives']}")
+    try:
+        check_primitives(primitives)
+    except ValueError as exc:
+        raise ValueError(f"{path}: its header's 'primitives': {exc}") from None
+    if not isinstance(header.get("extra", {}), dict):
+        raise ValueError(f"{path}: its header's 'extra' is a {type(header['extra']).__name__}; valid: {HEADER_FIELDS['extra']}")
     q_star = header.get("q_star")
-    if q_star is not None and (isinstance(q_star, bool) or not isinstance(q_star, (int, float)) or not math.isfinite(q_star)):
-        raise ValueError(f"{path}: its header's Q*_g (q_star) is {q_star!r}; valid: a finite number, or null (never calibrated)")
+    if q_star is not None:
+        try:
+            check_in_range(q_star, "its header's Q*_g (q_star)")
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}, or null (never calibrated)") from None
     return header
+
+
+HEADER_FIELDS: dict[str, str] = {
+    "config": "a JSON object of MPGNetConfig fields, the network's settings",
+    "primitives": "a JSON list of the branches it holds, e.g. [\"push\", \"grasp\"]",
+    "extra": "a JSON object (what training and export recorded), or none",
+}
+"""The header fields :func:`read_checkpoint_header` checks beyond the format and Q*_g, and
+what each must be."""
+
+_STORED_TYPES = {"F16": "float16", "BF16": "bfloat16", "F32": "float32", "F64": "float64", "I64": "int64", "I32": "int32",
+                 "I16": "int16", "I8": "int8", "U8": "uint8", "BOOL": "bool"}
+
+
+def stored_float_type(header: Mapping[str, Any]) -> str:
+    """The floating type a checkpoint's weights are stored in: ``"float16"`` for an exported
+    copy (its header's ``extra`` says ``float16``), else ``"float32"``, as training writes."""
+    return "float16" if header.get("extra", {}).get("float16") else "float32"
+
+
+def check_tensor_dtypes(path: str | Path, header: Mapping[str, Any] | None = None) -> None:
+    """``ValueError`` naming the first tensor of the checkpoint at ``path`` stored in another
+    type than written: weights in :func:`stored_float_type`, BatchNorm's batch counters
+    (``*.num_batches_tracked``) in int64. Reads the types alone, no tensor data: a file whose
+    float weights were re-saved as int32 would load as truncated weights."""
+    from safetensors import safe_open
+
+    header = read_checkpoint_header(path) if header is None else header
+    floating = stored_float_type(header)
+    with safe_open(str(path), framework="pt") as f:
+        for key in f.keys():
+            stored = f.get_slice(key).get_dtype()
+            stored = _STORED_TYPES.get(stored, stored)
+            expected = "int64" if key.endswith("num_batches_tracked") else floating
+            if stored != expected:
+                why = "its header says float16 (an exported copy)" if floating == "float16" else "float32, as training writes"
+                raise ValueError(
+                    f"checkpoint {path}: tensor {key!r} is stored as {stored}, expected {expected} ({why}); the file was "
+                    f"re-saved with other types: use the checkpoint as training or mpg-export wrote it"
+                )
 
 
 def check_finite(tensors: Mapping[str, Any], what: str) -> None:
@@ -127,7 +186,8 @@ def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = T
     from safetensors.torch import load_file
 
     header = read_checkpoint_header(path)
-    file_cfg = header.get("config", {})
+    check_tensor_dtypes(path, header)
+    file_cfg = header["config"]
     mine = net.config.to_dict()
     for key in ("variant", "trunk_depth", "head_channels", "num_rotations", "heightmap_size"):
         if file_cfg.get(key) != mine[key]:
@@ -135,7 +195,7 @@ def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = T
                 f"checkpoint {path} has {key}={file_cfg.get(key)!r} but this network has {key}={mine[key]!r}; "
                 "build the network with the checkpoint's configuration (MPGNetConfig.from_dict(header['config']))"
             )
-    missing_branches = [p for p in net.primitives if p not in header.get("primitives", [])]
+    missing_branches = [p for p in net.primitives if p not in header["primitives"]]
     if missing_branches and strict_branches:
         raise ValueError(
             f"checkpoint {path} has branches {header.get('primitives')} but this network needs {list(net.primitives)} "

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field
 from numbers import Integral, Real
 from typing import Any, Callable
 
-from mpg_agents.acting.grasp_threshold import UNCALIBRATED
+from mpg_agents.acting.grasp_threshold import UNCALIBRATED, check_in_range
 from mpg_agents.learning.td_step import TDStepConfig
 from mpg_envs.settings_fields import check_known_fields
 
@@ -167,8 +167,7 @@ def check_train_config(cfg: TrainConfig) -> None:
         _pair("q_bounds", cfg.q_bounds, "two finite numbers [low, high] with low < high",
               lambda a, b: math.isfinite(a) and math.isfinite(b) and a < b)
     _integer("heuristic_after_failed_grasps", cfg.heuristic_after_failed_grasps, 0)
-    if cfg.q_star is not None and (isinstance(cfg.q_star, bool) or not isinstance(cfg.q_star, Real) or not math.isfinite(cfg.q_star)):
-        raise ValueError(f"training setting q_star must be a finite number or None (the starting weights'), got {cfg.q_star!r}")
+    check_in_range(cfg.q_star, "training setting q_star (None: the starting weights')")
     _integer("demonstration_episodes", cfg.demonstration_episodes, 0)
     if cfg.discriminator is not None and not isinstance(cfg.discriminator, str):
         raise ValueError(f"training setting discriminator must be a checkpoint path or None, got {cfg.discriminator!r}")

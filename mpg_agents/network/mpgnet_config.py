@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
+from numbers import Integral
 from typing import Any, Mapping
 
 from mpg_agents.network.mobilenet import DEFAULT_BN_MOMENTUM, full_depth
@@ -171,6 +172,13 @@ class MPGNetConfig:
             raise ValueError(f"grasp_region must be one of {GRASP_REGIONS}, got {self.grasp_region!r}")
         if self.move_region not in MOVE_REGIONS:
             raise ValueError(f"move_region must be one of {MOVE_REGIONS}, got {self.move_region!r}")
+        low, high = self.target_margin_range
+        if isinstance(self.target_margin_px, bool) or not isinstance(self.target_margin_px, Integral) or not low <= self.target_margin_px <= high:
+            raise ValueError(
+                f"target_margin_px must be an integer in [{low}, {high}] pixels, got {self.target_margin_px!r} (shrinking "
+                f"by more than half the heightmap keeps each part's deepest pixels, as {low} does; growing by {high} "
+                f"already covers the whole heightmap)"
+            )
         if not self.visible_band_m >= 0:
             raise ValueError(f"visible_band_m must be >= 0 metres, got {self.visible_band_m}")
         if not self.move_band_m >= 0:
@@ -185,6 +193,14 @@ class MPGNetConfig:
             raise ValueError(f"color_input must be True or False, got {self.color_input!r}")
         if self.trunk_batch is not None and self.trunk_batch < 1:
             raise ValueError(f"trunk_batch must be None or positive, got {self.trunk_batch}")
+
+    @property
+    def target_margin_range(self) -> tuple[int, int]:
+        """The ``target_margin_px`` values that mean something, ``[low, high]``: shrinking past
+        half the heightmap leaves each part of a mask its deepest pixels, as shrinking by half
+        does (:func:`mpg_agents.network.regions.target_pixels`), and growing by the heightmap's
+        side less one covers all of it from any pixel."""
+        return -(self.heightmap_size // 2), self.heightmap_size - 1
 
     @classmethod
     def small(cls, **overrides: Any) -> "MPGNetConfig":

@@ -60,12 +60,13 @@ def test_nan_weights_are_never_written(tmp_path, small_net):
     assert not (tmp_path / "w.safetensors").exists()
 
 
-@pytest.mark.parametrize("q_star, shown", [(float("nan"), "nan"), (float("inf"), "inf"), ("high", "'high'")])
-def test_a_non_finite_q_star_in_the_header_is_refused(tmp_path, checkpoint, capsys, q_star, shown):
+@pytest.mark.parametrize("q_star, shown", [(float("nan"), "nan"), (float("inf"), "inf"), ("high", "'high'"), (-3, "-3"), (1e9, "1000000000.0")])
+def test_a_q_star_out_of_range_in_the_header_is_refused(tmp_path, checkpoint, capsys, q_star, shown):
     from mpg_agents.cli import eval_main, export_main
 
     path = rewritten(checkpoint, tmp_path / "q.safetensors", header={"q_star": q_star})
-    message = f"q.safetensors: its header's Q*_g (q_star) is {shown}; valid: a finite number, or null (never calibrated)"
+    message = (f"q.safetensors: its header's Q*_g (q_star) is {shown}; valid: a number in (-1, 15] (a grasp's Q lies in "
+               "what the rewards allow: at or below -1 every grasp passes, and no return exceeds 15), or null (never calibrated)")
     with pytest.raises(ValueError) as info:
         read_checkpoint_header(path)
     assert message in str(info.value)
@@ -109,3 +110,80 @@ def test_export_never_overwrites_its_source(tmp_path, checkpoint, capsys):
     assert checkpoint.read_bytes() == before
     assert export_main([str(checkpoint), str(tmp_path / "missing" / "copy.safetensors")]) == 2
     assert "missing' does not exist; create it first" in capsys.readouterr().err
+
+
+def test_the_q_star_range_comes_from_the_rewards():
+    from mpg_agents.acting.grasp_threshold import check_in_range, q_star_range
+    from mpg_envs.tasks.rewards import RewardConfig
+
+    # Grasps earn 1 or 0, a strict mis-pick -1; the longest stage (Stage I) has 15 motions.
+    assert q_star_range() == (-1.0, 15.0)
+    assert q_star_range(RewardConfig(success=2.0, wrong_object=-0.5)) == (-0.5, 30.0)
+    assert check_in_range(0.6) == 0.6 and check_in_range(6.3) == 6.3 and check_in_range(15) == 15.0 and check_in_range(None) is None
+    for bad in (-1, -3, 15.5, 1e9):
+        with pytest.raises(ValueError, match=r"valid: a number in \(-1, 15\]"):
+            check_in_range(bad)
+
+
+def test_an_out_of_range_q_star_or_target_margin_flag_is_refused_before_any_work(tmp_path, checkpoint, capsys):
+    from mpg_agents.cli import eval_main, export_main, train_main
+
+    common = ["--policy", str(checkpoint), "--env", "MPG-Stage5-v0", "--episodes", "1", "--quiet"]
+    assert eval_main([*common, "--q-star", "-1"]) == 2
+    assert "error: --q-star is -1.0; valid: a number in (-1, 15]" in capsys.readouterr().err
+    assert train_main(["--env", "MPG-Stage2-v0", "--out", str(tmp_path / "run"), "--q-star", "-1"]) == 2
+    assert "error: --q-star is -1.0; valid: a number in (-1, 15]" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+    assert export_main([str(checkpoint), str(tmp_path / "copy.safetensors"), "--q-star", "16"]) == 2
+    assert "error: --q-star is 16.0; valid: a number in (-1, 15]" in capsys.readouterr().err
+    assert eval_main([*common, "--target-margin", "1000"]) == 2
+    assert "error: --target-margin 1000: target_margin_px must be an integer in [-112, 223] pixels, got 1000" in capsys.readouterr().err
+    assert export_main([str(checkpoint), str(tmp_path / "copy.safetensors"), "--target-margin", "-113"]) == 2
+    assert "target_margin_px must be an integer in [-112, 223] pixels, got -113" in capsys.readouterr().err
+    assert not (tmp_path / "copy.safetensors").exists()
+
+
+def test_float_weights_resaved_as_integers_are_refused_naming_the_tensor(tmp_path, checkpoint, capsys):
+    from mpg_agents.acting.weights import check_tensor_dtypes
+    from mpg_agents.cli import eval_main
+
+    state = load_file(str(checkpoint))
+    key = next(k for k, v in state.items() if v.is_floating_point() and k.startswith("branches.grasp"))
+    path = rewritten(checkpoint, tmp_path / "int.safetensors", tensors={key: state[key].to(torch.int32)})
+    message = f"int.safetensors: tensor '{key}' is stored as int32, expected float32 (float32, as training writes)"
+    for check in (load_mpgnet, check_tensor_dtypes):
+        with pytest.raises(ValueError) as info:
+            check(path)
+        assert message in str(info.value)
+    assert eval_main(["--policy", str(path), "--env", "MPG-Stage5-v0", "--episodes", "1", "--quiet"]) == 2
+    assert message in capsys.readouterr().err
+    # An exported copy stores float16 and says so; its float32 re-save is refused too.
+    copy = export_weights(checkpoint, tmp_path / "copy.safetensors")
+    check_tensor_dtypes(copy)
+    resaved = rewritten(copy, tmp_path / "f32.safetensors", tensors={key: load_file(str(copy))[key].float()})
+    with pytest.raises(ValueError, match=rf"tensor '{key}' is stored as float32, expected float16 \(its header says float16"):
+        load_mpgnet(resaved)
+
+
+@pytest.mark.parametrize("header, message", [
+    ({"config": None}, "its header has no 'config' (a JSON object of MPGNetConfig fields, the network's settings)"),
+    ({"primitives": None}, "its header has no 'primitives' (a JSON list of the branches it holds"),
+    ({"extra": ["a"]}, "its header's 'extra' is a list; valid: a JSON object (what training and export recorded), or none"),
+    ({"config": [1]}, "its header's 'config' is a list; valid: a JSON object of MPGNetConfig fields"),
+    ({"primitives": ["jump"]}, "its header's 'primitives': primitives must be a non-empty subset of"),
+])
+def test_a_header_missing_or_with_a_wrong_field_is_refused_naming_it(tmp_path, checkpoint, capsys, header, message):
+    from mpg_agents.cli import eval_main
+
+    path = tmp_path / "h.safetensors"
+    with safe_open(str(checkpoint), framework="pt") as f:
+        doc = json.loads(f.metadata()["mpgnet"])
+    doc.update(header)
+    doc = {k: v for k, v in doc.items() if v is not None}
+    save_file(load_file(str(checkpoint)), str(path), metadata={"mpgnet": json.dumps(doc)})
+    with pytest.raises(ValueError) as info:
+        load_mpgnet(path)
+    assert f"h.safetensors: {message}" in str(info.value)
+    assert eval_main(["--policy", str(path), "--env", "MPG-Stage5-v0", "--episodes", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1

@@ -99,7 +99,7 @@ def test_mpg_eval_q_star_overrides_the_checkpoint(tmp_path, capsys):
     assert NetworkPolicy(path, env).policy.q_star == 1.5
     policy = NetworkPolicy(path, env, q_star=0.5)
     assert policy.policy.q_star == 0.5 and policy.name.endswith("[Q*_g: 0.5]")
-    with pytest.raises(ValueError, match="q_star must be a finite number"):
+    with pytest.raises(ValueError, match=r"q_star is nan; valid: a number in \(-1, 15\]"):
         NetworkPolicy(path, env, q_star=float("nan"))
     env.close()
     assert eval_main(["--policy", str(path), "--env", "MPG-Stage2-v0", "--episodes", "1", "--q-star", "0.25", "--quiet"]) == 0
