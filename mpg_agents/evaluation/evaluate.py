@@ -25,6 +25,7 @@ import numpy as np
 
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, describe_failures, failures_line
+from mpg_agents.evaluation.finding import FindingTally, finding_line, finding_summary
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.grid.actions import PRIMITIVES
@@ -54,6 +55,8 @@ class EpisodeRecord:
     actions: tuple[int | tuple[float, ...], ...] = ()
     visuals: dict[str, Any] | None = None  # the episode's drawn visual randomization (env option visual_randomization)
     steps: tuple[MotionRecord, ...] = ()  # what each motion met (mpg_agents.evaluation.motion_log)
+    first_sight: int | None = None  # motions until the target first showed (mpg_agents.evaluation.finding)
+    lookalike_grasps: int | None = None  # mis-picks of a look-alike (exemplar envs; None: not reported)
     seconds: float = field(default=0.0, compare=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -61,6 +64,8 @@ class EpisodeRecord:
         del data["seconds"]
         if data["visuals"] is None:  # records of envs without visual randomization stay as they were
             del data["visuals"]
+        if data["lookalike_grasps"] is None:  # only exemplar envs report look-alikes
+            del data["lookalike_grasps"]
         return data
 
     @property
@@ -105,6 +110,8 @@ class EvalResult:
     versions: dict[str, str] = field(default_factory=dict)  # package, env and MuJoCo versions
     # episodes that raised instead of ending (seed and error; the metrics are over the others)
     failures: list[EpisodeFailure] = field(default_factory=list)
+    # motions to first sight and look-alike grasps (mpg_agents.evaluation.finding.finding_summary)
+    finding: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready data; wall time and the worker count are left out so one seed gives one file."""
@@ -136,6 +143,7 @@ class EvalResult:
             ("  without a mis-pick", f"{100 * self.clean_success_rate:.1f}% [{100 * self.clean_success_interval[0]:.1f}, {100 * self.clean_success_interval[1]:.1f}]"),
             ("mis-picks per episode", f"{self.mispicks_per_episode:.2f}"),
             ("grasp success rate", "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.1f}% of {self.grasp_attempts}"),
+            ("finding the target", finding_line(self.finding)),
             ("success by visibility", ", ".join(f"{band}: {c['successes']}/{c['episodes']}" for band, c in self.success_by_visibility.items()) or "n/a"),
             ("primitives used", ", ".join(f"{p} {n}" for p, n in self.primitive_counts.items())),
             ("episodes ended by", ", ".join(f"{r} {n}" for r, n in self.end_reasons.items())),
@@ -198,10 +206,12 @@ def run_episode(
     primitives = dict.fromkeys(PRIMITIVES, 0)
     grasps = target_grasps = wrong_grasps = 0
     actions, steps = [], []
+    finding = FindingTally(visible)
     for step in episode_steps(env, obs, policy.act, _recorded):
         actions.append(step.action)
         steps.append(MotionRecord.from_info(step.info, info.get("visible_fraction")))
         info = step.info
+        finding.step(info)
         if on_step is not None:
             on_step(index, step.reward, info)
         primitives[info["primitive"]] += 1
@@ -224,6 +234,8 @@ def run_episode(
         actions=tuple(actions),
         visuals=reset_info.get("visual_randomization"),
         steps=tuple(steps),
+        first_sight=finding.first_sight,
+        lookalike_grasps=finding.lookalike_grasps,
         seconds=time.perf_counter() - start,
     )
 
@@ -287,6 +299,7 @@ def summarise(
         clean_success_interval=wilson_interval(clean, len(ordered)),
         mispicks_per_episode=sum(r.wrong_grasps for r in ordered) / len(ordered),
         success_by_visibility=success_by_visibility(ordered),
+        finding=finding_summary(ordered),
         env_options=dict(env_options or {}),
         versions=versions(env_id),
         failures=failed,
