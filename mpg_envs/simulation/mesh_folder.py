@@ -79,9 +79,10 @@ def load_mesh_folder(
     the result's ``skipped``.
 
     Args:
-        workers: worker processes decomposing meshes at once; ``None`` means the cores free now
-            (:func:`mpg_envs.threads.num_threads`: ``MPG_NUM_THREADS`` when set), at most one
-            per file. With 1, meshes are decomposed one by one in the shared worker.
+        workers: worker processes decomposing meshes at once, at most one per file; ``None``
+            means :func:`mpg_envs.threads.num_threads` (``MPG_NUM_THREADS`` or
+            ``OMP_NUM_THREADS`` when set, else the cores free now). With 1, meshes are
+            decomposed one by one in the shared worker.
 
     Returns:
         The objects (a list) with ``skipped``, the files left out.

@@ -155,20 +155,20 @@ def test_mesh_folder_errors(tmp_path: Path) -> None:
     bad = tmp_path / "bad"
     bad.mkdir()
     (bad / "fine.stl").write_bytes(b"")  # empty file: no triangles
-    with pytest.raises(ValueError, match="fine.stl"):
-        load_mesh_folder(bad, cache_dir=tmp_path / "cache")
+    with pytest.warns(RuntimeWarning, match="skipping a mesh"), pytest.raises(ValueError, match="fine.stl"):
+        load_mesh_folder(bad, cache_dir=tmp_path / "cache")  # its only mesh skipped: the folder fails
 
     garbage = tmp_path / "garbage"
     garbage.mkdir()
     (garbage / "junk.obj").write_bytes(np.random.default_rng(0).bytes(512))
-    with pytest.raises(ValueError, match="junk.obj"):
-        load_mesh_folder(garbage, cache_dir=tmp_path / "cache")
+    with pytest.warns(RuntimeWarning, match="skipping a mesh"), pytest.raises(ValueError, match="junk.obj"):
+        load_mesh_folder(garbage, cache_dir=tmp_path / "cache")  # its only mesh skipped: the folder fails
 
     flat = tmp_path / "flat"
     flat.mkdir()
     (flat / "plane.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n")
-    with pytest.raises(ValueError, match=r"plane\.obj.*zero volume"):
-        load_mesh_folder(flat, cache_dir=tmp_path / "cache")
+    with pytest.warns(RuntimeWarning, match="skipping a mesh"), pytest.raises(ValueError, match=r"plane\.obj.*zero volume"):
+        load_mesh_folder(flat, cache_dir=tmp_path / "cache")  # its only mesh skipped: the folder fails
 
     empty = tmp_path / "empty"
     empty.mkdir()
