@@ -14,10 +14,13 @@ Public entry points (``ARCHITECTURE.md`` maps every module):
 - :func:`save_qmap_png` (``mpg_agents.evaluation.visualize``): Q-map pictures.
 """
 
+import importlib
+
 from mpg_envs._version import __version__  # one version for both packages
 from mpg_envs.threads import use_passive_openmp_wait
 
-use_passive_openmp_wait()  # before torch loads OpenMP: idle threads sleep, not spin, so runs side by side share the cores
+# Before torch loads OpenMP: idle threads sleep, not spin, so runs side by side share the cores.
+use_passive_openmp_wait()
 
 # The public names load on first use (PEP 562), so ``mpg-eval --help`` and argument errors do not
 # wait for torch, and only the SB3 adapter's names import Stable-Baselines3.
@@ -56,8 +59,6 @@ def __getattr__(name: str):
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module 'mpg_agents' has no attribute {name!r}")
-    import importlib
-
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value
     return value

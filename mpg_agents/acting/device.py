@@ -23,7 +23,7 @@ def resolve_device(name: str | torch.device) -> torch.device:
         ValueError: ``name`` is not one of :data:`DEVICES` (a ``cuda:N`` index is accepted),
             or it asks for CUDA on a machine without it.
     """
-    import torch  # here: the command lines read DEVICES without loading torch
+    import torch  # noqa: PLC0415 - the command lines read DEVICES without loading torch
 
     if isinstance(name, torch.device):
         name = str(name)

@@ -55,7 +55,8 @@ def reset_first_valid(
     Raises:
         InvalidSceneError: :data:`MAX_SKIPPED_SEEDS` seeds in a row gave no valid scene.
     """
-    from mpg_envs.scenes.generators import InvalidSceneError
+    # Start-up time: the generators load the simulation (mujoco, trimesh, CoACD), this module does not.
+    from mpg_envs.scenes.generators import InvalidSceneError  # noqa: PLC0415
 
     for attempt in range(MAX_SKIPPED_SEEDS + 1):
         try:

@@ -23,7 +23,7 @@ def finger_geometry(env: gym.Env | None = None) -> FingerGeometry:
         TypeError: ``env`` is not an MPG env (it has no ``EnvConfig``).
     """
     if env is None:
-        from mpg_envs.tasks.config import EnvConfig  # lazily: it loads the simulation
+        from mpg_envs.tasks.config import EnvConfig  # noqa: PLC0415 - start-up time: it loads the simulation
 
         return geometry_of_config(EnvConfig())
     config = getattr(env.unwrapped, "config", None)

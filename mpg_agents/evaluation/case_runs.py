@@ -30,6 +30,7 @@ from typing import Any, Callable, Sequence
 import gymnasium as gym
 
 from mpg_agents.evaluation.evaluate import EpisodeRecord, env_id_of, run_episode
+from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, describe_failures, failures_line
 from mpg_envs._version import __version__
 from mpg_envs.scenes.cases import Case, CaseSet, jitter_scene
@@ -273,8 +274,6 @@ def run_case_set(
     """:func:`run_cases` with a fresh ``gym.make(env_id)`` (strict retrieval, :data:`STRICT`,
     unless ``env_kwargs`` says otherwise) and :func:`mpg_agents.evaluation.policy_zoo.make_policy`'s
     ``policy_name``."""
-    from mpg_agents.evaluation.policy_zoo import make_policy
-
     settings = {**STRICT, **(env_kwargs or {})}
     env = gym.make(env_id, **settings)
     try:

@@ -9,6 +9,7 @@ and kept as text otherwise (``camera``, ``fail``): ``--env-option obs_mode=camer
 from __future__ import annotations
 
 import ast
+import inspect
 from typing import Any, Iterable
 
 RESERVED = ("num_objects",)
@@ -38,9 +39,7 @@ def literal_or_text(raw: str) -> Any:
 
 def env_keywords() -> tuple[str, ...]:
     """The keywords an MPG env takes besides its stage and object count."""
-    import inspect
-
-    from mpg_envs.tasks.env import MPGEnv
+    from mpg_envs.tasks.env import MPGEnv  # noqa: PLC0415 - start-up time: it loads the simulation
 
     names = inspect.signature(MPGEnv.__init__).parameters
     return tuple(n for n in names if n not in ("self", "stage", *RESERVED))

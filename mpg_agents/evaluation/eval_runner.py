@@ -20,8 +20,10 @@ paths readable at the same absolute path.
 from __future__ import annotations
 
 import logging
+import multiprocessing as mp
 import os
 import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,9 +31,11 @@ from typing import Any, Callable, Iterator, Sequence
 
 from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, registered_options, run_episodes, summarise
 from mpg_agents.evaluation.failures import EpisodeFailure
+from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
 
+import mpg_envs  # registers the envs in a fresh worker
 from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
-from mpg_envs.threads import one_thread_children
+from mpg_envs.threads import one_thread_children, worker_init
 
 
 @dataclass(frozen=True)
@@ -51,8 +55,6 @@ class EvalJob:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
         if self.num_objects is not None and self.num_objects < 1:
             raise ValueError(f"num_objects must be >= 1, got {self.num_objects}")
-        from mpg_agents.evaluation.policy_zoo import BUILTIN
-
         if self.policy not in BUILTIN and Path(self.policy).exists():
             # workers may start in another directory
             object.__setattr__(self, "policy", str(Path(self.policy).resolve()))
@@ -99,7 +101,7 @@ def chunk_indices(episodes: int, chunks: int) -> list[list[int]]:
 
 @contextmanager
 def _one_torch_thread() -> Iterator[None]:
-    import torch
+    import torch  # noqa: PLC0415 - start-up time: the command lines import this module without torch
 
     before = torch.get_num_threads()
     torch.set_num_threads(1)
@@ -114,9 +116,6 @@ def run_chunk(
 ) -> ChunkResult:
     """Build ``job``'s env and policy once and run the episodes ``indices`` on one thread; with
     ``keep_going`` an episode that raises is kept as a failure and the others still run."""
-    import mpg_envs  # registers the envs in a fresh worker
-    from mpg_agents.evaluation.policy_zoo import make_policy
-
     start = time.perf_counter()
     with _one_torch_thread():
         kwargs = dict(job.env_kwargs)
@@ -136,8 +135,6 @@ def run_chunk(
 
 def _ray_chunk(job: EvalJob, indices: Sequence[int], keep_going: bool = False) -> ChunkResult:
     """:func:`run_chunk` in a Ray worker, which keeps one compute thread for good."""
-    from mpg_envs.threads import worker_init
-
     worker_init()
     return run_chunk(job, indices, keep_going=keep_going)
 
@@ -145,7 +142,7 @@ def _ray_chunk(job: EvalJob, indices: Sequence[int], keep_going: bool = False) -
 def start_ray(workers: int | None = None, address: str | None = None, **init_kwargs: Any):
     """``ray.init`` as this module's tasks need it: a local Ray with ``workers`` CPUs, or the
     cluster at ``address``; one OpenMP thread per worker. Returns the ``ray`` module."""
-    import ray
+    import ray  # noqa: PLC0415 - Ray is an optional extra
 
     env_vars = dict(THREAD_ENV)
     if "MUJOCO_GL" in os.environ:
@@ -166,7 +163,7 @@ def start_ray(workers: int | None = None, address: str | None = None, **init_kwa
 @contextmanager
 def ray_session(workers: int | None = None, address: str | None = None) -> Iterator[Any]:
     """The running Ray if there is one (left running), else one started here and shut down after."""
-    import ray
+    import ray  # noqa: PLC0415 - Ray is an optional extra
 
     if ray.is_initialized():
         yield ray
@@ -225,11 +222,6 @@ def _run_on_processes(
     jobs: Sequence[EvalJob], workers: int, on_record: RecordHook | None, keep_going: bool
 ) -> tuple[list[list[ChunkResult]], list[float]]:
     """:func:`_run_on_ray` on a local pool of ``workers`` fresh processes (one thread each)."""
-    import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-    from mpg_envs.threads import worker_init
-
     with one_thread_children():  # the workers start (lazily, as jobs are submitted) on one thread each
         start = time.perf_counter()
         chunks: list[list[ChunkResult]] = [[] for _ in jobs]

@@ -23,6 +23,7 @@ from typing import Any, Callable, Iterable, Sequence
 import gymnasium as gym
 import numpy as np
 
+import mpg_envs
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, describe_failures, failures_line
 from mpg_agents.evaluation.finding import FindingTally, finding_line, finding_summary
@@ -322,8 +323,6 @@ def versions(env_id: str) -> dict[str, str]:
     """The package version, the env id's version (``v0`` of ``MPG-Occluded-v0``) and the
     MuJoCo version the episodes run on (``"mujoco"``: results depend on its major version, see
     :mod:`mpg_envs.simulation.mujoco_version`; a file without it was measured on MuJoCo 3.x)."""
-    import mpg_envs
-
     return {
         "package": str(getattr(mpg_envs, "__version__", "unknown")),
         "env": env_id.rsplit("-", 1)[-1],

@@ -21,6 +21,7 @@ name, e.g. ``stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded
 
 from __future__ import annotations
 
+import warnings
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -28,7 +29,11 @@ from typing import Any, Mapping, Sequence
 import gymnasium as gym
 import numpy as np
 
+from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.heuristics import heuristic_grasp_action
+from mpg_agents.acting.spaces import finger_geometry
+from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
+from mpg_envs.policies.oracle import OraclePolicy
 
 BUILTIN = ("oracle", "random", "grasp-only", "shipped")
 SHIPPED_CHECKPOINT = "mpgnet_small.safetensors"
@@ -108,12 +113,12 @@ class NetworkPolicy:
         move_region: str | None = None, q_star: float | None = None, grasp_fingers: str | None = None,
         move_fingers: str | None = None, device: str | None = None, grasp_retries: int | None = None,
     ):
-        import torch
+        # Start-up time: torch and the agent load here, so the heuristics, the oracle and the
+        # command lines run without them.
+        import torch  # noqa: PLC0415
 
-        from mpg_agents.acting.agent import MPGAgent
-        from mpg_agents.acting.device import resolve_device
-        from mpg_agents.acting.grasp_threshold import check_override
-        from mpg_agents.acting.spaces import finger_geometry
+        from mpg_agents.acting.agent import MPGAgent  # noqa: PLC0415
+        from mpg_agents.acting.grasp_threshold import check_override  # noqa: PLC0415
 
         torch.set_flush_denormal(True)  # see mpg_agents.learning.learner: denormals slow CPUs down
         path = Path(path)
@@ -138,8 +143,6 @@ class NetworkPolicy:
             self.policy.set_q_star(check_override(q_star))
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
         if self.policy.coordination != "max_q" and {"grasp", "push"} <= set(self.primitives) and self.policy.q_star is None:
-            import warnings
-
             warnings.warn(f"checkpoint {path} carries no Q*_g (null: never calibrated): its {self.policy.coordination!r} "
                           "coordination compares the best grasp and push Q instead; pass --q-star (mpg-calibrate measures one)",
                           stacklevel=2)
@@ -157,7 +160,7 @@ class NetworkPolicy:
         if q_star is not None:
             self.name += f" [Q*_g: {q_star:g}]"
         if grasp_retries is None:  # the checkpoint's own (mpg-export --grasp-retries), else off
-            from mpg_agents.acting.weights import read_checkpoint_header
+            from mpg_agents.acting.weights import read_checkpoint_header  # noqa: PLC0415 - as torch above
 
             grasp_retries = read_checkpoint_header(path).get("extra", {}).get("grasp_retries", 0)
         if isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0:
@@ -170,8 +173,6 @@ class NetworkPolicy:
             self.name += f" [push after {grasp_retries} failed grasps]"
         self.memory = None
         if avoid_repeats:
-            from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
-
             self.memory = ActionMemory(RepeatRule())
             self.name += " [no repeats]"
 
@@ -196,7 +197,7 @@ class NetworkPolicy:
         return int(decision.action)
 
     def save_qmaps(self, path: str | Path, obs: Mapping[str, np.ndarray]) -> None:
-        from mpg_agents.evaluation.visualize import save_policy_qmaps
+        from mpg_agents.evaluation.visualize import save_policy_qmaps  # noqa: PLC0415 - it loads torch
 
         save_policy_qmaps(path, self.policy, obs)  # every branch's map, not only the decision's
 
@@ -211,8 +212,6 @@ def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
 def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
     """A policy by name (see the module docstring) for ``env``."""
     if name == "oracle":
-        from mpg_envs.policies.oracle import OraclePolicy
-
         return OraclePolicy(env)
     if name == "random":
         return RandomBaseline(env, seed)

@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 import torch
 
+from mpg_agents.acting.agent import batch_observation
 from mpg_envs.files import write_bytes_whole
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, decode_action
 from mpg_envs.grid.workspace import rotation_angle, rotation_direction
@@ -187,8 +188,6 @@ def save_policy_qmaps(path: str | Path, policy: Any, obs: Mapping[str, Any]) -> 
     """:func:`save_qmap_png` for an agent's decision on ``obs`` (an
     :class:`~mpg_agents.acting.agent.MPGAgent` or SB3's ``MPGNetPolicy``), with the Q maps of every
     primitive the network has (the decision itself may compute only some of them)."""
-    from mpg_agents.acting.agent import batch_observation
-
     decision = policy.decide(obs)
     net = policy.q_net.mpgnet
     obs_tensor, _ = batch_observation(obs, next(net.parameters()).device)

@@ -27,6 +27,7 @@ import numpy as np
 from mpg_agents.acting.seeds import MAX_SKIPPED_SEEDS
 from mpg_agents.learning.actor_pool import open_actor_pool
 from mpg_agents.learning.actors import ActorSpec, ActorStep, ActRequest, Weights, weights_of
+from mpg_envs.scenes.generators import InvalidSceneError
 
 if TYPE_CHECKING:
     from mpg_agents.learning.learner import Learner
@@ -130,8 +131,6 @@ class ActorLedger:
         Raises:
             InvalidSceneError: more than ``most_skips`` seeds in a row gave the actor no valid scene.
         """
-        from mpg_envs.scenes.generators import InvalidSceneError
-
         a = step.actor
         if step.skipped is not None:
             self.running[a] = False

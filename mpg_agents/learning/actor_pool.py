@@ -19,14 +19,16 @@ installed); :func:`check_actor_backend` says before any work whether the one ask
 from __future__ import annotations
 
 import importlib.util
+import multiprocessing as mp
 import os
 import signal
 import traceback
+from multiprocessing.connection import wait
 from pathlib import Path
 from typing import Any, Sequence
 
 from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
-from mpg_envs.threads import one_thread_children
+from mpg_envs.threads import one_thread_children, worker_init
 from mpg_agents.learning.actors import Actor, ActorSpec, ActorStep, ActRequest
 from mpg_agents.learning.train_config import TrainConfig
 
@@ -98,8 +100,6 @@ def _check_free(busy: Any, actor: int, size: int) -> None:
 def _actor_process(spec: ActorSpec, conn: Any) -> None:
     """An actor's process: build the actor, then answer each request on ``conn`` until told to stop."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the learner's to handle: it saves, then stops us
-    from mpg_envs.threads import worker_init
-
     worker_init()
     actor = None
     try:
@@ -126,8 +126,6 @@ class ProcessActorPool(ActorPool):
     """Actors in local processes (no Ray), one torch/OpenMP thread each."""
 
     def __init__(self, specs: Sequence[ActorSpec]) -> None:
-        import multiprocessing as mp
-
         # Forked from a fresh server process that has imported the actor's modules once (not from
         # the learner: no forked torch or MuJoCo state), so a second pool in this process starts fast.
         context = mp.get_context("forkserver")
@@ -159,8 +157,6 @@ class ProcessActorPool(ActorPool):
         return len(self._busy)
 
     def next_step(self) -> ActorStep:
-        from multiprocessing.connection import wait
-
         if not self._busy:
             raise RuntimeError("no actor has a step in flight")
         ready = wait([self._conns[i] for i in sorted(self._busy)])
@@ -198,8 +194,6 @@ class _RayActor:
     """An :class:`~mpg_agents.learning.actors.Actor` as a Ray actor (one CPU, one thread)."""
 
     def __init__(self, spec: ActorSpec) -> None:
-        from mpg_envs.threads import worker_init
-
         worker_init()
         self.actor = Actor(spec)
 
@@ -212,7 +206,7 @@ class RayActorPool(ActorPool):
     cluster at ``address`` (``"auto"``, ``"HOST:6379"``), or on the Ray already running."""
 
     def __init__(self, specs: Sequence[ActorSpec], address: str | None = None) -> None:
-        import ray
+        import ray  # noqa: PLC0415 - Ray is an optional extra
 
         self._ray = ray
         self._started = False

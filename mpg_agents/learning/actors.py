@@ -37,6 +37,7 @@ from mpg_agents.learning.training_objects import stage_env_config, training_obje
 from mpg_agents.learning.training_stages import TrainingStage
 from mpg_agents.learning.trials import try_alternatives
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.simulation.objects import check_not_held_out
 from mpg_envs.tasks.config import EnvConfig
 
@@ -225,8 +226,6 @@ class Actor:
 
     def _reset(self, request: ActRequest) -> str | None:
         """Start episode ``request.episode``; returns why its seed gave no valid scene, if it did not."""
-        from mpg_envs.scenes.generators import InvalidSceneError
-
         if request.episode is None:
             raise RuntimeError(f"actor {self.spec.index}: no episode runs and the request names none to start")
         self.episode = request.episode

@@ -39,6 +39,7 @@ from typing import Any, Callable
 import gymnasium as gym
 import numpy as np
 import torch
+from tqdm import tqdm
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.learning.actor_feed import train_with_actors
@@ -174,8 +175,6 @@ class Learner:
     # ------------------------------------------------------------------ loop
     def run(self) -> dict[str, Any]:
         """Train until the configured iterations are done; returns the final summary."""
-        from tqdm import tqdm
-
         if self.stage.calibration_episodes and self.counters.calibrated_at < 0:  # the starting net
             self.calibrate_in_scenes(self.stage.calibration_episodes)
         if self.config.demonstration_episodes and not self.resumed:  # a fresh run: iteration 0, empty replay

@@ -95,7 +95,8 @@ class TrainingLog:
     """
 
     def __init__(self, run_dir: str | Path, iteration: int = 0) -> None:
-        from torch.utils.tensorboard import SummaryWriter
+        # Start-up time: TensorBoard loads torch; the logs and plots are read without it.
+        from torch.utils.tensorboard import SummaryWriter  # noqa: PLC0415
 
         run_dir = Path(run_dir)
         path = run_dir / "progress.csv"

@@ -22,8 +22,9 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
+from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
 
 RUNS: dict[str, tuple[str, ...]] = {
     "mpgnet": (),
@@ -86,8 +87,6 @@ def train_run(spec: RunSpec) -> RunResult:
     ``train.log`` in its folder (appended, so a resumed run keeps its history)."""
     if spec.finished:
         return RunResult(spec.run, spec.seed, str(spec.folder), "finished before", 0.0)
-    from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
-
     spec.folder.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, **THREAD_ENV}
     start = time.perf_counter()
@@ -114,7 +113,8 @@ def plan_runs(runs: Sequence[str], seeds: Sequence[int], config: str | Path = DE
 def train_runs(specs: Sequence[RunSpec], workers: int | None = 1, ray_address: str | None = None) -> list[RunResult]:
     """Run ``specs`` as Ray tasks, ``workers`` at once on a local Ray (one CPU each), or on the
     cluster at ``ray_address``; results in the order of ``specs``."""
-    from mpg_agents.evaluation.eval_runner import ray_session
+    # Start-up time: the evaluation runner loads its statistics (scipy); --help does not need it.
+    from mpg_agents.evaluation.eval_runner import ray_session  # noqa: PLC0415
 
     with ray_session(workers, ray_address) as ray:
         remote = ray.remote(num_cpus=1, max_retries=0)(train_run)
