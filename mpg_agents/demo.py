@@ -27,8 +27,10 @@ import numpy as np
 import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
 from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, fail
+from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
 from mpg_envs.files import WriteFailed, check_folder_writable, write_bytes_whole
 from mpg_envs.perception.render import RenderUnavailableError
+from mpg_envs.threads import set_torch_threads
 
 DEMO_ENV = "MPG-OccludedHard-v0"
 """The demo's env: the hard track, where grasping alone mis-picks."""
@@ -125,8 +127,6 @@ def check_arguments(args: argparse.Namespace) -> str:
             named), or an ``--out`` that is a file or where no file can be written.
         ValueError: a device that is not there (CUDA asked for where there is none).
     """
-    from mpg_agents.evaluation.policy_zoo import BUILTIN
-
     if args.episodes < 1:
         raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
     if args.seed < 0:
@@ -162,10 +162,8 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, ValueError) as exc:
         return fail(exc)
 
-    from mpg_agents.evaluation.policy_zoo import make_policy
-    from mpg_agents.evaluation.evaluate import evaluate
-
-    from mpg_envs.threads import set_torch_threads
+    # Start-up time: argument errors are told before the evaluation (scipy) loads.
+    from mpg_agents.evaluation.evaluate import evaluate  # noqa: PLC0415
 
     threads = set_torch_threads()  # the cores free now (MPG_NUM_THREADS overrides)
     out = Path(args.out)

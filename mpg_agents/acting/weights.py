@@ -15,12 +15,17 @@ import json
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
+import torch
+from safetensors import safe_open
+from safetensors.torch import load_file, save
+
 from mpg_agents.acting.coordination import check_coordination
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, check_in_range, exported_q_star
 from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_envs import __version__
 from mpg_envs.files import same_file, write_bytes_whole
 from mpg_envs.grid.actions import check_primitives
 from mpg_envs.simulation.mujoco_version import running_mujoco
@@ -36,8 +41,6 @@ def checkpoint_metadata(
     ``"package_version"`` the version of the package that wrote it and ``"mujoco_version"`` the
     MuJoCo it ran on (a net trained on one MuJoCo major version acts on scenes of another; the
     env id, with its version, a training run writes under ``extra``)."""
-    from mpg_envs import __version__
-
     header = {
         "format": CHECKPOINT_FORMAT,
         "package_version": __version__,
@@ -62,8 +65,6 @@ def save_mpgnet(
     Raises:
         mpg_envs.files.WriteFailed: the file cannot be written (one line naming it and why).
     """
-    from safetensors.torch import save
-
     state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
     check_finite(state, f"the MPGNet to be written to {path}")
     path = Path(path)
@@ -73,8 +74,6 @@ def save_mpgnet(
 
 def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
     """The JSON header of an MPGNet safetensors file (no tensors are read)."""
-    from safetensors import safe_open
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"MPGNet checkpoint not found: {path}")
@@ -142,8 +141,6 @@ def check_tensor_dtypes(path: str | Path, header: Mapping[str, Any] | None = Non
     type than written: weights in :func:`stored_float_type`, BatchNorm's batch counters
     (``*.num_batches_tracked``) in int64. Reads the types alone, no tensor data: a file whose
     float weights were re-saved as int32 would load as truncated weights."""
-    from safetensors import safe_open
-
     header = read_checkpoint_header(path) if header is None else header
     floating = stored_float_type(header)
     with safe_open(str(path), framework="pt") as f:
@@ -161,8 +158,6 @@ def check_tensor_dtypes(path: str | Path, header: Mapping[str, Any] | None = Non
 
 def check_finite(tensors: Mapping[str, Any], what: str) -> None:
     """``ValueError`` naming ``what`` and its floating tensors that hold NaN or infinite values."""
-    import torch
-
     bad = [k for k, t in tensors.items() if torch.is_floating_point(t) and not bool(torch.isfinite(t).all())]
     if bad:
         raise ValueError(f"{what} has NaN or infinite values in {len(bad)} tensor(s): {', '.join(bad[:5])}"
@@ -183,8 +178,6 @@ def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = T
         ValueError: naming the mismatch (variant, trunk depth, head width, a tensor's shape, a
             missing branch) when the file holds another architecture.
     """
-    from safetensors.torch import load_file
-
     header = read_checkpoint_header(path)
     check_tensor_dtypes(path, header)
     file_cfg = header["config"]

@@ -13,6 +13,10 @@ import numpy as np
 from mpg_agents.learning.train_log import CSV_COLUMNS
 from mpg_envs.files import written_whole
 
+# Matplotlib is imported where a picture is drawn, not at the top: importing
+# this module (the command lines, reading progress.csv) then neither loads it (start-up time)
+# nor sets its backend (Agg is chosen only when drawing, so a notebook keeps its own).
+
 
 PLOTTED_COLUMNS = ("iteration", "episode", "primitive", "loss", "epsilon", "target_grasped", "num_motions")
 """The ``progress.csv`` columns the curves are drawn from (``is_success`` too, where a log has it)."""
@@ -112,10 +116,10 @@ def check_image_path(out: str | Path | None) -> None:
 
 def image_suffixes() -> tuple[str, ...]:
     """The suffixes of the :data:`PICTURE_FORMATS` matplotlib writes here (``.png`` first)."""
-    import matplotlib
+    import matplotlib  # noqa: PLC0415 - see the note on matplotlib at the top
 
     matplotlib.use("Agg")
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # noqa: PLC0415
 
     kinds = Figure().canvas.get_supported_filetypes()
     return tuple("." + k for k in PICTURE_FORMATS if k in kinds)
@@ -189,10 +193,10 @@ def episode_motions(data: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray
 
 def plot_run(run: str | Path, out: str | Path | None = None, window: int = 200) -> Path:
     """Draw success rate, loss, epsilon and motions per episode for a run or a pipeline."""
-    import matplotlib
+    import matplotlib  # noqa: PLC0415 - see the note on matplotlib at the top
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415
 
     run = Path(run)
     if (run / "progress.csv").is_file():
@@ -255,10 +259,10 @@ def plot_compare(runs: Sequence[tuple[str, str | Path]], stage: str, out: str | 
     ``runs`` are ``(label, pipeline or run directory)``; a pipeline contributes ``stage``'s
     folder, a single run its own ``progress.csv``.
     """
-    import matplotlib
+    import matplotlib  # noqa: PLC0415 - see the note on matplotlib at the top
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # noqa: PLC0415
 
     if not runs:
         raise ValueError("plot_compare needs at least one run")

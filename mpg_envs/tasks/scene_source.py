@@ -33,7 +33,7 @@ import inspect
 import json
 import os
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -45,6 +45,7 @@ from mpg_envs.scenes.arranged import ArrangedScenes, ArrangementError, arrangeme
 from mpg_envs.scenes.arrangement_draw import draw_arrangement
 from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, keep_inside
 from mpg_envs.scenes.scene_io import SceneFile
+from mpg_envs.scenes.test_sets import TEST_SEEDS, TEST_SET_WORKSPACE, TestSet, find_test_set, test_set_name
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.tasks.episode_sim import EpisodeSim
@@ -52,9 +53,6 @@ from mpg_envs.tasks.stages import StageSpec
 
 RESET_OPTIONS = ("scene", "mesh_dir", "drop_outside", "num_objects")
 """The options ``MPGEnv.reset(options=...)`` takes."""
-
-if TYPE_CHECKING:
-    from mpg_envs.scenes.test_sets import TestSet
 
 BURY_BELOW = 0.5
 """A visible-fraction band whose upper bound is at most this uses the buried generator."""
@@ -188,8 +186,6 @@ def _test_set_of(request: SceneRequest, seed: int | None) -> TestSet | None:
         return None
     if config.object_set_seed != 0 or request.visible_range != stage.visible_range:
         return None
-    from mpg_envs.scenes.test_sets import TEST_SEEDS, TEST_SET_WORKSPACE, find_test_set, test_set_name
-
     name = test_set_name(stage.test_set, request.object_set_name)  # the object set's own sets
     if config.workspace != TEST_SET_WORKSPACE or name is None or int(seed) not in TEST_SEEDS:
         return None
