@@ -20,7 +20,8 @@ from mpg_agents.acting.coordination import COORDINATIONS
 from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.evaluation.env_options import parse_env_options
 from mpg_agents.evaluation.failures import NothingFinished
-from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_net_setting, check_output, check_q_star_flag, fail, read_config
+from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_env_options, check_net_setting, check_output  # noqa: E501
+from mpg_agents.cli_input import check_q_star_flag, check_seed_flag, check_thread_setting, fail, read_config
 from mpg_envs.files import WriteFailed, write_text_whole
 
 
@@ -50,8 +51,7 @@ def _add_net_setting_arguments(parser: argparse.ArgumentParser, prefix: str) -> 
 
 
 def _net_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """``MPGNetConfig`` field -> value of the :func:`_add_net_setting_arguments` options given
-    (a :class:`UsageError` for a ``--target-margin`` outside its range)."""
+    """``MPGNetConfig`` field -> value of the :func:`_add_net_setting_arguments` options given (checked)."""
     check_net_setting("--target-margin", "target_margin_px", args.target_margin)
     given = (("grasp_region", args.grasp_region), ("target_margin_px", args.target_margin),
              ("move_region", args.move_region), ("grasp_fingers", args.grasp_fingers),
@@ -95,16 +95,17 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--resume-anyway", action="store_true",
                         help="resume a saved run even though settings differ from its own (they are listed; the record keeps the new ones)")
     args = parser.parse_args(argv)
-    from mpg_envs.threads import set_torch_threads
-
-    set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
     try:
         from mpg_agents.acting.grasp_threshold import as_record
         from mpg_agents.learning.learner import Learner
         from mpg_agents.learning.run_folder import RunFolderBusy
         from mpg_agents.learning.train_config import TrainConfig, json_safe
         from mpg_agents.learning import training_stages as ts
+        from mpg_envs.threads import set_torch_threads
 
+        check_thread_setting()
+        set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
+        check_seed_flag(args.seed)
         check_q_star_flag(args.q_star)
         base, stages = training_settings(args.config)
         flags = {f.name: getattr(args, f.name) for f in fields(TrainConfig) if getattr(args, f.name, None) is not None}
@@ -178,8 +179,8 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel
 
         check_env_id(args.env)
-        if args.seed < 0:
-            raise UsageError(f"--seed must be >= 0, got {args.seed}")
+        check_thread_setting()
+        check_seed_flag(args.seed)
         check_output(args.json, "--json", {"the --policy checkpoint": None if args.policy in BUILTIN else args.policy,
                                            "the --cases file": args.cases})
         if args.device is not None:
@@ -205,12 +206,13 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         if args.device is not None:
             extra += (("device", args.device),)
         env_options = parse_env_options(args.env_option)
+        check_env_options(args.env, env_options)
         if args.cases is not None:
             return _eval_cases(args, dict(extra), env_options)
         job = EvalJob(args.policy, args.env, args.episodes, args.seed, args.num_objects, extra, tuple(env_options.items()))
         on_record = None if args.quiet else (lambda record: print("  " + record.describe(), flush=True))
         result = evaluate_parallel(job, workers, args.ray_address, on_record=on_record, backend=args.backend, keep_going=True)
-    except (UsageError, FileNotFoundError, ValueError) as exc:
+    except (UsageError, FileNotFoundError, ValueError) as exc:  # also a stale or changed test set (TestSetError)
         return fail(exc)
     except NothingFinished as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -218,12 +220,6 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except RuntimeError as exc:
-        from mpg_envs.scenes.test_sets import TestSetError
-
-        if isinstance(exc, TestSetError):  # a stale or changed shipped test set: what to do is in its line
-            return fail(exc)
-        raise
     return _report_run(result, args.json)
 
 
@@ -295,8 +291,8 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         from mpg_agents.evaluation.policy_zoo import make_policy
 
         check_env_id(args.env)
-        if args.seed < 0:
-            raise UsageError(f"--seed must be >= 0, got {args.seed}")
+        check_thread_setting()
+        check_seed_flag(args.seed)
         check_output(args.json, "--json", {"the --policy checkpoint": None if args.policy == "shipped" else args.policy})
         if args.policy != "shipped":
             check_checkpoint(args.policy)

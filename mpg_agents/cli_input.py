@@ -11,7 +11,10 @@ from typing import Any, Mapping
 
 from mpg_envs.files import WriteFailed, check_writable, same_file
 
-__all__ = ["UsageError", "check_checkpoint", "check_env_id", "check_net_setting", "check_output", "check_q_star_flag", "fail", "read_config"]
+__all__ = [
+    "UsageError", "check_checkpoint", "check_env_id", "check_env_options", "check_net_setting", "check_output",
+    "check_q_star_flag", "check_seed_flag", "check_thread_setting", "fail", "read_config",
+]
 
 
 class UsageError(Exception):
@@ -32,11 +35,15 @@ def read_config(path: str | None) -> dict[str, Any]:
     if not p.is_file():
         raise UsageError(f"config file {path!r} does not exist")
     try:
-        if p.suffix == ".toml":
-            return tomllib.loads(p.read_text())
-        return json.loads(p.read_text())
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError) as exc:
+        settings = tomllib.loads(p.read_text()) if p.suffix == ".toml" else json.loads(p.read_text())
+    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise UsageError(f"config file {path!r} is not valid {p.suffix[1:] or 'JSON'}: {exc}") from exc
+    if not isinstance(settings, dict):
+        raise UsageError(
+            f"config file {path!r} holds a {type(settings).__name__}; valid: a JSON object (or TOML table) of "
+            f"settings by name, e.g. {{\"steps\": 1000, \"stages\": {{\"Stage2\": {{...}}}}}}"
+        )
+    return settings
 
 
 def check_env_id(env_id: str) -> None:
@@ -117,3 +124,56 @@ def check_net_setting(flag: str, field: str, value: Any) -> None:
         MPGNetConfig(**{field: value})
     except ValueError as exc:
         raise UsageError(f"{flag} {value}: {exc}") from None
+
+
+def check_seed_flag(value: int | None, flag: str = "--seed") -> None:
+    """A seed given on the command line in ``0..2**64 - 1``
+    (:func:`~mpg_agents.acting.seeds.check_seed`), else a :class:`UsageError` naming ``flag``
+    and the valid range (``None``: not given)."""
+    if value is None:
+        return
+    from mpg_agents.acting.seeds import check_seed
+
+    try:
+        check_seed(value, flag)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def check_thread_setting() -> None:
+    """``MPG_NUM_THREADS``, when set, a positive integer
+    (:func:`mpg_envs.threads.requested_threads`), else a :class:`UsageError` naming it."""
+    from mpg_envs.threads import requested_threads
+
+    try:
+        requested_threads()
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def check_env_options(env_id: str, options: Mapping[str, Any]) -> None:
+    """The ``--env-option`` keywords of ``env_id`` checked before any work, by making its env
+    once (no world is built; then closed): a :class:`UsageError` names the option and what is
+    valid (a ``config`` of the wrong type or with a bad field, an ``object_set`` or
+    ``camera_config`` of the wrong kind, ``render_mode=human`` without pygame)."""
+    if not options:
+        return
+    import importlib.util
+
+    import gymnasium as gym
+
+    from mpg_envs.tasks.env import MPGEnv
+
+    options = dict(options)
+    if options.get("render_mode") == "human":
+        if importlib.util.find_spec("pygame") is None:
+            raise UsageError(
+                "--env-option render_mode=human shows each frame in a window through pygame, which is not installed "
+                "(pip install pygame); valid without it: render_mode=rgb_array, or no render_mode"
+            )
+        options["render_mode"] = "rgb_array"  # gym.make shows such an env's frames itself (HumanRendering)
+    try:
+        env = MPGEnv(**{**gym.spec(env_id).kwargs, **options})
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"--env-option: {exc}") from None
+    env.close()

@@ -10,6 +10,7 @@ seeds (700000-) that evaluations use.
 
 from __future__ import annotations
 
+from numbers import Integral
 from typing import TYPE_CHECKING, Any, Callable
 
 if TYPE_CHECKING:
@@ -23,6 +24,20 @@ DEMONSTRATION_SEED_OFFSET = 800_000
 
 CALIBRATION_SEED_OFFSET = 900_000
 """Where a run's Q*_g calibration episodes start inside its seed range."""
+
+MAX_SEED = 2**64 - 1
+"""The largest seed a run or an evaluation takes (``--seed``, ``TrainConfig.seed``): a run seeds
+torch with it (``torch.manual_seed`` takes at most 2**64 - 1), and numpy's generators with it."""
+
+
+def check_seed(seed: int, what: str = "seed") -> int:
+    """``seed`` as an int in ``0..MAX_SEED``; else a ``ValueError`` naming ``what`` (e.g.
+    ``"--seed"``) and the valid range (a negative one: ``"--seed must be >= 0, got -5"``)."""
+    if isinstance(seed, bool) or not isinstance(seed, Integral) or seed < 0:
+        raise ValueError(f"{what} must be >= 0, got {seed!r}")
+    if seed > MAX_SEED:
+        raise ValueError(f"{what} must be an integer in 0..{MAX_SEED} (2**64 - 1), got {seed}")
+    return int(seed)
 
 
 def episode_seed(run_seed: int, k: int, demonstration: bool = False, calibration: bool = False) -> int:

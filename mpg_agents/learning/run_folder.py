@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from typing import Any, Mapping
 
+from mpg_envs.files import WriteFailed, check_folder_writable
+
 LOCK_NAME = "run.lock"
 
 _HELD: dict[str, list[Any]] = {}  # resolved lock path -> [open file, holders in this process]
@@ -53,8 +55,8 @@ def prepare_run_folder(out: str | Path) -> Path:
     """``out`` as a folder, made if missing; one that exists must be a run folder (:func:`is_run_folder`).
 
     Raises:
-        ValueError: ``out`` (or a folder above it) is a file, or ``out`` holds files of no run
-            of this project (named; nothing in it is touched).
+        ValueError: ``out`` (or a folder above it) is a file, ``out`` holds files of no run
+            of this project (named; nothing in it is touched), or no file can be written there.
     """
     out = Path(out)
     for part in (out, *out.parents):
@@ -65,7 +67,12 @@ def prepare_run_folder(out: str | Path) -> Path:
         shown = ", ".join(held[:5]) + (f" and {len(held) - 5} more" if len(held) > 5 else "")
         raise ValueError(f"run folder {str(out)!r} is not empty and holds no run of this project ({shown}); "
                          "a run would overwrite them: give a new or empty folder, or an earlier run's folder to resume it")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        check_folder_writable(out)  # a read-only folder or disk, /proc: refused before any work
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # WriteFailed names why
+        reason = exc.reason if isinstance(exc, WriteFailed) else exc.strerror or str(exc)
+        raise ValueError(f"run folder {str(out)!r} cannot be written ({reason}); give --out a folder you may write in") from None
     return out
 
 

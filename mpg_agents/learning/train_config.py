@@ -14,6 +14,7 @@ from numbers import Integral, Real
 from typing import Any, Callable
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, check_in_range
+from mpg_agents.acting.seeds import check_seed
 from mpg_agents.learning.td_step import TDStepConfig
 from mpg_envs.settings_fields import check_known_fields
 
@@ -145,6 +146,7 @@ def check_train_config(cfg: TrainConfig) -> None:
     inf = math.inf
     _integer("steps", cfg.steps, 0, optional=True)
     _integer("seed", cfg.seed, 0)
+    check_seed(cfg.seed, "training setting seed")  # the upper bound (torch's)
     if cfg.variant not in ("small", "large"):
         raise ValueError(f"training setting variant must be 'small' or 'large', got {cfg.variant!r}")
     _integer("num_objects", cfg.num_objects, 1, optional=True)

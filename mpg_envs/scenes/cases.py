@@ -33,7 +33,7 @@ import zlib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Iterator
 
 import mujoco
 import numpy as np
@@ -177,12 +177,28 @@ def folder_set(folder: Path) -> CaseSet:
     else sorted by name."""
     index = folder / INDEX_FILE
     if index.is_file():
-        entries = json.loads(index.read_text())
+        entries = _index_entries(index)
         return CaseSet(folder.name, tuple(Case(e["name"], _scene_path(folder, e["name"]), note=e.get("note", "")) for e in entries))
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".json", ".txt"))
     if not files:
         raise ValueError(f"case folder {str(folder)!r} holds no .json or .txt scene files")
     return CaseSet(folder.name, tuple(Case(p.stem, p) for p in files))
+
+
+def _index_entries(index: Path) -> list[dict[str, Any]]:
+    """The entries of a case folder's ``index.json``; a ``ValueError`` naming the file and what
+    is valid when it is not a JSON list of ``{"name": ..., "note": ...}`` objects."""
+    valid = 'valid: a JSON list of {"name": <a scene file\'s name>, "note": <text, optional>} objects'
+    try:
+        entries = json.loads(index.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError is a ValueError
+        raise ValueError(f"{index}: not valid JSON ({exc}); {valid}") from None
+    if not isinstance(entries, list):
+        raise ValueError(f"{index} holds a JSON {type(entries).__name__ if not isinstance(entries, dict) else 'object'}; {valid}")
+    for k, entry in enumerate(entries):
+        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or not isinstance(entry.get("note", ""), str):
+            raise ValueError(f"{index}: entry {k} is {entry!r}; {valid}")
+    return entries
 
 
 def _scene_path(folder: Path, name: str) -> Path:

@@ -76,8 +76,9 @@ def test_set_name(stage_test_set: str, object_set: str) -> str | None:
 test_set_name.__test__ = False  # type: ignore[attr-defined]  # not a pytest test
 
 
-class TestSetError(RuntimeError):
-    """A shipped test set that cannot be used as it is (stale, or its scenes changed)."""
+class TestSetError(RuntimeError, ValueError):
+    """A shipped test set that cannot be used as it is (stale, or its scenes changed): bad
+    input, as a ``ValueError`` is (the command lines report it on one line)."""
 
     __test__ = False  # not a pytest test class
 

@@ -18,8 +18,8 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.actions import PixelActionSpace
-from mpg_envs.tasks.config import OBS_MODES, EnvConfig, config_of, observation_space
-from mpg_envs.simulation.objects import ObjectAsset, load_object_set
+from mpg_envs.tasks.config import OBS_MODES, EnvConfig, check_camera_config, config_of, object_assets, observation_space
+from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.perception.occlusion import change_detected, check_band
 from mpg_envs.perception.render import render_overview
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
@@ -135,14 +135,10 @@ class MPGEnv(gym.Env):
         self.obs_mode = obs_mode
         self.render_mode = render_mode
         self.grasp_scorer = grasp_scorer
-        self.camera_config = camera_config
+        self.camera_config = check_camera_config(camera_config)
         self.visual_randomization = VisualRandomization.from_option(visual_randomization)  # None: off
         self.arranged = ArrangedScenes.from_option(arranged)  # None: off
-        self.object_set = (
-            load_object_set(object_set, seed=config.object_set_seed) if isinstance(object_set, (str, Path)) else list(object_set)
-        )
-        if not self.object_set:
-            raise ValueError("object_set is empty")
+        self.object_set = object_assets(object_set, config.object_set_seed)  # a name, a folder or assets
         self._object_set_name = str(object_set) if isinstance(object_set, (str, Path)) else "custom"
         self.primitives = stage_spec.primitives
         size = config.workspace.shape

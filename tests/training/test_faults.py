@@ -177,7 +177,8 @@ def test_positive_settings_refuse_zero_with_a_strict_bound():
 
 @pytest.mark.parametrize("flag, message", [
     (["--steps", "-1"], "training setting steps must be an integer >= 0 or None, got -1"),
-    (["--seed", "-5"], "training setting seed must be an integer >= 0, got -5"),
+    (["--seed", "-5"], "--seed must be >= 0, got -5"),
+    (["--seed", "18446744073709551616"], "--seed must be an integer in 0..18446744073709551615 (2**64 - 1), got 18446744073709551616"),
     (["--num-objects", "0"], "training setting num_objects must be an integer >= 1 or None, got 0"),
 ])
 def test_bad_training_flags_are_named(tmp_path, capsys, flag, message):
@@ -233,3 +234,115 @@ def test_demo_and_train_runs_refuse_an_out_that_is_a_file(tmp_path, capsys):
         runs_main(["--out", str(out)])
     assert exit_info.value.code == 2
     assert f"--out {str(out)!r} is a file; give a folder (made if missing)" in capsys.readouterr().err
+
+
+# -------------------------------------------------- settings, files and signals named in one line
+@pytest.mark.parametrize("option, message", [
+    ("config={'scene_tries': 'x'}", "--env-option: config scene_tries must be an integer >= 1 (draws of a whole scene before "
+                                    "InvalidSceneError), got 'x'"),
+    ("config=fast", "--env-option: config must be an EnvConfig or a dict of its fields (e.g. {'scene_tries': 40}; valid "
+                    "fields: workspace, robot, "),
+    ("camera_config=3", "--env-option: camera_config must be None (the default cameras) or a CameraConfig, got 3"),
+    ("object_set=[1, 2]", "--env-option: object_set must be an object set's name (e.g. 'blocks'), a mesh folder's path or a "
+                          "list of ObjectAsset, got [1, 2] (it holds 1 of type int)"),
+])
+def test_a_bad_env_option_is_named_before_any_episode(capsys, monkeypatch, option, message):
+    import mpg_agents.evaluation.eval_runner as eval_runner
+
+    monkeypatch.setattr(eval_runner, "evaluate_parallel", lambda *a, **k: pytest.fail("episodes ran before the options were checked"))
+    assert eval_main(["--policy", "random", "--env", "MPG-Stage2-v0", "--episodes", "1", "--env-option", option]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {message}") and err.count("\n") == 1
+
+
+def test_human_rendering_without_pygame_is_named(capsys, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "pygame" else real(name, *a))
+    assert eval_main(["--policy", "random", "--env", "MPG-Stage2-v0", "--episodes", "1", "--env-option", "render_mode=human"]) == 2
+    assert capsys.readouterr().err == (
+        "error: --env-option render_mode=human shows each frame in a window through pygame, which is not installed "
+        "(pip install pygame); valid without it: render_mode=rgb_array, or no render_mode\n"
+    )
+
+
+def test_eval_and_calibrate_name_a_seed_out_of_range_and_a_bad_thread_count(capsys, monkeypatch):
+    too_big = "--seed must be an integer in 0..18446744073709551615 (2**64 - 1), got 18446744073709551616"
+    assert eval_main(["--policy", "oracle", "--env", "MPG-Stage2-v0", "--seed", "18446744073709551616"]) == 2
+    assert capsys.readouterr().err == f"error: {too_big}\n"
+    assert calibrate_main(["--policy", "shipped", "--seed", "18446744073709551616"]) == 2
+    assert capsys.readouterr().err == f"error: {too_big}\n"
+    monkeypatch.setenv("MPG_NUM_THREADS", "abc")
+    threads = "error: MPG_NUM_THREADS must be a positive integer (or unset for automatic), got 'abc'\n"
+    for main, argv in ((eval_main, ["--policy", "oracle"]), (calibrate_main, ["--policy", "shipped"]),
+                       (train_main, ["--env", "MPG-Stage2-v0", "--out", "unused"])):
+        assert main(argv) == 2
+        assert capsys.readouterr().err == threads
+    assert not Path("unused").exists()
+
+
+def test_a_train_config_that_is_no_table_is_named(tmp_path, capsys):
+    for name, text, held in (("list.json", "[1, 2]", "list"), ("binary.json", "\udcff", None)):
+        path = tmp_path / name
+        path.write_bytes(text.encode("utf-8", "surrogateescape"))
+        assert train_main(["--env", "MPG-Stage2-v0", "--config", str(path), "--out", str(tmp_path / "run")]) == 2
+        err = capsys.readouterr().err
+        expected = f"holds a {held}; valid: a JSON object (or TOML table) of settings by name" if held else "is not valid json: "
+        assert f"config file {str(path)!r} {expected}" in err and err.count("\n") == 1
+    assert not (tmp_path / "run").exists()
+
+
+def test_an_out_that_takes_no_files_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    import mpg_agents.learning.run_folder as run_folder
+    from mpg_envs.files import WriteFailed
+
+    def read_only(folder):  # what a read-only mount answers (the tests may run as root, whom chmod does not stop)
+        raise WriteFailed(folder, "Read-only file system")
+
+    monkeypatch.setattr(run_folder, "check_folder_writable", read_only)
+    out = tmp_path / "run"
+    assert train_main(["--env", "MPG-Stage2-v0", "--steps", "1", "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (f"error: run folder {str(out)!r} cannot be written (Read-only file system); "
+                                       "give --out a folder you may write in\n")
+    assert not out.exists()
+    if os.geteuid() != 0 and Path("/proc").is_dir():  # a folder no process writes in, without mocks
+        monkeypatch.undo()
+        assert train_main(["--env", "MPG-Stage2-v0", "--steps", "1", "--out", "/proc/run"]) == 2
+        assert "run folder '/proc/run' cannot be written (" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("index, message", [
+    ('{"cases": []}', "index.json holds a JSON object; valid: a JSON list of {\"name\": "),
+    ('[{"name"', "index.json: not valid JSON (Expecting ':' delimiter: line 1 column 9 (char 8)); valid: a JSON list of "),
+    ('[{"note": "no name"}]', "index.json: entry 0 is {'note': 'no name'}; valid: a JSON list of "),
+])
+def test_a_case_folder_index_that_is_no_list_is_named(tmp_path, capsys, index, message):
+    (tmp_path / "index.json").write_text(index)
+    assert eval_main(["--policy", "random", "--cases", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {tmp_path}{os.sep}{message}") and err.count("\n") == 1
+
+
+def test_an_interrupted_eval_is_one_line(capsys, monkeypatch):
+    import mpg_agents.evaluation.eval_runner as eval_runner
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(eval_runner, "evaluate_parallel", interrupted)
+    assert eval_main(["--policy", "random", "--env", "MPG-Stage2-v0", "--episodes", "3", "--quiet"]) == 130
+    assert capsys.readouterr().err == "interrupted\n"
+
+
+def test_sigint_during_mpg_eval_prints_interrupted_and_exits_130():
+    import signal
+
+    code = ("import sys; from mpg_agents.cli import eval_main; "
+            "sys.exit(eval_main(['--policy', 'random', '--env', 'MPG-Stage2-v0', '--episodes', '50']))")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
+    assert "seed" in proc.stdout.readline()  # the first episode finished: the run is under way
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130 and err.strip().splitlines()[-1] == "interrupted" and "Traceback" not in err
