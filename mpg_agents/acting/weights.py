@@ -149,7 +149,7 @@ def check_tensor_dtypes(path: str | Path, header: Mapping[str, Any] | None = Non
             stored = _STORED_TYPES.get(stored, stored)
             expected = "int64" if key.endswith("num_batches_tracked") else floating
             if stored != expected:
-                why = "its header says float16 (an exported copy)" if floating == "float16" else "float32, as training writes"
+                why = "its header says float16: an exported copy" if floating == "float16" else "as training writes weights"
                 raise ValueError(
                     f"checkpoint {path}: tensor {key!r} is stored as {stored}, expected {expected} ({why}); the file was "
                     f"re-saved with other types: use the checkpoint as training or mpg-export wrote it"

@@ -150,7 +150,7 @@ def test_float_weights_resaved_as_integers_are_refused_naming_the_tensor(tmp_pat
     state = load_file(str(checkpoint))
     key = next(k for k, v in state.items() if v.is_floating_point() and k.startswith("branches.grasp"))
     path = rewritten(checkpoint, tmp_path / "int.safetensors", tensors={key: state[key].to(torch.int32)})
-    message = f"int.safetensors: tensor '{key}' is stored as int32, expected float32 (float32, as training writes)"
+    message = f"int.safetensors: tensor '{key}' is stored as int32, expected float32 (as training writes weights)"
     for check in (load_mpgnet, check_tensor_dtypes):
         with pytest.raises(ValueError) as info:
             check(path)
@@ -161,7 +161,7 @@ def test_float_weights_resaved_as_integers_are_refused_naming_the_tensor(tmp_pat
     copy = export_weights(checkpoint, tmp_path / "copy.safetensors")
     check_tensor_dtypes(copy)
     resaved = rewritten(copy, tmp_path / "f32.safetensors", tensors={key: load_file(str(copy))[key].float()})
-    with pytest.raises(ValueError, match=rf"tensor '{key}' is stored as float32, expected float16 \(its header says float16"):
+    with pytest.raises(ValueError, match=rf"tensor '{key}' is stored as float32, expected float16 \(its header says float16: an exported copy\)"):
         load_mpgnet(resaved)
 
 
