@@ -20,8 +20,8 @@ from mpg_envs.tasks.stages import STAGES
 
 ROOT = Path(__file__).resolve().parents[1]
 
-HEAVY = ("torch", "stable_baselines3", "ray", "tensorboard", "matplotlib", "safetensors")
-"""Libraries of the optional extras ([agents], [ray]) that the envs must never import."""
+HEAVY = ("torch", "stable_baselines3", "ray", "tensorboard", "matplotlib", "safetensors", "minari")
+"""Libraries of the optional extras ([agents], [ray], [demos]) that the envs must never import."""
 
 ENVS_ONLY = f"""
 import json, sys
@@ -107,9 +107,9 @@ def test_citation_file_parses_and_names_this_version():
 def test_extras_keep_the_envs_install_lean():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     base = " ".join(project["dependencies"]).lower()
-    for name in ("torch", "stable-baselines3", "ray", "tensorboard", "matplotlib", "safetensors"):
+    for name in ("torch", "stable-baselines3", "ray", "tensorboard", "matplotlib", "safetensors", "minari"):
         assert name not in base, f"{name} belongs in an extra, not in the envs' dependencies"
-    assert {"agents", "ray", "docs", "dev"} <= set(project["optional-dependencies"])
+    assert {"agents", "ray", "demos", "docs", "dev"} <= set(project["optional-dependencies"])
 
 
 def test_the_wheel_ships_every_module_and_data_file():
