@@ -17,7 +17,9 @@ from mpg_envs.perception.render import choose_gl_backend
 
 choose_gl_backend()  # before anything imports mujoco: EGL (or OSMesa) on headless Linux
 
-import gymnasium as gym  # noqa: E402
+from typing import Any
+
+import gymnasium as gym
 
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
 from mpg_envs.tasks.stages import STAGES, StageSpec
@@ -60,7 +62,8 @@ def make(env_id: str, **kwargs) -> gym.Env:
 
 def env_primitives(env: gym.Env) -> tuple[str, ...]:
     """The primitives an env allows, in action order (works through wrappers)."""
-    return tuple(env.unwrapped.primitives)
+    unwrapped: Any = env.unwrapped  # an MPG env (gym.Env does not declare its attributes)
+    return tuple(unwrapped.primitives)
 
 
 _register()

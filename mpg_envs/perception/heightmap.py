@@ -88,7 +88,7 @@ class Heightmaps:
     @property
     def shape(self) -> tuple[int, int]:
         """Heightmap shape ``(rows, cols)``."""
-        return self.depth.shape  # type: ignore[return-value]
+        return self.depth.shape
 
 
 def geomgroup_mask(groups: Sequence[int] = VISIBLE_GEOM_GROUPS) -> np.ndarray:
@@ -112,7 +112,7 @@ def geom_colors(model: mujoco.MjModel) -> np.ndarray:
     rgba = model.geom_rgba.astype(np.float32).copy()
     matid = model.geom_matid
     # MuJoCo keeps float32 colours, so the default is an exact comparison.
-    is_default = np.all(model.geom_rgba == np.float32([0.5, 0.5, 0.5, 1.0]), axis=1)
+    is_default = np.all(model.geom_rgba == np.array([0.5, 0.5, 0.5, 1.0], dtype=np.float32), axis=1)
     use_material = (matid >= 0) & is_default
     rgba[use_material] = model.mat_rgba[matid[use_material]]
     return np.round(np.clip(rgba[:, :3], 0.0, 1.0) * 255.0).astype(np.uint8)

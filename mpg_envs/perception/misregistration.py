@@ -94,7 +94,7 @@ def misregistered_heightmaps(
     color[:] = np.asarray(background_color, dtype=np.uint8)
     color[seen_any] = maps.color.reshape(-1, 3)[source[seen_any]]
     depth = np.where(seen_any, best, 0.0).astype(np.float32)
-    geom_id = None
+    geom_id: np.ndarray | None = None
     if maps.geom_id is not None:
         geom_id = np.full(rows * cols, -1, dtype=np.int32)
         geom_id[seen_any] = maps.geom_id.reshape(-1)[source[seen_any]]

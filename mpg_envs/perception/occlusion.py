@@ -13,6 +13,7 @@ anywhere, or around the target, or an object was grasped.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -47,7 +48,7 @@ def is_occluded(depth: np.ndarray, target_mask: np.ndarray, target_top: float, c
     inside), ``target_top`` the height of the target's highest point.
     """
     _check_same_shape(depth, target_mask)
-    mask = target_mask.astype(np.uint8)
+    mask: np.ndarray = target_mask.astype(np.uint8)
     if config.erode_pixels > 0:
         eroded = cv2.erode(mask, np.ones((3, 3), np.uint8), iterations=config.erode_pixels)
         # A target thinner than the erosion keeps its original footprint.
@@ -110,7 +111,8 @@ def check_band(band: object, name: str = "visible_range") -> tuple[float, float]
     if band is None:
         return None
     try:
-        low, high = (float(v) for v in band)  # type: ignore[union-attr]
+        pair: Any = band  # anything: checked here
+        low, high = (float(v) for v in pair)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a (low, high) pair of fractions, got {band!r}") from None
     if not 0.0 <= low <= high <= 1.0:

@@ -208,7 +208,8 @@ def draw_visuals(config: VisualRandomization, seed: int) -> EpisodeVisuals:
     direction = (np.sin(tilt) * np.cos(azimuth), np.sin(tilt) * np.sin(azimuth), -np.cos(tilt))
     intensity = rng.uniform(*config.light_intensity)
     share = rng.uniform(*config.ambient_share)
-    lighting = Lighting(tuple(float(v) for v in direction), intensity * share, intensity * (1 - share), config.shadows)
+    dx, dy, dz = (float(v) for v in direction)
+    lighting = Lighting((dx, dy, dz), intensity * share, intensity * (1 - share), config.shadows)
     table_gain = _gains(rng, 1, config.table_brightness, config.table_hue)[0]
     object_gains = _gains(rng, MAX_OBJECT_SLOTS, config.object_brightness, config.object_hue)
     offsets = _in_ball(rng, CAMERA_SLOTS, config.camera_position_error)

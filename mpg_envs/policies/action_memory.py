@@ -13,11 +13,23 @@ __all__ = ["ActionMemory", "RepeatConfig", "RepeatRule"]
 
 
 class RepeatConfig(Protocol):
-    """When an action repeats a remembered one (e.g. :class:`RepeatRule`, :class:`mpg_envs.policies.oracle.OracleConfig`)."""
+    """When an action repeats a remembered one (e.g. :class:`RepeatRule`,
+    :class:`mpg_envs.policies.oracle.OracleConfig`): read-only, so frozen dataclasses qualify."""
 
-    repeat_pixels: int  # an action this close to a tried one (same primitive and angle) ...
-    repeat_window: int  # ... on a heightmap unchanged within this many pixels around it ...
-    repeat_height_change: float  # ... (no pixel moved by more than this, metres) repeats it
+    @property
+    def repeat_pixels(self) -> int:
+        """An action this close to a tried one (same primitive and angle) ..."""
+        ...
+
+    @property
+    def repeat_window(self) -> int:
+        """... on a heightmap unchanged within this many pixels around it ..."""
+        ...
+
+    @property
+    def repeat_height_change(self) -> float:
+        """... (no pixel moved by more than this, metres) repeats it."""
+        ...
 
 
 @dataclass(frozen=True)

@@ -102,9 +102,9 @@ class OraclePolicy:
         self.memory = ActionMemory(config)
         self.last_plan: dict[str, Any] | None = None  # what the last act() decided and why
         self._episode_motions = -1
-        self._obs: dict[str, np.ndarray] | None = None
-        self._ids_model = None
-        self._ids_caster = None
+        self._obs: dict[str, np.ndarray] = {}  # the observation of the last act()
+        self._ids_model: Any = None  # the mujoco.MjModel the caster below was made for
+        self._ids_caster: Any = None  # its RaycastHeightmapper (made on first use)
 
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
         """SB3-style: ``(action, state)`` for the env's current state."""
@@ -118,7 +118,7 @@ class OraclePolicy:
     def act(self, obs: Any = None) -> int:
         """The flat action index the oracle chooses now, for the env's current observation
         ``obs`` (``None``: the env's last one) and the simulator state behind it."""
-        env = self.env.unwrapped
+        env: Any = self.env.unwrapped  # an MPG env (gym.Env does not declare its attributes)
         if env.num_motions == 0 and self._episode_motions != 0:
             self.reset()  # a new episode even if the caller did not say so
         self._episode_motions = env.num_motions
@@ -326,6 +326,7 @@ class OraclePolicy:
                     best = (blocked, offset, row, col, limit)
                 if blocked <= 0:
                     break
+            assert best is not None  # the offsets tried include 0.0: at least one
             blocked, offset, row, col, limit = best
             edge = width / 2 + c.finger_margin
             in_low = (sb <= -edge) & (sb >= offset - reach) & (hb > limit)

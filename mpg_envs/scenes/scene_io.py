@@ -34,6 +34,7 @@ import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -198,6 +199,7 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
     (``env.unwrapped.current_scene()``)."""
     if not isinstance(scene, SceneFile):
         scene = scene.unwrapped.current_scene()  # type: ignore[attr-defined]
+    scene = cast(SceneFile, scene)
     digests: dict[str, str] = {}
     objects = []
     for obj in scene.objects:

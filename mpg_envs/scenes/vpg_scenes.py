@@ -115,7 +115,8 @@ def read_vpg_text(path: Path, mesh_dir: str | Path | None, seed: int) -> SceneFi
         raise SceneFileError(f"scene file {str(path)!r} lists no objects")
     gti = not Path(lines[0][1][0]).suffix
     shapes = _shapes(path, mesh_dir, seed)
-    objects, targets = [], []
+    objects: list[SceneObject] = []
+    targets: list[int] = []
     for lineno, fields in lines:
         where = f"{path}:{lineno}"
         if gti:
@@ -131,7 +132,8 @@ def read_vpg_text(path: Path, mesh_dir: str | Path | None, seed: int) -> SceneFi
             if len(fields) != 10:
                 raise SceneFileError(f"{where}: expected 'mesh r g b x y z rx ry rz', got {len(fields)} fields")
             mesh, numbers = fields[0], fields[4:]
-            rgb = tuple(_numbers(where, fields[1:4]))
+            r, g, b = _numbers(where, fields[1:4])
+            rgb = (r, g, b)
         label = f"object {len(objects)} ({mesh}, line {lineno})" if not gti else f"object {len(objects)} ({name} {mesh}, line {lineno})"
         objects.append(_vpg_object(shapes, mesh, rgb, _numbers(where, numbers), where, label))
     if gti and len(targets) != 1:
@@ -173,7 +175,7 @@ def _numbers(where: str, fields: list[str]) -> list[float]:
     return values
 
 
-def _vpg_object(shapes: _Shapes, mesh: str, rgb: tuple[float, ...], numbers: list[float], where: str, label: str) -> SceneObject:
+def _vpg_object(shapes: _Shapes, mesh: str, rgb: tuple[float, float, float], numbers: list[float], where: str, label: str) -> SceneObject:
     """One object at its VPG pose: the shape frame's Euler angles, the bounding-box centre."""
     assets, frames, source = shapes
     stem = Path(mesh).stem

@@ -212,7 +212,8 @@ def make_asset(
         if volume is None:
             volume = sum(mesh_volume(v, f) for v, f in parts)
         mass = float(np.clip(density * volume, *MASS_RANGE))
-    offset = tuple(float(c) for c in com)
+    x, y, z = (float(c) for c in com)
+    offset = (x, y, z)
     return ObjectAsset(
         name=name, parts=tuple(parts), rgba=rgba, mass=mass, friction=friction, source=source,
         mesh_offset=offset, scale=float(scale), licence=licence,

@@ -9,6 +9,7 @@ jitters every dimension by up to +-10 %. Geometry is cached on disk
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 
@@ -84,7 +85,7 @@ def blocks_object_set(
         if kind == "arch":
             key_data["tunnel_ratio"] = ARCH_TUNNEL_RATIO
         parts, com = cached_parts(
-            folder, f"blocks-{name}", key_data, lambda kind=kind, dims=dims: _make_block(kind, dims, seed, params)
+            folder, f"blocks-{name}", key_data, functools.partial(_make_block, kind, dims, seed, params)
         )
         assets.append(make_asset(name, parts, TABLEAU_10[index % len(TABLEAU_10)], density, None, friction, "blocks", com))
     return assets

@@ -200,7 +200,7 @@ def _solid(path: str, scale: float, seed: int, params: CoacdParams, use_coacd: b
             f"mesh file {path!r}: a concave solid needs convex decomposition (its convex hull is "
             f"{hull_volume / volume:.2f} x its volume, over the {HULL_FALLBACK_RATIO:g} a hull may stand in for)"
         )
-    parts: list[Part] = []
+    parts = []
     for piece in union.split(only_watertight=False) if len(bodies) > 1 else [union]:
         if float(piece.volume) >= CONVEX_VOLUME_RATIO * float(piece.convex_hull.volume):
             parts.extend(_hull_parts([piece.vertices]))

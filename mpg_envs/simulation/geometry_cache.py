@@ -129,7 +129,7 @@ def _read_cache(path: Path) -> _Entry | None:
 
 def _write_cache(path: Path, parts: list[Part], com: np.ndarray, volume: float | None = None, note: str = "") -> None:
     """Write atomically (temporary file + rename) so concurrent readers never see half a file."""
-    arrays: dict[str, np.ndarray] = {
+    arrays: dict[str, Any] = {  # np.savez's keywords
         "format": np.array(CACHE_FORMAT_VERSION),
         "num_parts": np.array(len(parts)),
         "com": np.asarray(com, dtype=np.float64),

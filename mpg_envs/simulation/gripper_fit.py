@@ -51,7 +51,7 @@ class FitError(ValueError):
     """No uniform scale brings an object's extents into the range."""
 
 
-def scale_bounds(extents: Sequence[float], extent_range: ExtentRange) -> tuple[float, float]:
+def scale_bounds(extents: Sequence[float] | np.ndarray, extent_range: ExtentRange) -> tuple[float, float]:
     """The interval ``[low, high]`` of uniform scales that put ``extents`` in ``extent_range``.
 
     With sorted extents ``e1 <= e2 <= e3``: ``low = min_extent / e1`` and
@@ -70,7 +70,7 @@ def scale_bounds(extents: Sequence[float], extent_range: ExtentRange) -> tuple[f
     return float(low), float(high)
 
 
-def fit_scale(extents: Sequence[float], extent_range: ExtentRange = BLOCKS_EXTENTS) -> float:
+def fit_scale(extents: Sequence[float] | np.ndarray, extent_range: ExtentRange = BLOCKS_EXTENTS) -> float:
     """The uniform scale nearest 1 that puts ``extents`` (m) in ``extent_range``.
 
     An object already in range keeps its size (1.0); a larger one shrinks just enough, a

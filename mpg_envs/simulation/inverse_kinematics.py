@@ -120,12 +120,12 @@ def solve_site_pose(
         steps = step
         err_norm = 0.0
         err_pos[:] = target_pos - site_xpos
-        err_norm += np.linalg.norm(err_pos)
+        err_norm += float(np.linalg.norm(err_pos))
         mujoco.mju_mat2Quat(site_xquat, site_xmat)
         mujoco.mju_negQuat(neg_site_xquat, site_xquat)
         mujoco.mju_mulQuat(err_rot_quat, target_quat, neg_site_xquat)
         mujoco.mju_quat2Vel(err_rot, err_rot_quat, 1)
-        err_norm += np.linalg.norm(err_rot) * rot_weight
+        err_norm += float(np.linalg.norm(err_rot)) * rot_weight
         if err_norm < tol:
             success = True
             break

@@ -112,6 +112,7 @@ class IsolatedWorker:
         with self._lock:
             process = self._ensure_started()
             assert process.stdin is not None and process.stdout is not None
+            stdout = process.stdout
             try:
                 # The call is pickled apart: the worker unpickles it after taking on the path.
                 _write_message(process.stdin, (list(sys.path), pickle.dumps((target, args), pickle.HIGHEST_PROTOCOL)))
@@ -122,7 +123,7 @@ class IsolatedWorker:
 
             def read_reply() -> None:
                 try:
-                    replies.put(("reply", _read_message(process.stdout)))
+                    replies.put(("reply", _read_message(stdout)))
                 except Exception as exc:  # EOF (the worker died) or a torn message
                     replies.put(("eof", exc))
 

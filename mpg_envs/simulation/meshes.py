@@ -26,7 +26,7 @@ import math
 import os
 import warnings
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import trimesh
@@ -322,7 +322,7 @@ def _as_load_error(path: Path, exc: WorkerCallError) -> MeshLoadError:
 def _vertex_extents(path: Path, data: bytes) -> np.ndarray:
     """Bounding-box size of the file's finite vertices (trimesh's parser: Python, no native code)."""
     try:
-        mesh = trimesh.load(trimesh.util.wrap_as_stream(data), file_type=path.suffix.lower()[1:], force="mesh", process=False)
+        mesh: Any = trimesh.load(trimesh.util.wrap_as_stream(data), file_type=path.suffix.lower()[1:], force="mesh", process=False)
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
     except Exception as exc:  # trimesh raises many types for bad files; report them uniformly
         raise MeshLoadError(f"mesh file {str(path)!r}: cannot load it ({type(exc).__name__}: {exc})") from exc

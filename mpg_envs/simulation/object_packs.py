@@ -98,11 +98,13 @@ def load_object_pack(path: str | os.PathLike[str]) -> list[ObjectAsset]:
                 v0, f0 = v_ends[j] - vertex_counts[j], f_ends[j] - face_counts[j]
                 parts.append((vertices[v0 : v_ends[j]], faces[f0 : f_ends[j]]))
             k += int(part_counts[i])
+            ox, oy, oz = (float(c) for c in data["mesh_offset"][i])
+            r, g, b, a = (float(c) for c in data["rgba"][i])
             assets.append(
                 ObjectAsset(
-                    name=name, parts=tuple(parts), rgba=tuple(data["rgba"][i]), mass=float(data["mass"][i]),
+                    name=name, parts=tuple(parts), rgba=(r, g, b, a), mass=float(data["mass"][i]),
                     friction=float(data["friction"][i]), source=str(data["sources"][i]),
-                    mesh_offset=tuple(float(c) for c in data["mesh_offset"][i]), scale=float(data["scale"][i]),
+                    mesh_offset=(ox, oy, oz), scale=float(data["scale"][i]),
                     licence=str(data["licences"][i]),
                 )  # fmt: skip
             )

@@ -132,7 +132,7 @@ class Primitives:
             # cannot reach is a motion that did nothing (the world is put back).
             checkpoint.restore()
             result = self._unreachable(primitive, int(rotation), int(row), int(col))
-        if target_pose is not None:
+        if target_pose is not None and target is not None:
             result.target_moved = target in result.removed_objects or self._moved(target, *target_pose)
         result.physics_steps = world.counter.steps - steps0
         result.physics_seconds = world.counter.seconds - secs0
@@ -230,7 +230,7 @@ class Primitives:
         world, cfg = self.world, self.config
         if world.robot.driver_angle(world.data) > self.gripper.closed_driver_angle - cfg.closed_margin:
             return None  # the fingers closed fully: nothing between them
-        touching = {world.object_of_geom(o) for _, o in world.contacts_between(world.robot.gripper_geom_ids, np.concatenate(world.object_geom_ids))}
+        touching = {int(world.object_of_geom(o)) for _, o in world.contacts_between(world.robot.gripper_geom_ids, np.concatenate(world.object_geom_ids))}
         lifted = [
             i
             for i in touching

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -155,7 +156,7 @@ class ArmIK:
         self.home = np.asarray(config.home, dtype=float)
         self.solves = 0
 
-    def solve(self, position: np.ndarray, theta: float, seed: np.ndarray | None = None) -> np.ndarray:
+    def solve(self, position: Sequence[float] | np.ndarray, theta: float, seed: np.ndarray | None = None) -> np.ndarray:
         """Arm joint angles putting the TCP at ``position`` pointing down, closing along ``theta``.
 
         Raises :class:`UnreachablePoseError` (a ``RuntimeError``) when the pose is out of reach.

@@ -192,11 +192,11 @@ def regular_polygon(radius: float, sides: int, scale: Sequence[float] = (1.0, 1.
 
 def box_part(lo: Sequence[float], hi: Sequence[float]) -> Part:
     """The axis-aligned box between corners ``lo`` and ``hi``."""
-    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
-    return convex_part(np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]))
+    a, b = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    return convex_part(np.array([[x, y, z] for x in (a[0], b[0]) for y in (a[1], b[1]) for z in (a[2], b[2])]))
 
 
-def axis_fit_factors(extents: Sequence[float], extent_range: ExtentRange = BLOCKS_EXTENTS) -> np.ndarray:
+def axis_fit_factors(extents: Sequence[float] | np.ndarray, extent_range: ExtentRange = BLOCKS_EXTENTS) -> np.ndarray:
     """Per-axis factors that bring ``extents`` into ``extent_range`` (the blocks' by default).
 
     Each extent is clamped to ``[min_extent, max_extent]`` and then the two smallest to at most
@@ -214,7 +214,7 @@ def axis_fit_factors(extents: Sequence[float], extent_range: ExtentRange = BLOCK
     return target / ext
 
 
-def scale_parts(parts: Sequence[Part], factors: Sequence[float]) -> list[Part]:
+def scale_parts(parts: Sequence[Part], factors: Sequence[float] | np.ndarray) -> list[Part]:
     """Parts scaled about the origin per axis (convex parts stay convex and disjoint)."""
     f = np.asarray(factors, dtype=np.float64)
     return [convex_part(v * f) for v, _ in parts]

@@ -176,15 +176,15 @@ class World:
         """Height of the highest point of object ``i`` above the table."""
         return float(self.object_vertices(i)[:, 2].max())
 
-    def set_object_pose(self, i: int, position: Sequence[float], quat: Sequence[float]) -> None:
+    def set_object_pose(self, i: int, position: Sequence[float] | np.ndarray, quat: Sequence[float] | np.ndarray) -> None:
         """Place object ``i`` (making it active) at rest at a pose."""
         adr, dof = self.object_qpos_adr[i], self.object_dof_adr[i]
         self.data.qpos[adr : adr + 3] = position
-        quat = np.asarray(quat, dtype=float)
-        norm = np.linalg.norm(quat)
+        q = np.asarray(quat, dtype=float)
+        norm = np.linalg.norm(q)
         # A quaternion read from the simulation is unit to rounding: keep its bits, so a saved
         # scene restores bit-identical observations; anything else is normalised.
-        self.data.qpos[adr + 3 : adr + 7] = quat if abs(norm - 1.0) < 1e-12 else quat / norm
+        self.data.qpos[adr + 3 : adr + 7] = q if abs(norm - 1.0) < 1e-12 else q / norm
         self.data.qvel[dof : dof + 6] = 0.0
         self._set_active(i, True)
 
@@ -264,7 +264,12 @@ class World:
         return used
 
     def drop_object(
-        self, i: int, xy: Sequence[float], quat: Sequence[float], height: float | None = None, max_steps: int | None = None
+        self,
+        i: int,
+        xy: Sequence[float] | np.ndarray,
+        quat: Sequence[float] | np.ndarray,
+        height: float | None = None,
+        max_steps: int | None = None,
     ) -> int:
         """Drop object ``i`` from ``height`` above whatever is below ``xy`` and let it settle
         (at most ``max_steps`` steps; ``None``: the physics' ``settle_max_steps``).
