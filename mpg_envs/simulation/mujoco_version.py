@@ -7,6 +7,13 @@ major version. Every evaluation, test set and checkpoint records the MuJoCo vers
 package version, and results are compared (paired, or side by side in one table) only within
 one major version.
 
+MuJoCo 4.0.0's sparse Cholesky factorization gives the Newton solver a wrong Hessian factor
+when the constraint Jacobian is sparse (fixed in 4.0.1: MuJoCo issue 3767), and MuJoCo picks
+the sparse Jacobian from 60 degrees of freedom, which every scene of 15 objects has: the arm or
+the fingers diverge in some motions (``mjWARN_BADQACC``, 3 of 100 held-out blocks episodes).
+:func:`constraint_jacobian` gives the dense Jacobian on that release and MuJoCo's own choice on
+every other.
+
 A record written before the field existed says nothing: every such file was measured on
 MuJoCo 3.x (the package required ``mujoco<4`` until then), and reads as
 :data:`UNRECORDED_MUJOCO`, ``"3.x"``.
@@ -26,6 +33,10 @@ MUJOCO_KEY = "mujoco"
 """The key of the MuJoCo version in an evaluation's ``versions`` entry."""
 
 
+SPARSE_CHOLESKY_BROKEN = frozenset({"4.0.0"})
+"""MuJoCo releases whose Newton solver diverges with a sparse constraint Jacobian."""
+
+
 class MuJoCoVersionError(ValueError):
     """Results of different MuJoCo major versions were to be compared or pooled."""
 
@@ -41,6 +52,14 @@ def mujoco_major(version: str) -> int:
     if not head.isdigit():
         raise ValueError(f"a MuJoCo version starts with its major number (3.17.0, 4.0.0, 3.x), got {version!r}")
     return int(head)
+
+
+def constraint_jacobian(version: str | None = None) -> mujoco.mjtJacobian:
+    """The constraint Jacobian a world compiles with on MuJoCo ``version`` (default: the running
+    one): dense on :data:`SPARSE_CHOLESKY_BROKEN`, else ``mjJAC_AUTO`` (MuJoCo's default: dense
+    below 60 degrees of freedom, sparse above), so 3.x runs as it always did."""
+    broken = (running_mujoco() if version is None else version) in SPARSE_CHOLESKY_BROKEN
+    return mujoco.mjtJacobian.mjJAC_DENSE if broken else mujoco.mjtJacobian.mjJAC_AUTO
 
 
 def recorded_mujoco(versions: Mapping[str, Any] | None) -> str:

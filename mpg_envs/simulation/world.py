@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 
 from mpg_envs.simulation.objects import ObjectAsset, add_object_body
+from mpg_envs.simulation.mujoco_version import constraint_jacobian
 from mpg_envs.simulation.robot import Robot, RobotConfig, robot_spec
 from mpg_envs.grid.workspace import Workspace
 
@@ -110,6 +111,8 @@ class World:
         self.assets = list(objects)
         spec = _arena_with_robot(robot, robot_visual).copy()  # a copy: parsing and attaching cost more than objects
         spec.option.timestep = physics.timestep
+        # MuJoCo's choice, except on a release whose sparse solver diverges (mujoco_version).
+        spec.option.jacobian = constraint_jacobian()
         for i, asset in enumerate(self.assets):
             pos = (self.workspace.center[0], self.workspace.center[1], self.PARK_DEPTH - i)
             body = add_object_body(spec, spec.worldbody, asset, name=f"object{i}", pos=pos)
