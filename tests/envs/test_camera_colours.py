@@ -107,7 +107,9 @@ def test_the_occlusion_flag_on_camera_images_is_the_ray_cast_tracks():
     plain = gym.make("MPG-Stage5-v0")
     expected = [int(plain.reset(seed=s)[0]["occluded"][0]) for s in seeds]
     plain.close()
-    assert expected == [1, 0, 0]
+    # The seeds' drops settle per MuJoCo major version (seed 700004's target lands covered on 4):
+    # the scenes the flags are compared on, with a clear target among them.
+    assert expected == {3: [1, 0, 0], 4: [1, 1, 0]}[int(mujoco.__version__.split(".")[0])]
     camera = gym.make("MPG-Stage5-v0", obs_mode="camera", visual_randomization=True)
     try:
         flags = [int(camera.reset(seed=s)[0]["occluded"][0]) for s in seeds]
