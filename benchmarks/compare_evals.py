@@ -7,6 +7,10 @@ Each side is one policy in one cell (env, object count): one or more ``mpg-eval 
 e.g. seed blocks run apart. Episodes are paired by their reset seed; only the seeds both sides
 played count. Prints A minus B with 95% paired-bootstrap intervals (``mpg_agents.evaluation.comparison``),
 and the motions' difference split by primitive (moves, pushes, grasps per episode).
+
+Each side's files must be of one MuJoCo major version (their ``versions``; a file that records
+none was measured on MuJoCo 3.x), and so must the two sides: ``--across-mujoco`` pairs a MuJoCo 4
+cell with a 3.x one on the same seeds anyway, to measure what the MuJoCo version changes.
 """
 
 from __future__ import annotations
