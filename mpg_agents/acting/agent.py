@@ -15,7 +15,7 @@ Its parts: :attr:`MPGAgent.q_net` (:class:`~mpg_agents.acting.q_function.MPGQFun
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Self
+from typing import TYPE_CHECKING, Any, Iterator, Mapping, Self
 
 import numpy as np
 import torch
@@ -76,7 +76,11 @@ class AgentMethods:
     q_net: MPGQFunction
     threshold: GraspThreshold
     coordination: str
-    device: torch.device
+
+    if TYPE_CHECKING:  # each class has its own (a property): declared for the checker only
+
+        @property
+        def device(self) -> torch.device: ...
 
     @classmethod
     def build(cls, observation_space: spaces.Dict, action_space: spaces.Discrete, **settings: Any) -> Self:

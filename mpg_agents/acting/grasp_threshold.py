@@ -111,6 +111,8 @@ class GraspThreshold(nn.Module):
     NaN (a tensor holds no ``None``); :meth:`get` and :meth:`set` speak ``None``.
     """
 
+    value: torch.Tensor  # the buffer
+
     def __init__(self, q_star: float | None = UNCALIBRATED) -> None:
         super().__init__()
         self.register_buffer("value", torch.tensor(math.nan, dtype=torch.float64))

@@ -81,7 +81,7 @@ def check_observation_space(space: spaces.Space, size: int) -> None:
     for key, allowed in shapes.items():
         if key not in space.spaces:
             raise ValueError(f"observation space lacks {key!r}; MPGNet needs keys {sorted(shapes)}")
-        if tuple(space.spaces[key].shape) not in allowed:
+        if tuple(space.spaces[key].shape or ()) not in allowed:
             raise ValueError(
                 f"observation space {key!r} has shape {space.spaces[key].shape}; expected one of {allowed}"
             )

@@ -34,7 +34,7 @@ CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"
 
 
 def checkpoint_metadata(
-    net: MPGNet, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
+    net: MPGNet, q_star: float | None = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> dict[str, str]:
     """The safetensors metadata header: one JSON document under key ``"mpgnet"``; its
     ``"q_star"`` is where a checkpoint stores Q*_g (:mod:`mpg_agents.acting.grasp_threshold`), its
@@ -56,7 +56,7 @@ def checkpoint_metadata(
 
 
 def save_mpgnet(
-    net: MPGNet, path: str | Path, q_star: float = UNCALIBRATED, extra: Mapping[str, Any] | None = None
+    net: MPGNet, path: str | Path, q_star: float | None = UNCALIBRATED, extra: Mapping[str, Any] | None = None
 ) -> None:
     """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header,
     whole or not at all (:func:`mpg_envs.files.write_bytes_whole`): a process killed meanwhile,

@@ -19,6 +19,7 @@ installed); :func:`check_actor_backend` says before any work whether the one ask
 from __future__ import annotations
 
 import importlib.util
+import logging
 import multiprocessing as mp
 import os
 import signal
@@ -219,13 +220,13 @@ class RayActorPool(ActorPool):
                 # A local Ray's workers import this very package (a source checkout included).
                 root = str(Path(__file__).resolve().parents[2])
                 env_vars["PYTHONPATH"] = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)
-                ray.init(num_cpus=len(specs), runtime_env={"env_vars": env_vars}, include_dashboard=False, logging_level="WARNING")
+                ray.init(num_cpus=len(specs), runtime_env={"env_vars": env_vars}, include_dashboard=False, logging_level=logging.WARNING)
             else:
-                ray.init(address=address, runtime_env={"env_vars": env_vars}, logging_level="WARNING")
+                ray.init(address=address, runtime_env={"env_vars": env_vars}, logging_level=logging.WARNING)
             self._started = True
         remote = ray.remote(num_cpus=1)(_RayActor)
         self.size = len(specs)
-        self._handles = [remote.remote(spec) for spec in specs]
+        self._handles: list[Any] = [remote.remote(spec) for spec in specs]  # Ray actor handles
         self._pending: dict[Any, int] = {}
 
     def submit(self, actor: int, request: ActRequest) -> None:

@@ -59,13 +59,14 @@ def make_training_env(stage: TrainingStage, config: TrainConfig, num_objects: in
         if key != "config":
             kwargs[key] = training_object_set(value) if key == "object_set" else value
     env = gym.make(stage.env_id, **kwargs)
-    check_not_held_out("custom", env.unwrapped.object_set, f"training on {stage.env_id}")  # however they got there
+    unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
+    check_not_held_out("custom", unwrapped.object_set, f"training on {stage.env_id}")  # however they got there
     return env
 
 
 def build_agent(stage: TrainingStage, config: TrainConfig, env: gym.Env) -> MPGAgent:
     """A fresh agent with the stage's branches and coordination and the config's network."""
-    space = env.unwrapped
+    space: Any = env.unwrapped
     return MPGAgent.build(
         space.observation_space, space.action_space, variant=config.variant, branches=stage.branches or PRIMITIVES,
         coordination=stage.coordination, net_config=config.net_config, geometry=finger_geometry(env),
@@ -159,7 +160,7 @@ class ActorStep:
     truncated: bool = False
     info: dict[str, Any] = field(default_factory=dict)
     # The stage's trials from ``obs``, stored before the step: (next_obs, action, reward, terminated).
-    trials: list[tuple[dict[str, np.ndarray], int, float, bool]] = field(default_factory=list)
+    trials: list[tuple[Mapping[str, Any], int, float, bool]] = field(default_factory=list)
     trial_counts: TrialCounts = field(default_factory=TrialCounts)
     choose_seconds: float = 0.0
     step_seconds: float = 0.0
@@ -181,7 +182,8 @@ class Actor:
         self.env = make_training_env(spec.stage, cfg, spec.num_objects, "cpu")
         self.policy = build_agent(spec.stage, cfg, self.env)
         self.rng = np.random.default_rng([cfg.seed, spec.index, spec.start_iteration])
-        self.explorer = make_explorer(self.policy, spec.stage, tuple(self.env.unwrapped.primitives), self.rng, cfg)
+        unwrapped: Any = self.env.unwrapped
+        self.explorer = make_explorer(self.policy, spec.stage, tuple(unwrapped.primitives), self.rng, cfg)
         self.version = 0
         self.episode = -1
         self.obs: dict[str, np.ndarray] | None = None  # None: no episode running
@@ -209,7 +211,7 @@ class Actor:
         start = time.perf_counter()
         choice = choose_action(self.policy, self.explorer, self.spec.stage, obs, request.epsilon,
                                self.pushes_in_episode, self.failed_grasps_in_a_row)
-        trials: list[tuple[dict[str, np.ndarray], int, float, bool]] = []
+        trials: list[tuple[Mapping[str, Any], int, float, bool]] = []
         counts = TrialCounts()
         try_alternatives(self.env.unwrapped, self.policy, self.spec.stage, counts, obs, choice, self.rng,
                          lambda _, next_obs, action, reward, terminated: trials.append((next_obs, action, reward, terminated)))

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import gymnasium as gym
 
@@ -23,7 +23,7 @@ from mpg_agents.acting.episode_loop import episode_steps
 from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.policies.oracle import OraclePolicy
 
-AddTransition = Callable[[dict[str, Any], dict[str, Any], int, float, bool], None]
+AddTransition = Callable[[Mapping[str, Any], Mapping[str, Any], int, float, bool], None]
 """``add(obs, next_obs, action, reward, terminated)``: stores one unbatched transition."""
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ import signal
 import time
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import gymnasium as gym
 import numpy as np
@@ -108,7 +108,7 @@ class Learner:
         self.device = resolve_device(config.device)  # networks and batches; the replay and the env stay on the host
         torch.manual_seed(config.seed)  # before the networks are built: the seed fixes their initial weights
         self.env = make_training_env(self.stage, config, self.objects_now(0), self.device)
-        env = self.env.unwrapped
+        env: Any = self.env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
         self.primitives: tuple[str, ...] = tuple(env.primitives)
         # The online agent, then the target network: their initial weights come from the seed in this order.
         self.policy = build_agent(self.stage, config, self.env).to(self.device)
@@ -225,7 +225,8 @@ class Learner:
             RuntimeError: no grasp took the target.
         """
         if self._calibration_env is None:  # its own env: a training episode in progress is left as it is
-            self._calibration_env = make_training_env(self.stage, self.config, self.env.unwrapped.num_objects, self.device)
+            unwrapped: Any = self.env.unwrapped
+            self._calibration_env = make_training_env(self.stage, self.config, unwrapped.num_objects, self.device)
         try:
             measured = calibrate_q_star(
                 self.policy, self._calibration_env, episodes, self.config.seed, self.stage.calibration_quantile,
@@ -297,7 +298,7 @@ class Learner:
         stage with a finish trains its ``finish_trainable`` alone at the end)."""
         return self.stage.branches_at(self.counters.iteration, self.steps, self.trainable)
 
-    def choose(self, obs: dict[str, np.ndarray]) -> tuple[Choice, list[int]]:
+    def choose(self, obs: Mapping[str, Any]) -> tuple[Choice, list[int]]:
         """What this step does on ``obs``: the action (:meth:`act`) and the stage's trials of the
         actions not taken, tried and stored before it (:meth:`try_alternatives`)."""
         choice = self.act(obs)
@@ -349,7 +350,7 @@ class Learner:
         if every and c.iteration < self.steps and c.iteration // every > max(c.calibrated_at, 0) // every:
             self.calibrate_in_scenes(self.stage.calibration_episodes)
 
-    def store(self, obs: dict[str, np.ndarray], next_obs: dict[str, np.ndarray], action: int, reward: float, terminated: bool) -> None:
+    def store(self, obs: Mapping[str, Any], next_obs: Mapping[str, Any], action: int, reward: float, terminated: bool) -> None:
         """Add one transition to the replay (batch of one; a truncation is no terminal state)."""
         self.replay.add(
             {k: v[None] for k, v in obs.items()},
@@ -360,12 +361,12 @@ class Learner:
             [{}],
         )
 
-    def try_alternatives(self, obs: dict[str, np.ndarray], choice: Choice) -> list[int]:
+    def try_alternatives(self, obs: Mapping[str, Any], choice: Choice) -> list[int]:
         """The stage's counterfactual trials of this step (:func:`mpg_agents.learning.trials.try_alternatives`),
         tried, stored and counted; returns their actions (none when the stage has none)."""
         return try_alternatives(self.env.unwrapped, self.policy, self.stage, self.counters, obs, choice, self.rng, self.store)
 
-    def act(self, obs: dict[str, np.ndarray]) -> Choice:
+    def act(self, obs: Mapping[str, Any]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""
         c = self.counters
         return choose_action(self.policy, self.explorer, self.stage, obs, self.epsilon(), c.pushes_in_episode, c.failed_grasps_in_a_row)

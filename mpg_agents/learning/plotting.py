@@ -75,8 +75,8 @@ def read_progress(path: str | Path) -> dict[str, np.ndarray]:
             out[key] = np.array([float(v) if v.strip() != "" else np.nan for v in values])
         except ValueError:
             if key in CSV_COLUMNS:
-                n, bad = next((i, v) for i, v in enumerate(values, start=2) if v.strip() != "" and not _is_number(v))
-                raise ValueError(f"{path} line {n}: {key} is {bad!r}, not a number") from None
+                n, text = next((i, v) for i, v in enumerate(values, start=2) if v.strip() != "" and not _is_number(v))
+                raise ValueError(f"{path} line {n}: {key} is {text!r}, not a number") from None
             out[key] = np.array(values)  # a column of someone else's: kept as text
     iterations = out["iteration"]
     bad = np.flatnonzero(~np.isfinite(iterations) | (iterations != np.round(iterations)) | (iterations < 0))

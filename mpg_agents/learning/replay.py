@@ -134,8 +134,8 @@ class PrioritizedHeightmapReplayBuffer:
             raise ValueError(f"need alpha >= 0 and priority_eps > 0, got alpha={alpha}, priority_eps={priority_eps}")
         self.observation_space = observation_space
         self.action_space = action_space
-        self.obs_shape = {key: tuple(sub.shape) for key, sub in observation_space.spaces.items()}
-        self.action_dim = 1 if isinstance(action_space, spaces.Discrete) else int(np.prod(action_space.shape))
+        self.obs_shape = {key: tuple(sub.shape or ()) for key, sub in observation_space.spaces.items()}
+        self.action_dim = 1 if isinstance(action_space, spaces.Discrete) else int(np.prod(action_space.shape or ()))
         self.device = _device(device)
         self.n_envs = int(n_envs)
         self.buffer_size = max(buffer_size // n_envs, 1)
@@ -167,12 +167,12 @@ class PrioritizedHeightmapReplayBuffer:
 
     # The parent's dict-of-arrays attributes do not exist here; decoded views on demand.
     @property
-    def observations(self) -> dict[str, np.ndarray]:  # type: ignore[override]
+    def observations(self) -> dict[str, np.ndarray]:
         """Decoded stored observations ``{key: (size, n_envs, ...)}`` (slow; for inspection)."""
         return self._decode_all(self.obs_frames)
 
     @property
-    def next_observations(self) -> dict[str, np.ndarray]:  # type: ignore[override]
+    def next_observations(self) -> dict[str, np.ndarray]:
         """Decoded stored next observations (slow; for inspection)."""
         return self._decode_all(self.next_obs_frames)
 
@@ -207,7 +207,7 @@ class PrioritizedHeightmapReplayBuffer:
         return all(np.array_equal(a[k], b[k]) for k in a)
 
     # ---------------------------------------------------------------- API
-    def add(  # type: ignore[override]
+    def add(
         self,
         obs: dict[str, np.ndarray],
         next_obs: dict[str, np.ndarray],
@@ -264,15 +264,15 @@ class PrioritizedHeightmapReplayBuffer:
         self._last_next = [None] * self.n_envs
 
     @property
-    def rng_state(self) -> dict | None:
+    def rng_state(self) -> dict[str, Any] | None:
         """The sampling generator's state (``None`` when the buffer was built without a seed)."""
-        return self._rng.bit_generator.state if self._rng is not None else None
+        return dict(self._rng.bit_generator.state) if self._rng is not None else None
 
     @rng_state.setter
-    def rng_state(self, state: dict | None) -> None:
+    def rng_state(self, state: dict[str, Any] | None) -> None:
         if (state is None) != (self._rng is None):
             raise ValueError("a seeded buffer needs a generator state and an unseeded one none")
-        if self._rng is not None:
+        if self._rng is not None and state is not None:
             self._rng.bit_generator.state = state
 
     def sampling_probabilities(self) -> np.ndarray:

@@ -73,7 +73,7 @@ def save_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
 
     obs_idx = np.array([[index(f) for f in row] for row in buffer.obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
     next_idx = np.array([[index(f) for f in row] for row in buffer.next_obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
-    arrays: dict[str, np.ndarray] = {
+    arrays: dict[str, Any] = {  # np.savez's keywords
         "obs_idx": obs_idx,
         "next_idx": next_idx,
         "actions": buffer.actions[:n],

@@ -247,7 +247,8 @@ class TrainingStage:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "TrainingStage":
         check_known_fields(cls, data, "training stage settings")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+        kwargs: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        return cls(**kwargs)
 
 
 TRAINING_STAGES: tuple[TrainingStage, ...] = (

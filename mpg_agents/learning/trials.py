@@ -23,7 +23,7 @@ demonstrations: a simulator's counterfactual, not the paper's pure RL; off by de
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -44,7 +44,7 @@ TRIAL_COUNTERS: dict[str, tuple[str, ...]] = {
 """Each kind of trial (a ``TrainingStage`` field that switches it on) and the run counters
 (:class:`~mpg_agents.learning.run_state.Counters` fields) a stage's summary reports for it."""
 
-Store = Callable[[dict[str, np.ndarray], dict[str, np.ndarray], int, float, bool], None]
+Store = Callable[[Mapping[str, Any], Mapping[str, Any], int, float, bool], None]
 
 
 def grasp_trial_actions(env: Any, action: int, trials: int, rng: np.random.Generator) -> list[int]:
@@ -55,7 +55,7 @@ def grasp_trial_actions(env: Any, action: int, trials: int, rng: np.random.Gener
     return [env.action_space.encode(primitive, int(k) + GRASP_ROTATIONS * int(rng.integers(2)), row, col) for k in chosen]
 
 
-def move_trial_actions(env: Any, policy: MPGAgent, obs: dict[str, np.ndarray], action: int, trials: int) -> list[int]:
+def move_trial_actions(env: Any, policy: MPGAgent, obs: Mapping[str, Any], action: int, trials: int) -> list[int]:
     """Up to ``trials`` moves at the move net's best places away from move ``action``'s."""
     _, _, row, col = env.action_space.decode(action)
     return policy.alternatives(obs, "move", trials, MOVE_TRIAL_SPACING_PX, taken=(row, col))
@@ -65,7 +65,7 @@ RIVALS = {"move": "push", "push": "move"}
 """The primitive each uncovering primitive is weighed against by a rival trial."""
 
 
-def rival_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], primitive: str) -> list[int]:
+def rival_trial_actions(policy: MPGAgent, obs: Mapping[str, Any], primitive: str) -> list[int]:
     """The best action of ``primitive``'s rival (:data:`RIVALS`) when the target is covered in
     ``obs`` and the policy has that branch; else none."""
     rival = RIVALS.get(primitive)
@@ -74,7 +74,7 @@ def rival_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], primitive:
     return policy.alternatives(obs, rival, 1, 0.0)
 
 
-def covered_grasp_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], primitive: str) -> list[int]:
+def covered_grasp_trial_actions(policy: MPGAgent, obs: Mapping[str, Any], primitive: str) -> list[int]:
     """The grasp net's best grasp when the target is covered in ``obs``, the step taken uncovers
     (a move or a push) and the policy has a grasp branch; else none."""
     if primitive not in RIVALS or "grasp" not in policy.usable_primitives or not bool(obs["occluded"][0]):
@@ -82,7 +82,7 @@ def covered_grasp_trial_actions(policy: MPGAgent, obs: dict[str, np.ndarray], pr
     return policy.alternatives(obs, "grasp", 1, 0.0)
 
 
-def run_trials(env: Any, obs: dict[str, np.ndarray], actions: list[int], store: Store) -> list[dict[str, Any]]:
+def run_trials(env: Any, obs: Mapping[str, Any], actions: list[int], store: Store) -> list[dict[str, Any]]:
     """Try each action from the current state (undone after each) and ``store`` its transition
     from ``obs``; returns the trials' ``info`` dicts."""
     infos = []
@@ -94,7 +94,7 @@ def run_trials(env: Any, obs: dict[str, np.ndarray], actions: list[int], store: 
 
 
 def try_alternatives(
-    env: Any, policy: MPGAgent, stage: Any, counters: Any, obs: dict[str, np.ndarray], choice: Any,
+    env: Any, policy: MPGAgent, stage: Any, counters: Any, obs: Mapping[str, Any], choice: Any,
     rng: np.random.Generator, store: Store,
 ) -> list[int]:
     """The trials ``stage`` (a :class:`~mpg_agents.learning.training_stages.TrainingStage`) asks for

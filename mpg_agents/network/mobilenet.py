@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, cast
 
 import torch
 from safetensors.torch import load_file
@@ -134,7 +134,7 @@ class ConvBNAct(nn.Sequential):
     def forward(self, x: Tensor, first_channel: int = 0) -> Tensor:
         """Conv -> BN -> activation of ``x``; the convolution reads channels
         ``first_channel .. first_channel + in_channels - 1`` of ``x`` (see :func:`window_weight`)."""
-        conv, bn = self[0], self[1]
+        conv, bn = cast(nn.Conv2d, self[0]), cast(nn.BatchNorm2d, self[1])
         window = x.shape[1] != conv.in_channels or first_channel != 0
         if self.training:
             if not window:
@@ -154,7 +154,8 @@ class ConvBNAct(nn.Sequential):
         the batched path (a few small tensor ops per layer against its convolutions) and would
         have to track every in-place change of weights and statistics.
         """
-        conv, bn = self[0], self[1]
+        conv, bn = cast(nn.Conv2d, self[0]), cast(nn.BatchNorm2d, self[1])
+        assert bn.running_var is not None and bn.running_mean is not None  # tracked (the default)
         scale = bn.weight * torch.rsqrt(bn.running_var + bn.eps)
         weight = conv.weight * scale.view(-1, 1, 1, 1)
         bias = bn.bias - bn.running_mean * scale

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence, cast
 
 import torch
 from torch import Tensor, nn
@@ -102,6 +102,9 @@ class MPGNet(nn.Module):
         ValueError: finger masks without a ``geometry``, or one of another heightmap size.
     """
 
+    color_mean: Tensor  # buffers (register_buffer below)
+    color_std: Tensor
+
     def __init__(self, config: MPGNetConfig | None = None, geometry: FingerGeometry | None = None) -> None:
         super().__init__()
         self.config = config if config is not None else MPGNetConfig()
@@ -125,7 +128,7 @@ class MPGNet(nn.Module):
         self.register_buffer("color_std", torch.tensor(cfg.color_std).view(1, 3, 1, 1), persistent=False)
         self._grid_cache: dict[tuple, Tensor] = {}
         if cfg.channels_last:
-            self.to(memory_format=torch.channels_last)
+            self.to(memory_format=torch.channels_last)  # type: ignore[call-overload]  # torch's stubs omit it
 
     @property
     def primitives(self) -> tuple[str, ...]:
@@ -211,8 +214,10 @@ class MPGNet(nn.Module):
         blocked = self._finger_blocking(depth) if self.needs_geometry else None
         grasp_fingers = move_fingers = None
         if cfg.grasp_fingers == "clear":
+            assert blocked is not None  # a "clear" setting needs the geometry (checked at construction)
             grasp_fingers = least_blocked(blocked, region if grasp_region is None else grasp_region, cfg.finger_tolerance_m)
         if cfg.move_fingers == "clear":
+            assert blocked is not None
             move_fingers = least_blocked(blocked, region if move_region is None else move_region, cfg.finger_tolerance_m)
         return PreparedObs(
             torch.cat([color, depth, mask], dim=1), region, occluded, grasp_region, move_region, grasp_fingers, move_fingers
@@ -341,7 +346,7 @@ class MPGNet(nn.Module):
 
     def load_imagenet(self, path: str | Path) -> None:
         """Initialise every trunk from a torchvision MobileNetV3 checkpoint of the same variant."""
-        trunks = [self.mask_trunk] + [t for b in self.branches.values() for t in b.trunks]
+        trunks = [self.mask_trunk] + [t for b in self.branches.values() for t in cast(PrimitiveNet, b).trunks]
         for trunk in trunks:
             load_torchvision_features(trunk, path)
 

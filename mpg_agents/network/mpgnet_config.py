@@ -254,5 +254,5 @@ class MPGNetConfig:
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown MPGNetConfig keys {unknown}; valid keys: {sorted(known)}")
-        kwargs = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        kwargs: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**kwargs)

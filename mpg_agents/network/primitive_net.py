@@ -7,7 +7,7 @@ mask trunk they share. Every net reads its planes from one stacked, rotated inpu
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import torch
 from torch import Tensor, nn
@@ -49,8 +49,10 @@ class QHead(nn.Sequential):
             if isinstance(module, nn.Conv2d):
                 nn.init.kaiming_normal_(module.weight)
         if zero_output:
-            nn.init.zeros_(self[-1].weight)
-            nn.init.zeros_(self[-1].bias)
+            out = cast(nn.Conv2d, self[-1])
+            assert out.bias is not None  # made with a bias above
+            nn.init.zeros_(out.weight)
+            nn.init.zeros_(out.bias)
 
 
 class PrimitiveNet(nn.Module):

@@ -78,7 +78,7 @@ def _interior(mask: np.ndarray, depth: int) -> np.ndarray:
     distance = cv2.distanceTransform(binary, cv2.DIST_C, 3)[1:-1, 1:-1]
     parts, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
     deepest = np.zeros(parts, dtype=np.float32)
-    np.maximum.at(deepest, labels.ravel(), distance.ravel())
+    np.maximum.at(deepest, labels.ravel().astype(np.intp), distance.ravel())
     return mask & (distance >= np.minimum(depth + 1, deepest[labels]))
 
 
