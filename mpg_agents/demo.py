@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 import cv2
 import gymnasium as gym
@@ -71,7 +72,7 @@ def scene_picture(env: gym.Env, obs: dict[str, np.ndarray]) -> np.ndarray:
     """The heightmap panels beside the rendered scene (``env.render()``) when OpenGL works."""
     panels = heightmap_panels(obs)
     try:
-        view = env.render()
+        view: Any = env.render()  # an RGB array (render_mode="rgb_array")
     except RenderUnavailableError as exc:
         print(f"(no rendered view in scene.png: {exc})")
     else:

@@ -168,7 +168,7 @@ def run_cases(
     if not len(case_set):
         raise ValueError(f"case set {case_set.name!r} has no cases")
     start = time.perf_counter()
-    unwrapped = env.unwrapped
+    unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
     scenes = check_case_set(case_set, env)
     rows, records, failures = [], {}, []
     for c, case in enumerate(case_set):
@@ -213,7 +213,7 @@ def check_case_set(case_set: CaseSet, env: gym.Env) -> list[SceneFile]:
             missing or malformed file, objects interpenetrating or sunk into the table, no
             target where ``env`` needs one), with what is wrong with each.
     """
-    unwrapped = env.unwrapped
+    unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
     workspace, needs_target = unwrapped.config.workspace, not unwrapped.stage.mask_all_objects
     scenes, bad = [], []
     for case in case_set:

@@ -184,7 +184,7 @@ def _primitive_differences(a: EvalRecords, b: EvalRecords, seeds: Sequence[int])
     counts = [[side.by_seed[s].get("primitives") for s in seeds] for side in (a, b)]
     if any(c is None for side in counts for c in side):
         return {}
-    seen = {p for side in counts for c in side for p in c}
+    seen = {p for side in counts for c in side if c is not None for p in c}  # (none is None here)
     names = [p for p in PRIMITIVES if p in seen] + sorted(seen - set(PRIMITIVES))
     return {p: float(np.mean([ca.get(p, 0) - cb.get(p, 0) for ca, cb in zip(*counts)])) for p in names}
 

@@ -127,7 +127,7 @@ def run_chunk(
             failures: list[EpisodeFailure] | None = [] if keep_going else None
             records = run_episodes(policy, env, indices, job.seed, on_record=on_record, failures=failures)
             name = getattr(policy, "name", type(policy).__name__)
-            env_id, num_objects = env_id_of(env), int(env.unwrapped.num_objects)
+            env_id, num_objects = env_id_of(env), int(getattr(env.unwrapped, "num_objects"))  # an MPG env's
         finally:
             env.close()
     return ChunkResult(name, env_id, num_objects, records, time.perf_counter() - start, failures or [])
@@ -272,6 +272,7 @@ def evaluate_jobs(
         chunks, done_at = _run_in_process(jobs, on_record, keep_going)
         used_workers = 1
     elif backend == "processes":
+        assert workers is not None  # _check_workers: None only with a Ray address
         used_workers = int(workers)
         chunks, done_at = _run_on_processes(jobs, used_workers, on_record, keep_going)
     else:

@@ -407,7 +407,7 @@ def evaluate(
         records,
         policy=getattr(policy, "name", type(policy).__name__),
         env_id=env_id_of(env),
-        num_objects=int(env.unwrapped.num_objects),
+        num_objects=int(getattr(env.unwrapped, "num_objects")),  # an MPG env's (gym.Env does not declare it)
         seed=seed,
         wall_seconds=time.perf_counter() - start,
         env_options=env_options_of(env),

@@ -21,12 +21,19 @@ import numpy as np
 
 
 class FindingRecord(Protocol):
-    """What :func:`finding_summary` reads of an episode record."""
+    """What :func:`finding_summary` reads of an episode record (read-only: frozen records qualify)."""
 
-    visible_fraction: float | None
-    first_sight: int | None
-    lookalike_grasps: int | None
-    wrong_grasps: int
+    @property
+    def visible_fraction(self) -> float | None: ...
+
+    @property
+    def first_sight(self) -> int | None: ...
+
+    @property
+    def lookalike_grasps(self) -> int | None: ...
+
+    @property
+    def wrong_grasps(self) -> int: ...
 
 
 def first_sight(
@@ -90,7 +97,7 @@ def finding_summary(records: Iterable[FindingRecord]) -> dict[str, Any]:
     }
     told = [r for r in records if r.lookalike_grasps is not None]
     if told:
-        lookalikes = sum(int(r.lookalike_grasps) for r in told)
+        lookalikes = sum(int(r.lookalike_grasps or 0) for r in told)  # none is None here
         summary["lookalike_grasps_per_episode"] = lookalikes / len(told)
         summary["other_mispicks_per_episode"] = (
             sum(r.wrong_grasps for r in told) - lookalikes

@@ -23,7 +23,7 @@ geometry alone says.
 from __future__ import annotations
 
 from collections import Counter
-from typing import Sequence
+from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -35,7 +35,7 @@ from mpg_agents.evaluation.policy_zoo import NetworkPolicy, make_network_policy
 from mpg_envs.grid.grasp_geometry import other_grasp_angles
 
 
-def roc_auc(scores: Sequence[float], labels: Sequence[bool]) -> float:
+def roc_auc(scores: Sequence[float] | np.ndarray, labels: Sequence[bool] | np.ndarray) -> float:
     """Probability that a positive's score exceeds a negative's (ties count half).
 
     The Mann-Whitney form of the area under the ROC curve; NaN when either class is empty.
@@ -76,7 +76,7 @@ class GraspProbe:
             blocked = geometry.blocked(np.asarray(obs["depth"])[None], self.net.policy.net_config.num_rotations)[0]
             self.blocked = float(blocked[decision.rotation, decision.row, decision.col])
         if self.env is not None and decision.primitive == "grasp":
-            u = self.env.unwrapped
+            u: Any = self.env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
             self.other_angle_takes = any(
                 u.try_step(u.action_space.encode("grasp", k, decision.row, decision.col))[4]["target_grasped"]
                 for k in other_grasp_angles(decision.rotation)

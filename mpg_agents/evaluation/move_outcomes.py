@@ -66,12 +66,13 @@ class MoveProbe:
         return int(decision.action)
 
     def _lifts(self, rotation: int, row: int, col: int, depth: np.ndarray, obj: int | None = None) -> bool:
-        u = self.env.unwrapped
+        u: Any = self.env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
         result = u.sim.try_primitive("move", rotation, row, col, depth, u.target)
         return bool(result.lifted and (obj is None or result.grasped_object == obj))
 
     def _look(self, obs, rotation: int, row: int, col: int) -> dict[str, Any]:
-        u, oracle = self.env.unwrapped, self.oracle
+        u: Any = self.env.unwrapped
+        oracle = self.oracle
         world, target, depth = u.world, u.target, np.asarray(obs["depth"])
         _, ids = oracle.view(world)
         occluders = oracle.occluders(world, target, depth, ids, obs["mask"])

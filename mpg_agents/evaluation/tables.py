@@ -181,10 +181,10 @@ def table_rows(
     header = ["Method"] + _header(objects, track.strict_columns)
     body = []
     if track.paper_rows:
-        for row in PAPER_ROWS:
-            success = [f"{100 * row.success[n]:.0f}%" if n in row.success else "-" for n in objects]
-            motions = [f"{row.motions[n]:.2f}" if n in row.motions else "-" for n in objects]
-            body.append([f"{row.method} (paper)"] + success + motions)
+        for paper in PAPER_ROWS:
+            success = [f"{100 * paper.success[n]:.0f}%" if n in paper.success else "-" for n in objects]
+            motions = [f"{paper.motions[n]:.2f}" if n in paper.motions else "-" for n in objects]
+            body.append([f"{paper.method} (paper)"] + success + motions)
     paper_count = len(body)
     for policy in policies:
         results = [cells[(policy, n)] for n in objects if (policy, n) in cells]

@@ -334,6 +334,7 @@ def make_track_table(
     rows: dict[str, dict[str, dict[str, Any]]] = {}
     for (name, label, n), cell in cells.items():
         rows.setdefault(name, {}).setdefault(label, {})[str(n)] = cell
+    mujoco_versions = sorted({recorded_mujoco(cell.get("versions")) for cell in cells.values()})
     report = {
         "tracks": {name: TRACKS[name].env_id for name in tracks},
         "objects": list(objects),
@@ -344,7 +345,7 @@ def make_track_table(
         "rows": rows,
         "sources": sources,
         "missing": missing,
-        "mujoco": sorted({recorded_mujoco(cell.get("versions")) for cell in cells.values()}),
+        "mujoco": mujoco_versions,
     }
     grid_header, grid_body = tracks_success_rows(tracks, labels, objects, cells)
     markdown = "\n\n".join([
@@ -352,7 +353,7 @@ def make_track_table(
         "Every figure:", format_markdown(header, body, text_columns=2),
     ])
     if cells:
-        markdown += f"\n\nMeasured on MuJoCo {', '.join(report['mujoco'])}."
+        markdown += f"\n\nMeasured on MuJoCo {', '.join(mujoco_versions)}."
     if missing:
         counts = {name: sum(1 for m in missing if m[0] == name) for name in tracks}
         markdown += "\n\nNot run yet: " + "; ".join(f"{TRACKS[name].scenes} ({TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells" for name, k in counts.items() if k) + "."

@@ -13,12 +13,13 @@ mode and samples uniformly.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import numpy as np
 from stable_baselines3.dqn.dqn import DQN
 
 from mpg_agents.acting.device import resolve_device
+from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.sb3.replay import SB3HeightmapReplayBuffer
@@ -116,7 +117,7 @@ class MPGDQN(DQN):
         for _ in range(gradient_steps):
             data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
             result = td_step(
-                self.q_net, self.q_net_target, self.policy.optimizer, data, self.step_config, self.trainable, self.replay_buffer
+                cast(MPGQFunction, self.q_net), cast(MPGQFunction, self.q_net_target), self.policy.optimizer, data, self.step_config, self.trainable, self.replay_buffer
             )
             if result.trained:
                 losses.append(result.loss)

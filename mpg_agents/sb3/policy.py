@@ -9,7 +9,7 @@ network, coordination and Q*_g); the target network is SB3's.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import torch
 from gymnasium import spaces
@@ -32,7 +32,7 @@ DEFAULTS = TrainConfig()
 """``mpg-train``'s settings, where the adapter's defaults come from."""
 
 
-class MPGQNetwork(MPGQFunction, QNetwork):
+class MPGQNetwork(MPGQFunction, QNetwork):  # type: ignore[misc]  # forward: MPGNet's, not the MLP's
     """:class:`~mpg_agents.acting.q_function.MPGQFunction` as SB3's ``QNetwork``: its forward pass is
     MPGNet's flat Q vector.
 
@@ -59,7 +59,7 @@ class MPGQNetwork(MPGQFunction, QNetwork):
 
     def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> Tensor:
         # The max-Q action where each primitive may act (MPGNetPolicy decides with the coordination).
-        return self.greedy_actions(observation)
+        return self.greedy_actions(cast(dict[str, Tensor], observation))  # a Dict space's observation
 
     def _get_constructor_parameters(self) -> dict[str, Any]:
         data = BasePolicy._get_constructor_parameters(self)
@@ -151,8 +151,9 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
     def _predict(self, observation: PyTorchObs, deterministic: bool = True) -> Tensor:
         # Q-greedy either way: SB3's DQN does its epsilon-greedy exploration outside the policy.
         with torch.inference_mode():
-            decisions = self.decide_batch(observation)
-        device = next(iter(observation.values())).device
+            obs = cast(dict[str, Tensor], observation)  # a Dict space's observation
+            decisions = self.decide_batch(obs)
+        device = next(iter(obs.values())).device
         return torch.tensor([d.action for d in decisions], dtype=torch.long, device=device)
 
     def _get_constructor_parameters(self) -> dict[str, Any]:

@@ -29,7 +29,9 @@ class PrioritizedDictReplayBufferSamples(DictReplayBufferSamples):
         return self
 
 
-class SB3HeightmapReplayBuffer(PrioritizedHeightmapReplayBuffer, DictReplayBuffer):
+# SB3's buffers declare dict-of-array storage and their own signatures; this one keeps compact
+# frames and answers the calls SB3 makes (mypy cannot see the two as one class).
+class SB3HeightmapReplayBuffer(PrioritizedHeightmapReplayBuffer, DictReplayBuffer):  # type: ignore[misc, override]
     """:class:`~mpg_agents.learning.replay.PrioritizedHeightmapReplayBuffer` that is SB3's
     ``DictReplayBuffer`` (``MPGDQN``'s default ``replay_buffer_class``); same arguments.
 
