@@ -12,24 +12,35 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any, Sequence
 
+import gymnasium as gym
+
 from mpg_agents.acting.coordination import COORDINATIONS
 from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.evaluation.env_options import parse_env_options
+from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
 from mpg_agents.evaluation.failures import NothingFinished
+from mpg_agents.learning.plotting import check_image_path, plot_runs
+from mpg_agents.learning.run_folder import RunFolderBusy
 from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, check_env_options, check_net_setting, check_output  # noqa: E501
 from mpg_agents.cli_input import check_q_star_flag, check_seed_flag, check_thread_setting, fail, read_config
 from mpg_envs.files import WriteFailed, write_text_whole
+from mpg_envs.threads import set_torch_threads
+
+# Start-up time: each command imports torch, the simulation or the evaluation's statistics
+# (scipy) inside its function, once its arguments are read, so --help and argument errors
+# answer at once (those imports are marked noqa: PLC0415).
 
 
 def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
     """The ``TrainConfig`` and the stage table a ``--config`` file (TOML or JSON) describes:
     ``TrainConfig`` fields at the top level, ``[stages.StageN]`` tables of stage fields."""
-    from mpg_agents.learning import training_stages as ts
-    from mpg_agents.learning.train_config import TrainConfig
+    from mpg_agents.learning import training_stages as ts  # noqa: PLC0415
+    from mpg_agents.learning.train_config import TrainConfig  # noqa: PLC0415
 
     settings = read_config(path)
     stages = ts.with_overrides(ts.TRAINING_STAGES, settings.pop("stages", {}))
@@ -96,12 +107,10 @@ def train_main(argv: Sequence[str] | None = None) -> int:
                         help="resume a saved run even though settings differ from its own (they are listed; the record keeps the new ones)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.acting.grasp_threshold import as_record
-        from mpg_agents.learning.learner import Learner
-        from mpg_agents.learning.run_folder import RunFolderBusy
-        from mpg_agents.learning.train_config import TrainConfig, json_safe
-        from mpg_agents.learning import training_stages as ts
-        from mpg_envs.threads import set_torch_threads
+        from mpg_agents.acting.grasp_threshold import as_record  # noqa: PLC0415
+        from mpg_agents.learning.learner import Learner  # noqa: PLC0415
+        from mpg_agents.learning.train_config import TrainConfig, json_safe  # noqa: PLC0415
+        from mpg_agents.learning import training_stages as ts  # noqa: PLC0415
 
         check_thread_setting()
         set_torch_threads()  # the cores free now, so a busy machine is not oversubscribed (MPG_NUM_THREADS overrides)
@@ -113,7 +122,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         check_checkpoint(args.init)
         check_checkpoint(args.discriminator)
         if args.pipeline:
-            from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
+            from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline  # noqa: PLC0415
 
             if args.stages:
                 stages = ts.select_stages(stages, args.stages.split(","))
@@ -137,7 +146,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         print("interrupted: state saved, run the same command to resume", file=sys.stderr)
         return 130
     except Exception as exc:
-        from mpg_agents.learning.learner import StopRequested
+        from mpg_agents.learning.learner import StopRequested  # noqa: PLC0415
 
         if isinstance(exc, StopRequested):
             print("stopped: state saved, run the same command to resume", file=sys.stderr)
@@ -175,8 +184,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--peers", help="with --cases epg or gti: the folder holding the peers' files (vpg/, gti/)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.evaluation.policy_zoo import BUILTIN
-        from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel
+        from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_parallel  # noqa: PLC0415
 
         check_env_id(args.env)
         check_thread_setting()
@@ -192,7 +200,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         if args.workers is not None and args.workers < 1:
             raise UsageError(f"--workers must be >= 1, got {args.workers}")
         workers = 1 if args.workers is None and args.ray_address is None else args.workers
-        extra = (("coordination", args.coordination),) if args.coordination else ()
+        extra: tuple[tuple[str, Any], ...] = (("coordination", args.coordination),) if args.coordination else ()
         extra += tuple(_net_settings(args).items())
         if args.avoid_repeats:
             extra += (("avoid_repeats", True),)
@@ -249,8 +257,8 @@ def _report(result: Any, json_path: str | None) -> int:
 def _eval_cases(args: argparse.Namespace, policy_kwargs: dict[str, Any], env_options: dict[str, Any]) -> int:
     """``mpg-eval --cases``: every case of a set, ``--runs`` runs each, one row per case
     (strict retrieval unless ``--env-option wrong_grasp=...`` says otherwise)."""
-    from mpg_agents.evaluation.case_runs import run_case_set, without_output
-    from mpg_envs.scenes.cases import load_cases
+    from mpg_agents.evaluation.case_runs import run_case_set, without_output  # noqa: PLC0415
+    from mpg_envs.scenes.cases import load_cases  # noqa: PLC0415
 
     if args.workers not in (None, 1) or args.ray_address is not None:
         raise UsageError("--cases runs in this process: leave out --workers and --ray-address")
@@ -285,10 +293,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--device", choices=DEVICES, help="the network: auto (default: CUDA when available), cpu or cuda")
     args = parser.parse_args(argv)
     try:
-        import gymnasium as gym
-
-        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict, format_q_star
-        from mpg_agents.evaluation.policy_zoo import make_policy
+        from mpg_agents.acting.grasp_threshold import calibrate_q_star, calibration_dict, format_q_star  # noqa: PLC0415
 
         check_env_id(args.env)
         check_thread_setting()
@@ -345,7 +350,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--grasp-retries", type=int, metavar="K", help="the copy's default loop breaker: push once after K grasps in a row that did not take the target (0: never)")
     args = parser.parse_args(argv)
     try:
-        from mpg_agents.acting.weights import export_weights, read_checkpoint_header
+        from mpg_agents.acting.weights import export_weights, read_checkpoint_header  # noqa: PLC0415
 
         check_checkpoint(args.src)
         check_q_star_flag(args.q_star)
@@ -375,10 +380,6 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--labels", help="comma-separated legend labels, one per run (default: the folder names)")
     args = parser.parse_args(argv)
     try:
-        import warnings
-
-        from mpg_agents.learning.plotting import check_image_path, plot_runs
-
         try:
             check_image_path(args.out)
         except ValueError as exc:

@@ -3,13 +3,22 @@ checkpoints; bad input is a :class:`UsageError`, reported on one line with exit 
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 import tomllib
 from pathlib import Path
 from typing import Any, Mapping
 
+import gymnasium as gym
+
+import mpg_envs
+from mpg_agents.acting.seeds import check_seed
 from mpg_envs.files import WriteFailed, check_writable, same_file
+from mpg_envs.threads import requested_threads
+
+# Start-up time: checks that need torch (a checkpoint's header and tensors, Q*_g, the net's
+# settings) or the simulation (an env's keywords) import them inside, when they run (noqa: PLC0415).
 
 __all__ = [
     "UsageError", "check_checkpoint", "check_env_id", "check_env_options", "check_net_setting", "check_output",
@@ -48,10 +57,6 @@ def read_config(path: str | None) -> dict[str, Any]:
 
 def check_env_id(env_id: str) -> None:
     """A registered env id, else a :class:`UsageError` listing the valid ones."""
-    import gymnasium as gym
-
-    import mpg_envs
-
     if env_id not in gym.registry:
         tracks = [k for k in gym.registry if k.startswith("MPG-") and k not in mpg_envs.ENV_IDS]  # the tracks
         raise UsageError(f"unknown env id {env_id!r}; valid: {', '.join([*mpg_envs.ENV_IDS, *tracks])}")
@@ -91,7 +96,7 @@ def check_checkpoint(path: str | None) -> None:
         return
     if not Path(path).is_file():
         raise UsageError(f"checkpoint {path!r} does not exist")
-    from mpg_agents.acting.weights import check_tensor_dtypes, read_checkpoint_header
+    from mpg_agents.acting.weights import check_tensor_dtypes, read_checkpoint_header  # noqa: PLC0415
 
     try:
         check_tensor_dtypes(path, read_checkpoint_header(path))
@@ -104,7 +109,7 @@ def check_checkpoint(path: str | None) -> None:
 def check_q_star_flag(value: float | None, flag: str = "--q-star") -> None:
     """A Q*_g given on the command line, in :func:`~mpg_agents.acting.grasp_threshold.q_star_range`,
     else a :class:`UsageError` naming ``flag`` and the valid range (``None``: not given)."""
-    from mpg_agents.acting.grasp_threshold import check_in_range
+    from mpg_agents.acting.grasp_threshold import check_in_range  # noqa: PLC0415
 
     try:
         check_in_range(value, flag)
@@ -118,7 +123,7 @@ def check_net_setting(flag: str, field: str, value: Any) -> None:
     any work; a :class:`UsageError` names ``flag`` and what is valid (``None``: not given)."""
     if value is None:
         return
-    from mpg_agents.network.mpgnet_config import MPGNetConfig
+    from mpg_agents.network.mpgnet_config import MPGNetConfig  # noqa: PLC0415
 
     try:
         MPGNetConfig(**{field: value})
@@ -132,8 +137,6 @@ def check_seed_flag(value: int | None, flag: str = "--seed") -> None:
     and the valid range (``None``: not given)."""
     if value is None:
         return
-    from mpg_agents.acting.seeds import check_seed
-
     try:
         check_seed(value, flag)
     except ValueError as exc:
@@ -143,8 +146,6 @@ def check_seed_flag(value: int | None, flag: str = "--seed") -> None:
 def check_thread_setting() -> None:
     """``MPG_NUM_THREADS``, when set, a positive integer
     (:func:`mpg_envs.threads.requested_threads`), else a :class:`UsageError` naming it."""
-    from mpg_envs.threads import requested_threads
-
     try:
         requested_threads()
     except ValueError as exc:
@@ -158,11 +159,7 @@ def check_env_options(env_id: str, options: Mapping[str, Any]) -> None:
     ``camera_config`` of the wrong kind, ``render_mode=human`` without pygame)."""
     if not options:
         return
-    import importlib.util
-
-    import gymnasium as gym
-
-    from mpg_envs.tasks.env import MPGEnv
+    from mpg_envs.tasks.env import MPGEnv  # noqa: PLC0415
 
     options = dict(options)
     if options.get("render_mode") == "human":
