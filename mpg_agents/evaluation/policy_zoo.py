@@ -9,6 +9,8 @@ start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(p
 - ``oracle``: :class:`mpg_envs.policies.oracle.OraclePolicy` (reads the simulator: upper baseline).
 - ``random``: uniform over the whole action space (seeded).
 - ``grasp-only``: the pixel-only heuristic grasp at the target mask, every step.
+- ``matcher``: :class:`mpg_envs.policies.exemplar_matcher.ExemplarMatcher`, for envs that name the
+  target by an exemplar (``target_spec="exemplar"``): finds it by colour and shape, uncovers it, grasps it.
 - ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V, Stage V
   under strict retrieval) that ships in ``mpg_agents/checkpoints/`` (:data:`SHIPPED_CHECKPOINT`,
   its model card beside it).
@@ -33,9 +35,10 @@ from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.heuristics import heuristic_grasp_action
 from mpg_agents.acting.spaces import finger_geometry
 from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
+from mpg_envs.policies.exemplar_matcher import ExemplarMatcher
 from mpg_envs.policies.oracle import OraclePolicy
 
-BUILTIN = ("oracle", "random", "grasp-only", "shipped")
+BUILTIN = ("oracle", "random", "grasp-only", "shipped", "matcher")
 SHIPPED_CHECKPOINT = "mpgnet_small.safetensors"
 
 
@@ -69,6 +72,7 @@ class GraspOnlyBaseline:
     """The pixel-only heuristic grasp at the target every step (random when no target is visible)."""
 
     def __init__(self, env: gym.Env):
+        check_has_mask(env, "grasp-only")
         self.name = "grasp-only"
         self.primitives = tuple(env.unwrapped.primitives)
         if "grasp" not in self.primitives:
@@ -120,6 +124,7 @@ class NetworkPolicy:
         from mpg_agents.acting.agent import MPGAgent  # noqa: PLC0415
         from mpg_agents.acting.grasp_threshold import check_override  # noqa: PLC0415
 
+        check_has_mask(env, "an MPGNet checkpoint")
         torch.set_flush_denormal(True)  # see mpg_agents.learning.learner: denormals slow CPUs down
         path = Path(path)
         if not path.is_file():
@@ -209,6 +214,16 @@ def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
     return f" ({used[0]}-only net)" if len(used) == 1 else f" ({'+'.join(used)} net)"
 
 
+def check_has_mask(env: gym.Env, policy: str) -> None:
+    """Raise ``ValueError`` when ``env``'s observations have no target ``mask`` (an env that names
+    its target by an exemplar), which ``policy`` needs."""
+    if "mask" not in getattr(env.observation_space, "spaces", {}):
+        raise ValueError(
+            f"{policy} needs the target's mask in the observation; this env names the target by an exemplar "
+            "(target_spec='exemplar'): use target_spec='mask' or 'visible', or the matcher, oracle or random policy"
+        )
+
+
 def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
     """A policy by name (see the module docstring) for ``env``."""
     if name == "oracle":
@@ -217,6 +232,8 @@ def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
         return RandomBaseline(env, seed)
     if name == "grasp-only":
         return GraspOnlyBaseline(env)
+    if name == "matcher":
+        return ExemplarMatcher(env)
     if name == "shipped":
         return NetworkPolicy(shipped_checkpoint(), env, name="shipped:" + SHIPPED_CHECKPOINT, **kwargs)
     path = Path(name)

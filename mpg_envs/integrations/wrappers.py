@@ -119,7 +119,9 @@ class ImageObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         gym.ObservationWrapper.__init__(self, env)
         source = env.observation_space
         if not isinstance(source, spaces.Dict) or not {"color", "depth", "mask", "occluded"} <= set(source.spaces):
-            raise ValueError(f"ImageObservation needs the MPG Dict observation (color, depth, mask, occluded), got {source}")
+            exemplar = isinstance(source, spaces.Dict) and "query_color" in source.spaces
+            why = "; an env naming its target by an exemplar (target_spec='exemplar') has no mask" if exemplar else ""
+            raise ValueError(f"ImageObservation needs the MPG Dict observation (color, depth, mask, occluded), got {source}{why}")
         if not _is_int(size) or not 8 <= size <= 1024:
             raise ValueError(f"size must be an integer in 8..1024, got {size!r}")
         self.size = int(size)

@@ -38,7 +38,7 @@ QUERY_DROP_HEIGHT = 0.02
 """Height (m) of the object's lowest point above the table when it is let go."""
 
 KEPT_WORLDS = 8
-"""Query worlds kept per env (one per object; the eight blocks all stay compiled)."""
+"""Query worlds kept per env in ray-cast mode (one per object; the eight blocks all stay compiled)."""
 
 
 def yaw_turned(quat: Sequence[float], yaw: float) -> np.ndarray:
@@ -88,6 +88,7 @@ class ExemplarQuery:
         sim.paint_objects([rgba])
         centre = np.asarray(world.workspace.center[:2], dtype=float)
         world.drop_object(0, centre, random_quat(rng), height=QUERY_DROP_HEIGHT)
+        world.settle()  # at rest twice: an object slowed down only for an instant (tipping over) goes on
         position, quat = world.object_pose(0)
         yaw = float(rng.uniform(0.0, 2.0 * math.pi))
         world.set_object_pose(0, (centre[0], centre[1], position[2]), yaw_turned(quat, yaw))
@@ -123,7 +124,8 @@ class ExemplarQuery:
         # The cameras see only the table and the objects: the arm's visual meshes are left out.
         sim = EpisodeSim(self.config, obs_mode=self.obs_mode, camera_config=self.camera_config)
         self._sims[id(asset)] = (asset, sim)
-        while len(self._sims) > KEPT_WORLDS:
+        # The camera mode compiles every world afresh (EpisodeSim.build): one is enough to keep.
+        while len(self._sims) > (KEPT_WORLDS if self.obs_mode == "raycast" else 1):
             _, (_, old) = self._sims.popitem(last=False)
             old.close()
         return sim

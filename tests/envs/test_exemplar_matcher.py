@@ -1,0 +1,141 @@
+"""The matching heuristic (mpg_envs.policies.exemplar_matcher): its pure parts by hand, and on
+exemplar envs."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import mpg_envs  # noqa: F401  (registers the ids)
+from mpg_envs.perception.exemplar_match import (
+    MatchSettings,
+    colour_match,
+    height_steps,
+    heights,
+    object_extents,
+    query_model,
+    shape_score,
+)
+from mpg_envs.policies.exemplar_matcher import ExemplarMatcher, free_grasp
+from mpg_envs.policies.policy import Policy
+
+RES = 0.002
+
+
+def box_image(rows: slice, cols: slice, shape=(40, 40)) -> np.ndarray:
+    image = np.zeros(shape, dtype=bool)
+    image[rows, cols] = True
+    return image
+
+
+def test_extents_of_a_drawn_rectangle_are_its_sides_and_height():
+    # 10 x 25 pixels of 2 mm: a 2 cm x 5 cm footprint, 3 cm high.
+    extents = object_extents(box_image(slice(5, 15), slice(5, 30)), 0.03, RES)
+    assert extents == pytest.approx([0.02, 0.03, 0.05])
+
+
+def test_shape_score_by_hand():
+    extents = np.array([0.03, 0.05, 0.07])
+    config = MatchSettings()
+    assert shape_score(0.03, np.array([0.07, 0.05]), extents, config) == pytest.approx(
+        1.0
+    )  # lying flat
+    assert shape_score(0.07, np.array([0.05, 0.03]), extents, config) == pytest.approx(
+        1.0
+    )  # standing on its end
+    # Half of the footprint shows: the cover halves the score; judged partial, it does not count.
+    assert shape_score(0.03, np.array([0.07, 0.025]), extents, config) == pytest.approx(0.5)
+    assert shape_score(
+        0.03, np.array([0.07, 0.025]), extents, config, partial=True
+    ) == pytest.approx(1.0)
+    # One extent_tolerance too long: the fit is exp(-1/2); one height_sigma off: likewise.
+    assert shape_score(
+        0.03, np.array([0.07 + config.extent_tolerance, 0.05]), extents, config
+    ) == pytest.approx(math.exp(-0.5))
+    # (Standing the 5 cm extent up instead: 2.3 sigma off, and 5 cm of footprint on a 3 cm side.)
+    assert shape_score(
+        0.03 + config.height_sigma, np.array([0.07, 0.05]), extents, config
+    ) == pytest.approx(math.exp(-0.5))
+    # A disc of 5.3 cm lying flat is no 3 x 5 x 7 cm box: too wide for the 5 cm side.
+    assert shape_score(0.028, np.array([0.053, 0.053]), extents, config) < 0.75
+
+
+def test_height_steps_mark_both_sides_of_a_step():
+    up = np.zeros((5, 6), np.float32)
+    up[:, 3:] = 0.03
+    steps = height_steps(up, 0.006)
+    assert steps[:, 2].all() and steps[:, 3].all() and not steps[:, [0, 1, 4, 5]].any()
+
+
+def test_colour_match_and_the_table_level():
+    color = np.zeros((4, 4, 3), np.uint8)
+    color[:2] = (225, 87, 89)  # red
+    color[2:] = (242, 142, 43)  # orange
+    reference, _ = query_model(
+        color, np.pad(np.full((2, 4), 0.05, np.float32), ((0, 2), (0, 0))), RES
+    )
+    assert colour_match(color, reference, 14.0).tolist() == [[True] * 4] * 2 + [[False] * 4] * 2
+    depth = np.full((10, 10), 0.005, np.float32)  # a camera's table, 5 mm up
+    depth[:3, :3] = 0.035
+    assert heights(depth)[0, 0] == pytest.approx(0.03) and heights(depth)[9, 9] == 0
+
+
+def test_query_model_reads_the_object():
+    color = np.full((40, 40, 3), 90, np.uint8)
+    depth = np.zeros((40, 40), np.float32)
+    color[10:20, 5:30] = (89, 161, 79)
+    depth[10:20, 5:30] = 0.03
+    colour, extents = query_model(color, depth, RES)
+    assert extents == pytest.approx([0.02, 0.03, 0.05])
+    with pytest.raises(ValueError, match="the query shows no object above the table"):
+        query_model(color, np.zeros((40, 40), np.float32), RES)
+
+
+def test_free_grasp_takes_the_least_blocked_angle_and_avoids_tried_ones():
+    pixels = box_image(slice(10, 20), slice(10, 20))
+    blocked = np.full((16, 40, 40), 0.02, np.float32)
+    blocked[3] = -0.01
+    blocked[6] = 0.0
+    rotation, row, col, height = free_grasp(pixels, blocked)
+    assert rotation == 3 and height == pytest.approx(-0.01) and pixels[row, col]
+    assert free_grasp(pixels, blocked, avoid=[3])[0] == 6  # 2, 3, 4 are taken last
+    assert free_grasp(pixels, blocked, avoid=[2])[0] == 6
+
+
+def test_the_matcher_needs_an_exemplar_env(make_env):
+    with pytest.raises(ValueError, match="needs an exemplar .* target_spec='exemplar'"):
+        ExemplarMatcher(make_env("MPG-OccludedHard-v0", wrapped=True))
+    with pytest.raises(ValueError, match="target_spec='exemplar' needs a target"):
+        make_env("MPG-Stage1-v0", target_spec="exemplar")
+
+
+def test_the_matcher_takes_an_isolated_target_among_look_alikes(make_env):
+    env = make_env("MPG-Stage2-v0", wrapped=True, target_spec="exemplar")
+    matcher = ExemplarMatcher(env)
+    obs, info = env.reset(seed=2)
+    assert info["lookalikes"]["colour"] >= 1
+    obs, reward, terminated, truncated, info = env.step(matcher.act(obs))
+    assert info["target_grasped"] and matcher.last_plan["kind"] == "grasp_match"
+
+
+def test_the_matcher_uncovers_a_covered_target_first(make_env):
+    env = make_env("MPG-OccludedHardExemplar-v0", wrapped=True)
+    matcher = ExemplarMatcher(env)
+    obs, info = env.reset(seed=500000)
+    action = matcher.act(obs)
+    assert env.action_space.contains(action)
+    assert (
+        matcher.last_plan["kind"] in ("uncover", "dig")
+        and env.unwrapped.action_space.decode(action).primitive == "move"
+    )
+    matcher.reset()
+    assert matcher.last_plan is None and len(matcher.memory) == 0
+
+
+def test_the_matcher_is_a_policy():
+    env = gym.make("MPG-OccludedHardExemplar-v0")
+    assert isinstance(ExemplarMatcher(env), Policy)
+    env.close()
