@@ -103,7 +103,7 @@ class World:
         workspace: Workspace = Workspace(),
         robot: RobotConfig = RobotConfig(),
         physics: PhysicsConfig = PhysicsConfig(),
-        extra_spec_hook: Callable[[mujoco.MjSpec], None] | None = None,
+        extra_spec_hook: Callable[[mujoco.MjSpec], object] | None = None,
         robot_visual: bool = True,
     ):
         self.workspace = workspace

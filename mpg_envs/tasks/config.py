@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, fields, is_dataclass, replace
 from numbers import Integral
-from typing import Any, Sequence
+from typing import Any, Sequence, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -100,7 +100,7 @@ def _fields_of(default: Any, value: Any, name: str) -> Any:
     if not (isinstance(value, dict) and is_dataclass(default)):
         return value
     check_known_fields(type(default), value, f"config[{name!r}]")
-    return replace(default, **value)
+    return replace(cast(Any, default), **value)  # a dataclass instance (checked above)
 
 
 def object_assets(object_set: str | os.PathLike[str] | Sequence[ObjectAsset], seed: int = 0) -> list[ObjectAsset]:

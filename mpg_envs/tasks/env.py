@@ -12,7 +12,7 @@ The world, the primitives executor and the views of the episode are one public h
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Sequence, cast
 
 import gymnasium as gym
 import numpy as np
@@ -21,7 +21,7 @@ from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.tasks.config import OBS_MODES, EnvConfig, check_camera_config, config_of, object_assets, observation_space
 from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.perception.occlusion import change_detected, check_band
-from mpg_envs.perception.render import render_overview
+from mpg_envs.perception.render import OverviewRenderer, render_overview
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
 from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.tasks.episode_sim import EpisodeSim
@@ -85,6 +85,7 @@ class MPGEnv(gym.Env):
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+    action_space: PixelActionSpace  # gym.Env declares a Space
 
     def __init__(
         self,
@@ -105,9 +106,10 @@ class MPGEnv(gym.Env):
         target_spec: str = "mask",
     ):
         config = config_of(config)  # a dict of EnvConfig fields too (a registered track's)
-        self.stage = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
-        if not isinstance(self.stage, StageSpec):
+        spec = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
+        if not isinstance(spec, StageSpec):
             raise ValueError(f"unknown stage {stage!r}; valid: {sorted(STAGES)}")
+        self.stage: StageSpec = spec
         stage_spec = self.stage
         self.num_objects = self._checked_num_objects(stage_spec.num_objects if num_objects is None else num_objects)
         self.default_num_objects = self.num_objects
@@ -151,7 +153,7 @@ class MPGEnv(gym.Env):
         self.sim = EpisodeSim(
             config, obs_mode=obs_mode, camera_config=camera_config, robot_visual=visual, mask_all_objects=stage_spec.mask_all_objects
         )
-        self._renderer = None
+        self._renderer: OverviewRenderer | None = None
         self.target: int | None = None
         self._obs: dict[str, np.ndarray] | None = None
         self._score: tuple[dict, float] | None = None  # (observation, its grasp score)
@@ -183,10 +185,11 @@ class MPGEnv(gym.Env):
         if self._ended is not None:
             raise RuntimeError(self._ended)
         primitive, rotation, row, col = self.action_space.decode(action)
-        before = self._obs
+        before, executor = self._obs, self.sim.executor
+        assert before is not None and executor is not None  # an open episode has both
         score_before = self._grasp_score(before) if primitive != "grasp" else None
         visible_before = self._visible
-        result = self.sim.executor.execute(primitive, rotation, row, col, before["depth"], self.target)
+        result = executor.execute(primitive, rotation, row, col, before["depth"], self.target)
         self.num_motions += 1
         sim_warnings = self._check_physics()
         self._obs = self._observe()
@@ -227,7 +230,8 @@ class MPGEnv(gym.Env):
             self._test_seed = seed  # reset() checks the scene against its set once it has observed it
             return
         # The share is drawn only with the option on: without it, episodes are as they were.
-        if self.arranged is not None and self.sim.random.random() < self.arranged.share:
+        # (sim.random: the episode's generator, drawn by initialize_episode)
+        if self.arranged is not None and cast(np.random.Generator, self.sim.random).random() < self.arranged.share:
             self.target = arranged_start(self.sim, request, self.arranged, lambda s: load_scene(self.sim.build, s, self.config.workspace, False)[1])
             if self.target is not None:
                 return
@@ -239,7 +243,8 @@ class MPGEnv(gym.Env):
         """What the step did, judged on the new state (success, mis-pick, move success,
         occlusion, visibility and its gain over ``visible_before``, change); the reward and
         the episode's end are read off it."""
-        obs, world, target = self._obs, self.world, self.target
+        obs, world, target = self._obs, self._live_world(), self.target
+        assert obs is not None  # the step's new observation
         target_grasped = bool(result.lifted and (self.stage.mask_all_objects or result.grasped_object == target))
         target_out = target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
         occluded_before = bool(before["occluded"][0])
@@ -249,7 +254,7 @@ class MPGEnv(gym.Env):
         move_success = primitive == "move" and cleared
         gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
         wrong = bool(primitive == "grasp" and result.lifted and not target_grasped)
-        is_success = self.world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
+        is_success = world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
         seen = 0.0 if self._visible is None or visible_before is None else self._visible - visible_before
         return StepEvaluation(
             outcome=StepOutcome(primitive, result.lifted, target_grasped, move_success, changed, gain, seen,
@@ -261,7 +266,7 @@ class MPGEnv(gym.Env):
             occluded_before=occluded_before,
             occluded=occluded,
             visible_fraction=self._visible,
-            objects_left=self.world.objects_left(),
+            objects_left=world.objects_left(),
         )
 
     def step_reward(self, evaluation: StepEvaluation) -> float:
@@ -293,11 +298,12 @@ class MPGEnv(gym.Env):
             return None
         if self._obs is None:  # before the first reset, or after one that raised
             raise RuntimeError("call reset() before render()")
-        if self._renderer is None or self._renderer.model is not self.world.model:
+        world = self._live_world()
+        if self._renderer is None or self._renderer.model is not world.model:
             if self._renderer is not None:
                 self._renderer.close()
-            self._renderer = render_overview(self.world.model)
-        return self._renderer.render(self.world.data)
+            self._renderer = render_overview(world.model)
+        return self._renderer.render(world.data)
 
     def close(self):
         self._ended = "the env is closed; call reset() to start a new episode before step()"
@@ -348,7 +354,14 @@ class MPGEnv(gym.Env):
         :func:`mpg_envs.scenes.scene_io.save_scene` writes it."""
         if self._obs is None:  # before the first reset, or after one that raised
             raise RuntimeError("call reset() before current_scene()")
-        return scene_of(self.world, self.target, self.stage.name, self.config.object_set_seed)
+        return scene_of(self._live_world(), self.target, self.stage.name, self.config.object_set_seed)
+
+    def _live_world(self) -> World:
+        """The episode's world (``sim.world``), which a reset builds before anything reads it."""
+        world = self.sim.world
+        if world is None:
+            raise RuntimeError("no world yet: call reset() first")
+        return world
 
     def _observe(self) -> dict[str, np.ndarray]:
         obs, self._visible = self.sim.observe(self.target, self.num_motions, top_mask=self.naming.top_mask)
@@ -365,10 +378,11 @@ class MPGEnv(gym.Env):
     def _check_physics(self) -> dict[str, int]:
         """MuJoCo's warnings of the step (logged, and reported in info); objects thrown out
         of the room leave the scene (info's ``objects_left`` shows the loss)."""
-        sim_warnings = self.world.take_warnings()
+        world = self._live_world()
+        sim_warnings = world.take_warnings()
         if sim_warnings:
             gym.logger.warn(f"MuJoCo warnings during step {self.num_motions}: {sim_warnings}")
-        self.world.remove_strays()
+        world.remove_strays()
         return sim_warnings
 
     def _checked_num_objects(self, n: Any) -> int:
@@ -383,7 +397,7 @@ class MPGEnv(gym.Env):
             "num_motions": 0,
             "occluded": occluded,
             "visible_fraction": self._visible,
-            "objects_left": self.world.objects_left(),
+            "objects_left": self._live_world().objects_left(),
             "target": self.target,
             "is_success": False,
             **({} if self.visuals is None else {"visual_randomization": self.visuals.to_dict(self.num_objects)}),

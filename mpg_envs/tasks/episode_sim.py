@@ -39,14 +39,14 @@ class SimCheckpoint:
 
     def __init__(self, sim: EpisodeSim):
         self.sim = sim
-        self.world = WorldCheckpoint(sim.world)
+        self.world = WorldCheckpoint(sim._built())
         self.random_state = None if sim.random is None else sim.random.bit_generator.state
 
     def restore(self) -> None:
         """Put the world and the generator back as they were (MuJoCo is deterministic, so
         what runs next runs as it would have then)."""
         self.world.restore()
-        if self.random_state is not None:
+        if self.random_state is not None and self.sim.random is not None:  # (both or neither)
             self.sim.random.bit_generator.state = self.random_state
 
 
@@ -90,9 +90,9 @@ class EpisodeSim:
         self.random: np.random.Generator | None = None
         self.visuals: EpisodeVisuals | None = None
         self._assets: tuple[ObjectAsset, ...] | None = None
-        self._raycaster = None
-        self._occlusion_caster = None  # camera mode: the clean view the occlusion flag is judged on
-        self._camera = None
+        self._raycaster: RaycastHeightmapper | None = None  # ray-cast mode (made by build)
+        self._occlusion_caster: RaycastHeightmapper | None = None  # camera mode: the clean view the occlusion flag is judged on
+        self._camera: CameraHeightmapper | None = None
         self._raycast_threads = config.raycast_threads
         self._painted = False  # paint_objects was called: the ray casts read the model's colours live
 
@@ -151,11 +151,13 @@ class EpisodeSim:
             if self._camera is None:
                 self._camera = CameraHeightmapper(world.model, self.camera_config or CameraConfig(), self.config.workspace)
             return self._camera.heightmaps(world.data, rng, self.visuals)
+        caster = self._ray_caster()
         if self.visuals is not None:
-            return randomized_raycast(self._raycaster, world.data, self.visuals, rng, camera_centres=self._camera_centres())
+            assert rng is not None  # the visuals' own noise stream
+            return randomized_raycast(caster, world.data, self.visuals, rng, camera_centres=self._camera_centres())
         if self._painted:
-            return self._raycaster(world.data, geom_colors(world.model))
-        return self._raycaster(world.data)
+            return caster(world.data, geom_colors(world.model))
+        return caster(world.data)
 
     def paint_objects(self, rgba: Sequence[Sequence[float]]) -> None:
         """Give object ``i`` of the current world the colour ``rgba[i]`` (RGBA in [0, 1]) in every
@@ -193,11 +195,12 @@ class EpisodeSim:
         miscalibrated cameras would (``raycast_misregistration``) is judged on a clean cast too."""
         if self.obs_mode != "camera":
             if self.visuals is not None and self.visuals.raycast_misregistration:
-                return self._raycaster(self._built().data).depth  # the same reason: a misplaced view
+                return self._ray_caster()(self._built().data).depth  # the same reason: a misplaced view
             return maps.depth
         if self._occlusion_caster is None:
             self._occlusion_caster = RaycastHeightmapper(self._built().model, self.config.workspace, num_threads=self._raycast_threads)
-        return self._occlusion_caster(self._built().data).depth
+        caster = self._occlusion_caster
+        return caster(self._built().data).depth
 
     def target_view(self, depth: np.ndarray, target: int | None) -> tuple[np.ndarray, bool]:
         """The mask heightmap of ``target`` (of every object when ``mask_all_objects`` or no
@@ -278,13 +281,21 @@ class EpisodeSim:
     ) -> PrimitiveResult:
         """What running ``primitive`` at ``(rotation, row, col)`` does, with the world then
         put back exactly: what a planner with a perfect model of the physics can do."""
+        executor = self.executor
+        if executor is None:
+            raise RuntimeError("no world yet: reset the env (or build a world) first")
         with self.trial():
-            return self.executor.execute(primitive, rotation, row, col, depth, target)
+            return executor.execute(primitive, rotation, row, col, depth, target)
 
     def _built(self) -> World:
         if self.world is None:
             raise RuntimeError("no world yet: reset the env (or build a world) first")
         return self.world
+
+    def _ray_caster(self) -> RaycastHeightmapper:
+        if self._raycaster is None:  # made with the world in ray-cast mode
+            raise RuntimeError("no ray caster: the world is not built, or this is camera mode")
+        return self._raycaster
 
 
 def _same_assets(a: tuple[ObjectAsset, ...], b: tuple[ObjectAsset, ...]) -> bool:

@@ -33,7 +33,7 @@ import inspect
 import json
 import os
 from dataclasses import asdict, dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Sequence, cast
 
 import numpy as np
 
@@ -97,10 +97,10 @@ def drop_scene(sim: EpisodeSim, request: SceneRequest) -> int | None:
     scene_fn = GENERATORS[name]
     astray_draws = 0
     for _ in range(config.scene_tries):
-        picks = rng.integers(len(request.object_set), size=request.num_objects)
+        picks = rng.integers(len(request.object_set), size=request.num_objects)  # type: ignore[union-attr]  # drawn at reset
         world = sim.build([request.object_set[int(k)] for k in picks])
-        layout = scene_fn(world, rng, config.generator)
-        redropped = keep_inside(world, rng, layout, config.generator)
+        layout = scene_fn(world, rng, config.generator)  # type: ignore[arg-type]
+        redropped = keep_inside(world, rng, layout, config.generator)  # type: ignore[arg-type]
         if redropped is None:
             astray_draws += 1
             continue
@@ -147,6 +147,7 @@ def scene_from_test_set(request: SceneRequest, seed: int | None) -> SceneFile | 
     if test_set is None:
         return None
     test_set.check_made_by(generator_digest(request))
+    assert seed is not None  # _test_set_of finds no set without one
     return test_set.scene(seed, request.object_set)
 
 
@@ -232,9 +233,11 @@ def code_fingerprint(source: str) -> str:
     tree = ast.parse(source)
     for node in ast.walk(tree):
         body = getattr(node, "body", None)
-        first = body[0] if isinstance(body, list) and body else None
+        if not isinstance(body, list) or not body:
+            continue
+        first = body[0]
         if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
-            node.body = body[1:] or [ast.Pass()]
+            cast(Any, node).body = body[1:] or [ast.Pass()]  # a node with a body (mypy sees an ast.AST)
     return ast.unparse(tree)
 
 
@@ -244,15 +247,19 @@ def arranged_start(sim: EpisodeSim, request: SceneRequest, arranged: ArrangedSce
     returns its target), and return its target; ``None`` when none of ``arranged.tries``
     draws stood as designed (:func:`~mpg_envs.scenes.arranged.check_settled`): the reset then
     drops a scene. See :class:`~mpg_envs.scenes.arranged.ArrangedScenes`."""
+    rng = sim.random
+    assert rng is not None  # drawn at reset
     for _ in range(arranged.tries):
-        kind = arranged.kinds[int(sim.random.integers(len(arranged.kinds)))]
-        arrangement = draw_arrangement(int(sim.random.integers(2**31)), request.config.workspace, kind=kind)
+        kind = arranged.kinds[int(rng.integers(len(arranged.kinds)))]
+        arrangement = draw_arrangement(int(rng.integers(2**31)), request.config.workspace, kind=kind)
         scene = arrangement_scene(arrangement, request.config.workspace)
         target = load(scene)
         maps = sim.heightmaps()
         mask, _ = sim.target_view(maps.depth, target)
         try:
-            check_settled(sim.world, scene, arrangement, sim.visible_fraction(maps, mask, target))
+            world, visible = sim.world, sim.visible_fraction(maps, mask, target)
+            assert world is not None and visible is not None  # built by load; an arrangement has a target
+            check_settled(world, scene, arrangement, visible)
         except ArrangementError:
             continue
         return target

@@ -23,7 +23,7 @@ and ``wrong_grasp_shares`` (what it shared: ``"colour"``, ``"shape"``).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from gymnasium import spaces
@@ -166,7 +166,8 @@ class TargetNaming:
         if self.colours is None or self.spec != "exemplar":
             return {}
         others = [i for i, c in enumerate(self.colours) if c >= 0 and i != self.target]
-        looks = [shared_looks(self.shapes, self.colours, self.target, i) for i in others]
+        shapes, target = cast(tuple, self.shapes), cast(int, self.target)  # drawn with the colours at reset
+        looks = [shared_looks(shapes, self.colours, target, i) for i in others]
         return {
             "lookalikes": {
                 look: sum(look in shared for shared in looks) for look in ("colour", "shape")
@@ -179,7 +180,7 @@ class TargetNaming:
         if self.colours is None or self.spec != "exemplar":
             return {}
         shares = (
-            shared_looks(self.shapes, self.colours, self.target, grasped_object)
+            shared_looks(cast(tuple, self.shapes), self.colours, cast(int, self.target), grasped_object)
             if wrong_grasp and grasped_object is not None
             else ()
         )
