@@ -49,7 +49,7 @@ def test_a_target_moved_1_cm_in_a_shipped_set_is_refused_at_its_reset(tmp_path, 
                r"target's visible fraction at reset is 0\.143187, the set records 0\.184758, tolerance 0\.0001\); restore "
                r"the file occluded_hard_15\.npz \(reinstall the package, or `git checkout -- "
                r"mpg_envs/test_scenes/occluded_hard_15\.npz`\) or regenerate it with `python benchmarks/make_test_sets\.py "
-               r"--envs MPG-OccludedHard-v0 --objects 15` \(the set was made with MuJoCo [0-9.]+\)$")
+               r"--envs MPG-OccludedHard-v0 --objects 15` \(the set was made with MuJoCo [0-9.]+, this is MuJoCo [0-9.]+\)$")
     with pytest.raises(ChangedTestSetError, match=message):
         env.reset(seed=500000)
     _, info = env.reset(seed=500001)  # its other scenes are as made
