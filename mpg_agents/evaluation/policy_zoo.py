@@ -26,7 +26,7 @@ from __future__ import annotations
 import warnings
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence, cast
 
 import gymnasium as gym
 import numpy as np
@@ -55,7 +55,8 @@ class RandomBaseline:
 
     def __init__(self, env: gym.Env, seed: int = 0):
         self.name = "random"
-        self._space = gym.spaces.Discrete(int(env.action_space.n), seed=seed)
+        space: Any = env.action_space  # a Discrete
+        self._space: gym.spaces.Discrete = gym.spaces.Discrete(int(space.n), seed=seed)
 
     def seed(self, seed: int) -> None:
         """Restart the action stream; evaluation calls it with each episode's seed."""
@@ -74,7 +75,8 @@ class GraspOnlyBaseline:
     def __init__(self, env: gym.Env):
         check_has_mask(env, "grasp-only")
         self.name = "grasp-only"
-        self.primitives = tuple(env.unwrapped.primitives)
+        unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
+        self.primitives = tuple(unwrapped.primitives)
         if "grasp" not in self.primitives:
             raise ValueError(f"grasp-only needs an env that allows grasping; this one allows {self.primitives}")
         self._space = env.action_space
@@ -139,7 +141,8 @@ class NetworkPolicy:
         if move_fingers is not None:
             overrides["move_fingers"] = move_fingers
         self.policy = MPGAgent.from_weights(
-            path, env.observation_space, env.action_space, net_overrides=overrides, geometry=finger_geometry(env)
+            path, cast(gym.spaces.Dict, env.observation_space), cast(gym.spaces.Discrete, env.action_space),
+            net_overrides=overrides, geometry=finger_geometry(env),
         )
         self.policy.to(resolve_device(device if device is not None else "auto"))
         if coordination is not None:

@@ -77,10 +77,10 @@ def image_from_observation(
     """
     color = np.asarray(obs["color"], dtype=np.uint8)
     height, width = color.shape[:2]
-    planes = np.empty((height, width, 4), np.uint8)
+    planes: np.ndarray = np.empty((height, width, 4), np.uint8)
     planes[..., :3] = color
     planes[..., 3] = quantise_depth(obs["depth"], z_max)
-    mask = (np.asarray(obs["mask"]) > 0).astype(np.uint8) * np.uint8(255)
+    mask: np.ndarray = (np.asarray(obs["mask"]) > 0).astype(np.uint8) * np.uint8(255)
     if (height, width) != (size, size):
         planes = cv2.resize(planes, (size, size), interpolation=cv2.INTER_AREA)
         mask = cv2.resize(mask, (size, size), interpolation=cv2.INTER_NEAREST)
@@ -125,7 +125,8 @@ class ImageObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         if not _is_int(size) or not 8 <= size <= 1024:
             raise ValueError(f"size must be an integer in 8..1024, got {size!r}")
         self.size = int(size)
-        self.z_max = float(source["depth"].high.max())
+        depth_space: Any = source["depth"]  # a Box
+        self.z_max = float(depth_space.high.max())
         self.occlusion_channel = bool(occlusion_channel)
         self.channels_last = bool(channels_last)
         channels = len(IMAGE_CHANNELS) + int(self.occlusion_channel)

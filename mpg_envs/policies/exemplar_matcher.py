@@ -106,7 +106,7 @@ class ExemplarMatcher:
     name = "matcher"
 
     def __init__(self, env: gym.Env, config: MatcherConfig = MatcherConfig()):
-        unwrapped = env.unwrapped
+        unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
         if not {"query_color", "query_depth"} <= set(getattr(env.observation_space, "spaces", {})):
             raise ValueError(
                 "the matching heuristic needs an exemplar (query_color, query_depth): "
@@ -209,8 +209,8 @@ class ExemplarMatcher:
                 *_grip(blob.pixels),
                 {"kind": "grasp_last_resort", "score": round(blob.score, 3)},
             )
-        row, col = np.unravel_index(int(np.argmax(up)), up.shape)
-        yield ("grasp", 0, int(row), int(col), {"kind": "grasp_tallest"})
+        top_row, top_col = np.unravel_index(int(np.argmax(up)), up.shape)
+        yield ("grasp", 0, int(top_row), int(top_col), {"kind": "grasp_tallest"})
 
     def _regions(
         self, lab: np.ndarray, up: np.ndarray, where: np.ndarray, limit: int = 6

@@ -41,7 +41,7 @@ KEPT_WORLDS = 8
 """Query worlds kept per env in ray-cast mode (one per object; the eight blocks all stay compiled)."""
 
 
-def yaw_turned(quat: Sequence[float], yaw: float) -> np.ndarray:
+def yaw_turned(quat: Sequence[float] | np.ndarray, yaw: float) -> np.ndarray:
     """The orientation ``quat`` (w first) turned by ``yaw`` radians about the world's vertical."""
     w, x, y, z = np.asarray(quat, dtype=float)
     c, s = math.cos(yaw / 2), math.sin(yaw / 2)
