@@ -62,7 +62,8 @@ class EpisodeSim:
             move/push/grasp on ``world``.
         random: the episode's generator (the env's ``np_random``; camera noise and scene
             drops draw from it), set by :meth:`initialize_episode`.
-        ik: the arm's inverse kinematics (one per env; no state of a world).
+        ik: the arm's inverse kinematics (one per env; no state of a world: another
+            simulation's may be handed in, ``ik=``, since making one takes a while).
         visuals: the episode's drawn visual randomization
             (:class:`~mpg_envs.perception.visual_randomization.EpisodeVisuals`), set by the env
             after the scene is made (``None``: off, and while a scene is drawn).
@@ -76,6 +77,7 @@ class EpisodeSim:
         camera_config: Any = None,
         robot_visual: bool = False,
         mask_all_objects: bool = False,
+        ik: ArmIK | None = None,
     ):
         if obs_mode not in OBS_MODES:
             raise ValueError(f"obs_mode must be one of {OBS_MODES}, got {obs_mode!r}")
@@ -84,7 +86,7 @@ class EpisodeSim:
         self.camera_config = camera_config
         self.robot_visual = bool(robot_visual)
         self.mask_all_objects = bool(mask_all_objects)
-        self.ik = ArmIK(config.robot)
+        self.ik = ArmIK(config.robot) if ik is None else ik
         self.world: World | None = None
         self.executor: Primitives | None = None
         self.random: np.random.Generator | None = None

@@ -31,11 +31,16 @@ from mpg_envs.perception.visual_randomization import (
 )
 from mpg_envs.scenes.generators import random_quat
 from mpg_envs.simulation.assets import ObjectAsset
+from mpg_envs.simulation.robot import ArmIK
 from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.tasks.episode_sim import EpisodeSim
 
 QUERY_DROP_HEIGHT = 0.02
 """Height (m) of the object's lowest point above the table when it is let go."""
+
+QUERY_DROP_TIMESTEP = 0.004
+"""Physics timestep (s) of the drop: only where the object comes to rest matters (as the
+unseen-object track's drops)."""
 
 KEPT_WORLDS = 8
 """Query worlds kept per env in ray-cast mode (one per object; the eight blocks all stay compiled)."""
@@ -79,16 +84,19 @@ class ExemplarQuery:
         rgba: Sequence[float],
         rng: np.random.Generator,
         visuals: EpisodeVisuals | None = None,
+        ik: ArmIK | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(color, depth)``: ``(H, W, 3)`` uint8 and ``(H, W)`` float32 heightmaps of ``asset``
         painted ``rgba``, in a stable pose and yaw drawn from ``rng``, seen with the episode's
-        ``visuals`` (``None``: unrandomized)."""
-        sim = self._sim(asset)
+        ``visuals`` (``None``: unrandomized). ``ik``: the env's arm kinematics, shared by a
+        world made for the query (making one takes a while; ``None``: it makes its own)."""
+        sim = self._sim(asset, ik)
         world = sim.build([asset])
         sim.paint_objects([rgba])
         centre = np.asarray(world.workspace.center[:2], dtype=float)
-        world.drop_object(0, centre, random_quat(rng), height=QUERY_DROP_HEIGHT)
-        world.settle()  # at rest twice: an object slowed down only for an instant (tipping over) goes on
+        with world.stepping(QUERY_DROP_TIMESTEP):
+            world.drop_object(0, centre, random_quat(rng), height=QUERY_DROP_HEIGHT)
+            world.settle()  # at rest twice: an object slowed down only for an instant (tipping over) goes on
         position, quat = world.object_pose(0)
         yaw = float(rng.uniform(0.0, 2.0 * math.pi))
         world.set_object_pose(0, (centre[0], centre[1], position[2]), yaw_turned(quat, yaw))
@@ -113,7 +121,7 @@ class ExemplarQuery:
         )
         return dataclasses.replace(visuals, seed=seed, object_gains=gains)
 
-    def _sim(self, asset: ObjectAsset) -> EpisodeSim:
+    def _sim(self, asset: ObjectAsset, ik: ArmIK | None) -> EpisodeSim:
         """The kept simulation of ``asset`` (made, and the oldest one closed past :data:`KEPT_WORLDS`)."""
         kept = self._sims.pop(id(asset), None)
         if kept is not None and kept[0] is asset:
@@ -122,7 +130,9 @@ class ExemplarQuery:
         if kept is not None:  # another asset that had the same id
             kept[1].close()
         # The cameras see only the table and the objects: the arm's visual meshes are left out.
-        sim = EpisodeSim(self.config, obs_mode=self.obs_mode, camera_config=self.camera_config)
+        sim = EpisodeSim(
+            self.config, obs_mode=self.obs_mode, camera_config=self.camera_config, ik=ik
+        )
         self._sims[id(asset)] = (asset, sim)
         # The camera mode compiles every world afresh (EpisodeSim.build): one is enough to keep.
         while len(self._sims) > (KEPT_WORLDS if self.obs_mode == "raycast" else 1):

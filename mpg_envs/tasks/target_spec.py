@@ -141,7 +141,11 @@ class TargetNaming:
         )
         self.colours, self.shapes, self.target = tuple(colours), shapes, target
         color, depth = self._query.images(
-            world.assets[target], PALETTE[colours[target]], exemplar_rng(seed, 1), sim.visuals
+            world.assets[target],
+            PALETTE[colours[target]],
+            exemplar_rng(seed, 1),
+            sim.visuals,
+            sim.ik,
         )
         self.query = {"query_color": color, "query_depth": depth}
 
@@ -166,7 +170,8 @@ class TargetNaming:
         if self.colours is None or self.spec != "exemplar":
             return {}
         others = [i for i, c in enumerate(self.colours) if c >= 0 and i != self.target]
-        shapes, target = cast(tuple, self.shapes), cast(int, self.target)  # drawn with the colours at reset
+        # Drawn with the colours at reset.
+        shapes, target = cast(tuple, self.shapes), cast(int, self.target)
         looks = [shared_looks(shapes, self.colours, target, i) for i in others]
         return {
             "lookalikes": {
@@ -180,7 +185,9 @@ class TargetNaming:
         if self.colours is None or self.spec != "exemplar":
             return {}
         shares = (
-            shared_looks(cast(tuple, self.shapes), self.colours, cast(int, self.target), grasped_object)
+            shared_looks(
+                cast(tuple, self.shapes), self.colours, cast(int, self.target), grasped_object
+            )
             if wrong_grasp and grasped_object is not None
             else ()
         )
