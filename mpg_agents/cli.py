@@ -50,11 +50,11 @@ def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
 def _add_net_setting_arguments(parser: argparse.ArgumentParser, prefix: str) -> None:
     """The options that override a checkpoint's settings without weights (read by :func:`_net_settings`)."""
     parser.add_argument("--grasp-region", choices=("rectangle", "target", "visible"),
-                        help=prefix + "where a grasp may act (override the checkpoint's: the target's rectangle, its footprint, or the part of it where the target shows)")
+                        help=prefix + "where a grasp may act (override the checkpoint's: the target's " "rectangle, its footprint, or the part of it where the target shows)")
     parser.add_argument("--target-margin", type=int,
                         help=prefix + "grow (> 0) or shrink (< 0) the target's pixels by this many pixels for grasp regions 'target' and 'visible'")
     parser.add_argument("--move-region", choices=("rectangle", "top"),
-                        help=prefix + "where a move may act (override the checkpoint's: the target's rectangle or the top of its footprint, the occluder)")
+                        help=prefix + "where a move may act (override the checkpoint's: the target's " "rectangle or the top of its footprint, the occluder)")
     parser.add_argument("--grasp-fingers", choices=("any", "clear"),
                         help=prefix + "which grasps may act (override the checkpoint's): any, or only those whose open fingers land least blocked")
     parser.add_argument("--move-fingers", choices=("any", "clear"),
@@ -80,7 +80,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--out", default="runs/mpg", help="run directory (resumes if it holds a saved state)")
     parser.add_argument(
         "--config",
-        help="JSON or TOML file of training settings: TrainConfig fields, and 'stages': {name: {TrainingStage field: value}}",
+        help="JSON or TOML file of training settings: TrainConfig " "fields, and 'stages': {name: {TrainingStage field: value}}",
     )
     # Flags named after TrainConfig fields override the config file (dest = the field's name).
     parser.add_argument("--steps", type=int, help="iterations (one stage), or iterations of every stage (pipeline)")
@@ -104,7 +104,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         help="pipeline: train a learned baseline of Table I at the same total iterations instead of MPGNet",
     )
     parser.add_argument("--resume-anyway", action="store_true",
-                        help="resume a saved run even though settings differ from its own (they are listed; the record keeps the new ones)")
+                        help="resume a saved run even though settings differ from its " "own (they are listed; the record keeps the new ones)")
     args = parser.parse_args(argv)
     try:
         from mpg_agents.acting.grasp_threshold import as_record  # noqa: PLC0415
@@ -170,14 +170,14 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--avoid-repeats", action="store_true",
                         help="network policies: never repeat an action on an unchanged scene (take the best other one)")
     parser.add_argument("--grasp-retries", type=int, metavar="K",
-                        help="network policies: after K grasps in a row that did not take the target, push once (a move without a push net); 0: never (default: the checkpoint's)")
+                        help="network policies: after K grasps in a row that did not take the target, " "push once (a move without a push net); 0: never (default: the checkpoint's)")
     parser.add_argument("--device", choices=DEVICES, help="network policies: auto (default: CUDA when available), cpu or cuda")
-    parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or the cluster's CPUs with --ray-address; same results for any number")
+    parser.add_argument("--workers", type=int, help="worker processes on Ray; default 1 (in this process, no Ray), or " "the cluster's CPUs with --ray-address; same results for any number")
     parser.add_argument("--ray-address", help="join this Ray cluster (e.g. auto or HOST:6379) instead of starting a local Ray")
     parser.add_argument("--backend", choices=("ray", "processes"), default="ray", help="with --workers > 1: Ray (default) or a local process pool (no Ray start-up)")
     parser.add_argument("--quiet", action="store_true", help="no line per episode")
     parser.add_argument("--env-option", action="append", metavar="KEY=VALUE",
-                        help="an env keyword, e.g. wrong_grasp=fail, obs_mode=camera, 'visible_range=(0, 0.3)' (repeatable; recorded in the JSON)")
+                        help="an env keyword, e.g. wrong_grasp=fail, obs_mode=camera, " "'visible_range=(0, 0.3)' (repeatable; recorded in the JSON)")
     parser.add_argument("--cases", help="run a case set instead of seeded episodes: challenge | epg | gti, or a scene file or folder "
                         "(strict retrieval, a mis-pick ends a run as a failure, unless --env-option wrong_grasp=remove)")
     parser.add_argument("--runs", type=int, default=1, help="with --cases: runs per case (run 0 as written, the others jittered)")
@@ -347,7 +347,7 @@ def export_main(argv: Sequence[str] | None = None) -> int:
     _add_net_setting_arguments(parser, "")
     parser.add_argument("--q-star", type=float, help="Q*_g of the copy (training's stays on record in the header)")
     parser.add_argument("--coordination", choices=COORDINATIONS, help="the rule the copy acts with")
-    parser.add_argument("--grasp-retries", type=int, metavar="K", help="the copy's default loop breaker: push once after K grasps in a row that did not take the target (0: never)")
+    parser.add_argument("--grasp-retries", type=int, metavar="K", help="the copy's default loop breaker: push once after K " "grasps in a row that did not take the target (0: never)")
     args = parser.parse_args(argv)
     try:
         from mpg_agents.acting.weights import export_weights, read_checkpoint_header  # noqa: PLC0415
@@ -374,7 +374,7 @@ def plot_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="mpg-plot", description="Learning curves of a run (or pipeline) directory to a picture (PNG by default).")
     parser.add_argument("run", nargs="+", help="a run directory (holding progress.csv) or a pipeline directory (Stage*/progress.csv); "
                         "several with --stage: that stage of each on one axis")
-    parser.add_argument("--out", help="picture path, its suffix the format: .png, .pdf, .svg, ... (default: RUN/curves.png; required with several runs)")
+    parser.add_argument("--out", help="picture path, its suffix the format: .png, .pdf, .svg, " "... (default: RUN/curves.png; required with several runs)")
     parser.add_argument("--window", type=int, default=200, help="iterations per grasp-success point (paper: 200)")
     parser.add_argument("--stage", help="compare this stage (e.g. Stage5) of the runs given")
     parser.add_argument("--labels", help="comma-separated legend labels, one per run (default: the folder names)")

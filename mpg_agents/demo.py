@@ -150,7 +150,7 @@ def check_arguments(args: argparse.Namespace) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="MPG demo: a policy on a few seeded scenes.")
     parser.add_argument("--policy", default="shipped", help="shipped (the trained checkpoint), oracle, random, grasp-only or a checkpoint path")
-    parser.add_argument("--env", default=DEMO_ENV, help=f"a registered env id (default: {DEMO_ENV}, the hard track, 15 objects; MPG-Occluded-v0: the paper's test scenes)")
+    parser.add_argument("--env", default=DEMO_ENV, help=f"a registered env id (default: {DEMO_ENV}, the hard track, " "15 objects; MPG-Occluded-v0: the paper's test scenes)")
     parser.add_argument("--episodes", type=int, default=3, help="episodes to run (default 3)")
     # A held-out test seed (the shipped net trained on its own seeds), so the demo shows a
     # scene it never trained on.
@@ -175,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # a checkpoint of another architecture or action space
         env.close()
         return fail(exc)
-    print(f"policy {policy.name} on {args.env}, {args.episodes} episodes from seed {args.seed}, {threads} torch threads, {device}")
+    print(f"policy {policy.name} on {args.env}, {args.episodes} episodes " f"from seed {args.seed}, {threads} torch threads, {device}")
 
     def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
         if episode == 0:

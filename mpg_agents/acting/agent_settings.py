@@ -33,8 +33,9 @@ def agent_net_config(
         return MPGNetConfig.from_dict({**net_config.to_dict(), "primitives": list(branches)})
     overrides = dict(net_config or {})
     overrides["primitives"] = tuple(branches)
-    if overrides.pop("variant", variant) != variant:
-        raise ValueError(f"net_config variant {net_config['variant']!r} contradicts variant={variant!r}")  # type: ignore[index]
+    named = overrides.pop("variant", variant)
+    if named != variant:
+        raise ValueError(f"net_config variant {named!r} contradicts variant={variant!r}")
     return MPGNetConfig.for_variant(variant, **overrides)
 
 

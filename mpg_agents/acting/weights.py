@@ -97,7 +97,7 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
         )
     for field in ("config", "primitives"):
         if field not in header:
-            raise ValueError(f"{path}: its header has no {field!r} ({HEADER_FIELDS[field]}); it was not written by save_mpgnet/save_weights")
+            raise ValueError(f"{path}: its header has no {field!r} ({HEADER_FIELDS[field]}); " "it was not written by save_mpgnet/save_weights")
     if not isinstance(header["config"], dict):
         raise ValueError(f"{path}: its header's 'config' is a {type(header['config']).__name__}; valid: {HEADER_FIELDS['config']}")
     primitives = header["primitives"]
@@ -151,7 +151,7 @@ def check_tensor_dtypes(path: str | Path, header: Mapping[str, Any] | None = Non
             if stored != expected:
                 why = "its header says float16: an exported copy" if floating == "float16" else "as training writes weights"
                 raise ValueError(
-                    f"checkpoint {path}: tensor {key!r} is stored as {stored}, expected {expected} ({why}); the file was "
+                    f"checkpoint {path}: tensor {key!r} is stored as " f"{stored}, expected {expected} ({why}); the file was "
                     f"re-saved with other types: use the checkpoint as training or mpg-export wrote it"
                 )
 

@@ -127,7 +127,8 @@ def run_chunk(
             failures: list[EpisodeFailure] | None = [] if keep_going else None
             records = run_episodes(policy, env, indices, job.seed, on_record=on_record, failures=failures)
             name = getattr(policy, "name", type(policy).__name__)
-            env_id, num_objects = env_id_of(env), int(getattr(env.unwrapped, "num_objects"))  # an MPG env's
+            unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
+            env_id, num_objects = env_id_of(env), int(unwrapped.num_objects)
         finally:
             env.close()
     return ChunkResult(name, env_id, num_objects, records, time.perf_counter() - start, failures or [])

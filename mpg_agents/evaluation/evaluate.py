@@ -77,7 +77,7 @@ class EpisodeRecord:
     def describe(self) -> str:
         outcome = "success" if self.success else "failure"
         used = ", ".join(f"{n} {p}" for p, n in self.primitives.items() if n)
-        return f"episode {self.index} (seed {self.seed}): {outcome} after {self.motions} motions ({used}); end: {self.end_reason}"
+        return f"episode {self.index} (seed {self.seed}): {outcome} after " f"{self.motions} motions ({used}); end: {self.end_reason}"
 
 
 @dataclass
@@ -141,14 +141,14 @@ class EvalResult:
             ("task success rate", f"{100 * self.task_success_rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"),
             ("average motion number", motions),
             ("  in successful episodes", "n/a" if self.average_motions_success is None else f"{self.average_motions_success:.2f}"),
-            ("  without a mis-pick", f"{100 * self.clean_success_rate:.1f}% [{100 * self.clean_success_interval[0]:.1f}, {100 * self.clean_success_interval[1]:.1f}]"),
+            ("  without a mis-pick", f"{100 * self.clean_success_rate:.1f}% [{100 * self.clean_success_interval[0]:.1f}, " f"{100 * self.clean_success_interval[1]:.1f}]"),
             ("mis-picks per episode", f"{self.mispicks_per_episode:.2f}"),
             ("grasp success rate", "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.1f}% of {self.grasp_attempts}"),
             ("finding the target", finding_line(self.finding)),
             ("success by visibility", ", ".join(f"{band}: {c['successes']}/{c['episodes']}" for band, c in self.success_by_visibility.items()) or "n/a"),
             ("primitives used", ", ".join(f"{p} {n}" for p, n in self.primitive_counts.items())),
             ("episodes ended by", ", ".join(f"{r} {n}" for r, n in self.end_reasons.items())),
-            ("seconds per motion", f"{self.seconds_per_motion:.2f} ({self.workers} worker{'s' if self.workers > 1 else ''}, {self.wall_seconds:.1f} s)"),
+            ("seconds per motion", f"{self.seconds_per_motion:.2f} ({self.workers} " f"worker{'s' if self.workers > 1 else ''}, {self.wall_seconds:.1f} s)"),
         ]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
@@ -403,11 +403,12 @@ def evaluate(
     start = time.perf_counter()
     on_record = (lambda r: print("  " + r.describe(), flush=True)) if progress else None
     records = run_episodes(policy, env, range(episodes), seed, on_record=on_record, on_reset=on_reset, on_step=on_step)
+    unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
     return summarise(
         records,
         policy=getattr(policy, "name", type(policy).__name__),
         env_id=env_id_of(env),
-        num_objects=int(getattr(env.unwrapped, "num_objects")),  # an MPG env's (gym.Env does not declare it)
+        num_objects=int(unwrapped.num_objects),
         seed=seed,
         wall_seconds=time.perf_counter() - start,
         env_options=env_options_of(env),

@@ -172,7 +172,7 @@ class NetworkPolicy:
 
             grasp_retries = read_checkpoint_header(path).get("extra", {}).get("grasp_retries", 0)
         if isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0:
-            raise ValueError(f"grasp_retries must be a non-negative integer (0: off) or None (the checkpoint's), got {grasp_retries!r}")
+            raise ValueError("grasp_retries must be a non-negative integer (0: off) " f"or None (the checkpoint's), got {grasp_retries!r}")
         fallback = [p for p in ("push", "move") if p in self.primitives]
         self.grasp_retries = grasp_retries if grasp_retries and fallback else None  # a grasp-only net has nothing else to do
         self._instead_of_grasp = fallback[0] if fallback else None

@@ -141,7 +141,7 @@ def table_from_evals(
     results = {(label, objects): merged_result(paths) for label, paths in cells.items()}
     for (label, _), result in results.items():
         if result.env_id != spec.env_id or result.num_objects != objects:
-            raise ValueError(f"{label}: its files are {result.env_id} with {result.num_objects} objects, not {spec.env_id} with {objects}")
+            raise ValueError(f"{label}: its files are {result.env_id} with " f"{result.num_objects} objects, not {spec.env_id} with {objects}")
     labels = list(cells)
     header, body, paper_rows = table_rows(labels, [objects], results, spec, {label: label for label in labels})
     report = {

@@ -210,7 +210,7 @@ def tracks_rows(
     check_table_mujoco(cells)
     for name in tracks:
         if name not in TRACKS or not TRACKS[name].strict_columns:
-            raise ValueError(f"tracks_rows lays out strict tracks only, got {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}")
+            raise ValueError(f"tracks_rows lays out strict tracks only, got {name!r}; " f"valid: {[t for t, s in TRACKS.items() if s.strict_columns]}")
     header = ["Track", "Method"] + _header(objects, True)
     body = []
     for name in tracks:

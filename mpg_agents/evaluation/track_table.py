@@ -4,8 +4,9 @@ A cell is (track, policy, object count): ``episodes`` episodes on the track's en
 ``seed``. :func:`make_track_table` runs each cell that is missing and writes it as soon as it
 ends to ``OUT/<track>/cells/<label>_<objects>.json`` (``mpg-eval --json``'s format, with the
 policy entry it ran under ``table_policy``), so a stopped run resumes where it stopped and a
-small machine can run a table piece by piece (a long cell too, in blocks of seeds). A cell is used only when it is what the table
-asks: the track's env, the object count, exactly the seeds ``seed .. seed + episodes - 1``,
+small machine can run a table piece by piece (a long cell too, in blocks of seeds). A cell is
+used only when it is what the table asks: the track's env, the object count, exactly the seeds
+``seed .. seed + episodes - 1``,
 the same env options and the same policy entry; anything else raises
 :class:`CellMismatchError` naming the file and what differs, never a silently mixed table.
 
@@ -87,7 +88,7 @@ class CellRequest:
         if result.env_id != self.env_id or result.num_objects != self.objects:
             problems.append(f"it is {result.env_id} with {result.num_objects} objects, not {self.env_id} with {self.objects}")
         if seeds != list(range(self.seed, self.seed + self.episodes)):
-            problems.append(f"its seeds are {seeds[0]}..{seeds[-1]} ({len(seeds)} episodes), not {self.seed}..{self.seed + self.episodes - 1}")
+            problems.append(f"its seeds are {seeds[0]}..{seeds[-1]} ({len(seeds)} " f"episodes), not {self.seed}..{self.seed + self.episodes - 1}")
         if json.loads(json.dumps(result.env_options)) != self.recorded_env_options():
             problems.append(f"its env options are {result.env_options}, not {self.recorded_env_options()}")
         if problems:
@@ -138,12 +139,12 @@ class ReusedCell:
         if found != json.loads(json.dumps(asked)):
             raise CellMismatchError(f"{path} ran {found}, the table asks {asked}")
         if report.get("policies", {}).get(self.label) != entry:
-            raise CellMismatchError(f"{path} ran label {self.label!r} as {report.get('policies', {}).get(self.label)}, the policy file says {entry}")
+            raise CellMismatchError(f"{path} ran label {self.label!r} as " f"{report.get('policies', {}).get(self.label)}, the policy file says {entry}")
         cell = report.get("rows", {}).get(self.label, {}).get(str(self.objects))
         if cell is None:
             raise CellMismatchError(f"{path} has no cell for {self.label!r} at {self.objects} objects")
         if cell["episodes"] != request.episodes or cell["env_options"] != request.recorded_env_options():
-            raise CellMismatchError(f"{path}: {self.label!r} at {self.objects} objects ran {cell['episodes']} episodes with env options {cell['env_options']}")
+            raise CellMismatchError(f"{path}: {self.label!r} at {self.objects} objects ran " f"{cell['episodes']} episodes with env options {cell['env_options']}")
         return dict(cell)
 
 
@@ -292,7 +293,8 @@ def make_track_table(
     """The table of ``tracks`` x ``specs`` x ``objects``: every cell reused (``reused``),
     read from ``OUT/<track>/cells/``, or run there when ``run(request)`` says so; a cell
     neither recorded nor run is absent from the table. Reused cells must carry labels of
-    ``specs`` (``ValueError`` otherwise). Returns the report (``rows``: ``{track: {label: {objects: cell}}}``, each cell's
+    ``specs`` (``ValueError`` otherwise). Returns the report (``rows``:
+    ``{track: {label: {objects: cell}}}``, each cell's
     ``source``, the cells ``missing``) and the Markdown: the success grid
     (:func:`~mpg_agents.evaluation.tables.tracks_success_rows`), then every figure
     (:func:`~mpg_agents.evaluation.tables.tracks_rows`). ``on_cell(request, how,

@@ -238,8 +238,10 @@ class Learner:
         self.policy.set_q_star(measured.q_star)
         c = self.counters
         write_calibration(self.out / "calibration.json", measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
-        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {measured.q_star:.4g} in its scenes at iteration {c.iteration} "
-                 f"({len(measured.target_grasp_q)} of {measured.grasps} greedy grasps took the target in {episodes} episodes)")
+        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {measured.q_star:.4g} "
+                 f"in its scenes at iteration {c.iteration} "
+                 f"({len(measured.target_grasp_q)} of {measured.grasps} "
+                 f"greedy grasps took the target in {episodes} episodes)")
         c.calibrated_at = c.iteration
         self.save_state()
         return measured.q_star
@@ -255,7 +257,8 @@ class Learner:
             return self.policy.q_star
         before = self.policy.q_star
         self.policy.set_q_star(estimate_q_star(taken, self.stage.calibration_quantile))
-        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {format_q_star(self.policy.q_star)} from its last {len(taken)} "
+        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {format_q_star(self.policy.q_star)} "
+                 f"from its last {len(taken)} "
                  "greedy grasps that took the target")
         self.save_state()
         return self.policy.q_star

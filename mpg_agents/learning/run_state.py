@@ -53,7 +53,8 @@ class Counters:
     move_trial_successes: int = 0  # of those, the ones that uncovered the target
     rival_trials: int = 0  # covered-target moves and pushes tried as the other (TrainingStage.rival_trials)
     rival_trial_clears: int = 0  # of those, the ones that uncovered the target
-    covered_grasp_trials: int = 0  # covered-target moves and pushes tried as the best grasp (TrainingStage.covered_grasp_trials)
+    # Covered-target moves and pushes tried as the best grasp (TrainingStage.covered_grasp_trials).
+    covered_grasp_trials: int = 0
     covered_grasp_trial_targets: int = 0  # of those, the ones that took the target
     skipped_scenes: int = 0  # training episodes whose seed gave no valid scene (logged, see seeds.reset_first_valid)
     replay_credit: float = 0.0  # gradient steps earned at TrainConfig.replay_ratio and not yet taken (a fraction)

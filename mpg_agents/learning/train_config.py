@@ -62,7 +62,8 @@ class TrainConfig:
     checkpoint_every: int = 100
     window: int = 200  # grasp success rate per this many iterations (paper)
     torch_threads: int = 2
-    device: str = "auto"  # networks and batches: auto (CUDA when available) | cpu | cuda; replay and envs stay on the host
+    # Networks and batches: auto (CUDA when available) | cpu | cuda; replay and envs stay on the host.
+    device: str = "auto"
     net_config: dict[str, Any] = field(default_factory=dict)
     # Parallel actors (mpg_agents.learning.actors): 1 acts in the learner's process, as always;
     # N > 1 step N envs in their own processes and send their transitions to the learner's replay.
@@ -182,7 +183,7 @@ def check_train_config(cfg: TrainConfig) -> None:
         raise ValueError(f"training setting actor_backend must be one of {', '.join(ACTOR_BACKENDS)}, got {cfg.actor_backend!r}")
     if cfg.ray_address is not None and (not isinstance(cfg.ray_address, str) or cfg.actors == 1 or cfg.actor_backend == "processes"):
         raise ValueError(f"training setting ray_address is the Ray cluster the actors run on: a string with actors > 1 and "
-                         f"actor_backend 'ray' or 'auto', got {cfg.ray_address!r} with actors={cfg.actors}, actor_backend={cfg.actor_backend!r}")
+                         f"actor_backend 'ray' or 'auto', got {cfg.ray_address!r} with " f"actors={cfg.actors}, actor_backend={cfg.actor_backend!r}")
     if not isinstance(cfg.net_config, dict):
         raise ValueError(f"training setting net_config must be a table of MPGNetConfig fields, got {cfg.net_config!r}")
 

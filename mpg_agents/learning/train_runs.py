@@ -130,7 +130,7 @@ def _int_list(text: str) -> list[int]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``mpg-train-runs``: train several runs as Ray tasks; prints one JSON object at the end."""
-    parser = argparse.ArgumentParser(description="Train MPGNet, its ablations and the learned baselines, each for several seeds, as Ray tasks (resumable).")
+    parser = argparse.ArgumentParser(description="Train MPGNet, its ablations and the learned baselines, " "each for several seeds, as Ray tasks (resumable).")
     parser.add_argument("--runs", default="mpgnet,grasp-only", help=f"comma-separated, of {', '.join(RUNS)} (default mpgnet,grasp-only)")
     parser.add_argument("--seeds", type=_int_list, default=[0, 1], help="comma-separated training seeds (default 0,1)")
     parser.add_argument("--config", default=str(DEFAULT_CONFIG), help="the training config every run shares")

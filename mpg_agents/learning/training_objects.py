@@ -44,12 +44,12 @@ def object_set_entries(value: Any, what: str = "object_set") -> list[tuple[str, 
     for item in items:
         name, _, seed_text = item.partition(":")
         if name not in valid:
-            raise ValueError(f"{what}: object set {name!r} cannot be trained on; valid: {list(valid)} (held-out test sets are refused)")
+            raise ValueError(f"{what}: object set {name!r} cannot be trained on; " f"valid: {list(valid)} (held-out test sets are refused)")
         seed = None
         if seed_text:
             if not seed_text.isdigit() or int(seed_text) not in FAMILY_SEED_RANGES["train"]:
                 train = FAMILY_SEED_RANGES["train"]
-                raise ValueError(f"{what}: {item!r}: a training set's seed must be an integer in [{train.start}, {train.stop - 1}], got {seed_text!r}")
+                raise ValueError(f"{what}: {item!r}: a training set's seed must be an integer " f"in [{train.start}, {train.stop - 1}], got {seed_text!r}")
             seed = int(seed_text)
         entries.append((name, seed))
     return entries
@@ -65,7 +65,7 @@ def stage_env_config(options: dict[str, Any], reward: Any = None) -> EnvConfig |
     """
     table = options.get("config", {})
     if not isinstance(table, dict) or "reward" in table:
-        raise ValueError(f"env_options config must be a table of EnvConfig fields other than reward (a stage's reward is its own), got {table!r}")
+        raise ValueError("env_options config must be a table of EnvConfig fields other " f"than reward (a stage's reward is its own), got {table!r}")
     if not table and not reward:
         return None
     base = config_of(dict(table))

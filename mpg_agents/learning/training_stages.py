@@ -184,9 +184,9 @@ class TrainingStage:
         if self.finish_trainable:
             object.__setattr__(self, "finish_trainable", check_primitives(self.finish_trainable))
         if not 0 <= self.finish_iterations < self.iterations:
-            raise ValueError(f"stage {self.name}: finish_iterations must be in [0, iterations={self.iterations}), got {self.finish_iterations}")
+            raise ValueError(f"stage {self.name}: finish_iterations must be in [0, " f"iterations={self.iterations}), got {self.finish_iterations}")
         if bool(self.finish_iterations) != bool(self.finish_trainable):
-            raise ValueError(f"stage {self.name}: finish_iterations and finish_trainable go together (got {self.finish_iterations}, {self.finish_trainable})")
+            raise ValueError(f"stage {self.name}: finish_iterations and finish_trainable go " f"together (got {self.finish_iterations}, {self.finish_trainable})")
         if self.trainable is not None:
             object.__setattr__(self, "trainable", check_primitives(self.trainable))
         if self.objects is not None:
@@ -200,7 +200,7 @@ class TrainingStage:
         if not 0.0 <= self.calibration_quantile <= 1.0:
             raise ValueError(f"stage {self.name}: calibration_quantile must be in [0, 1], got {self.calibration_quantile}")
         if self.calibrate_every < 0 or (self.calibrate_every and not self.calibration_episodes):
-            raise ValueError(f"stage {self.name}: calibrate_every must be 0, or >= 1 with calibration_episodes, got {self.calibrate_every}")
+            raise ValueError(f"stage {self.name}: calibrate_every must be 0, or >= 1 " f"with calibration_episodes, got {self.calibrate_every}")
         if self.calibration_episodes and self.calibrates_q_star:
             raise ValueError(f"stage {self.name}: calibrates_q_star and calibration_episodes both set Q*_g; choose one")
         if self.alternate_every < 0 or self.iterations < 1:

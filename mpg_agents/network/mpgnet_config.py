@@ -175,7 +175,7 @@ class MPGNetConfig:
         low, high = self.target_margin_range
         if isinstance(self.target_margin_px, bool) or not isinstance(self.target_margin_px, Integral) or not low <= self.target_margin_px <= high:
             raise ValueError(
-                f"target_margin_px must be an integer in [{low}, {high}] pixels, got {self.target_margin_px!r} (shrinking "
+                f"target_margin_px must be an integer in [{low}, {high}] " f"pixels, got {self.target_margin_px!r} (shrinking "
                 f"by more than half the heightmap keeps each part's deepest pixels, as {low} does; growing by {high} "
                 f"already covers the whole heightmap)"
             )

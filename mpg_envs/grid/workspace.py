@@ -1,6 +1,7 @@
 """The workspace and its heightmap grid: pure geometry, no simulator.
 
-Conventions (as on the Environments page of the documentation): the robot base sits at the world origin facing +x; the workspace is
+Conventions (as on the Environments page of the documentation): the robot base sits at the
+world origin facing +x; the workspace is
 x in [0.276, 0.724], y in [-0.224, 0.224], z in [0, 0.4] metres above the table top. A
 heightmap pixel ``(row, col)`` covers ``y`` (rows) and ``x`` (columns):
 ``row = floor((y - y_min) / res)``, ``col = floor((x - x_min) / res)``.

@@ -17,7 +17,8 @@
   ``"continuous"`` (:class:`~mpg_envs.integrations.wrappers.ContinuousAction`) and ``"image"``
   (:class:`~mpg_envs.integrations.wrappers.ImageObservation`, channels-last by default because RLlib's
   CNN encoder expects ``(H, W, C)``, then cast to float32 in [0, 1] with Gymnasium's
-  ``DtypeObservation`` and ``RescaleObservation``: RLlib does not cast uint8 images). The raw env's 802,816-way action and ``Dict`` of
+  ``DtypeObservation`` and ``RescaleObservation``: RLlib does not cast uint8 images). The raw
+  env's 802,816-way action and ``Dict`` of
   heightmaps have no default RLlib model: use ``["grid", "image"]`` or your own RLModule.
 - ``seed`` (default 0): the base seed. Each env seeds its first reset with
   ``seed + 1000 * worker_index + vector_index``, so every env of every runner draws its own

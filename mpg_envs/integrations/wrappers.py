@@ -141,7 +141,7 @@ class ImageObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 def _check_grid(size: int, cell: int, rotations: int) -> None:
     if not _is_int(cell) or cell < 1 or size % cell:
         divisors = [d for d in range(1, size + 1) if size % d == 0]
-        raise ValueError(f"cell must be a whole number of pixels dividing the {size}-pixel heightmap, one of {divisors}; got {cell!r}")
+        raise ValueError("cell must be a whole number of pixels dividing the " f"{size}-pixel heightmap, one of {divisors}; got {cell!r}")
     if not _is_int(rotations) or rotations < 1 or NUM_ROTATIONS % rotations:
         divisors = [d for d in range(1, NUM_ROTATIONS + 1) if NUM_ROTATIONS % d == 0]
         raise ValueError(f"rotations must divide the env's {NUM_ROTATIONS} rotations, one of {divisors}; got {rotations!r}")
@@ -172,7 +172,7 @@ def grid_to_pixel_action(
     if isinstance(index, np.ndarray) and index.size == 1:
         index = index.reshape(())[()]
     if not _is_int(index) or not 0 <= int(index) < n:
-        raise ValueError(f"action must be an integer in 0..{n - 1} (primitives {primitives}, {rotations} rotations, {cells}x{cells} cells), got {index!r}")
+        raise ValueError(f"action must be an integer in 0..{n - 1} (primitives {primitives}, " f"{rotations} rotations, {cells}x{cells} cells), got {index!r}")
     p, rest = divmod(int(index), rotations * cells * cells)
     r, rest = divmod(rest, cells * cells)
     cell_row, cell_col = divmod(rest, cells)

@@ -307,7 +307,7 @@ class CameraHeightmapper:
             )
         if visuals is not None and len(visuals.camera_offsets) < len(self._camera_ids):
             raise ValueError(
-                f"visuals hold calibration errors of {len(visuals.camera_offsets)} cameras, this mode has {len(self._camera_ids)}"
+                f"visuals hold calibration errors of {len(visuals.camera_offsets)} " f"cameras, this mode has {len(self._camera_ids)}"
             )
         lighting = self.config.lighting if visuals is None else visuals.lighting
         colors = self._geom_colors(visuals)

@@ -293,8 +293,8 @@ class RaycastHeightmapper:
         ray_setup = np.array([self.source_height, *self.workspace.shape, self.workspace.resolution, self.workspace.x_min, self.workspace.y_min, self.workspace.z_min])
         key = b"".join(
             np.ascontiguousarray(a).tobytes()
-            for a in (g, m.geom_type[g], m.geom_group[g], m.geom_size[g], m.geom_aabb[g], m.geom_rgba[g, 3], data.geom_xpos[g], data.geom_xmat[g],
-                      *shapes, self._origin, self.geomgroup, ray_setup)
+            for a in (g, m.geom_type[g], m.geom_group[g], m.geom_size[g], m.geom_aabb[g], m.geom_rgba[g, 3],
+                      data.geom_xpos[g], data.geom_xmat[g], *shapes, self._origin, self.geomgroup, ray_setup)
         )  # fmt: skip
         kept = _STATIC_CASTS.get(key)
         if kept is None:

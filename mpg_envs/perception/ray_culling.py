@@ -45,7 +45,8 @@ def pixels_under_boxes(workspace: Workspace, lo: np.ndarray, hi: np.ndarray, sla
         return mask
     grow = workspace.resolution + slant * np.maximum(np.abs(hi[:, 2] - workspace.z_min), np.abs(lo[:, 2] - workspace.z_min))
     res = workspace.resolution
-    # Pixel k covers [min + k * res, min + (k + 1) * res): the cells meeting [a, b] are k in [floor((a - min) / res), ceil((b - min) / res)).
+    # Pixel k covers [min + k * res, min + (k + 1) * res): the cells meeting [a, b] are k in
+    # [floor((a - min) / res), ceil((b - min) / res)).
     c0 = np.clip(np.floor((lo[:, 0] - grow - workspace.x_min) / res), 0, cols).astype(int)
     c1 = np.clip(np.ceil((hi[:, 0] + grow - workspace.x_min) / res), 0, cols).astype(int)
     r0 = np.clip(np.floor((lo[:, 1] - grow - workspace.y_min) / res), 0, rows).astype(int)

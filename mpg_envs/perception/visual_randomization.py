@@ -103,9 +103,9 @@ class VisualRandomization:
         if not 0.0 <= self.camera_position_error <= 0.1:
             raise ValueError(f"VisualRandomization.camera_position_error must be in [0, 0.1] m, got {self.camera_position_error!r}")
         if not 0.0 <= self.camera_rotation_error <= 10.0:
-            raise ValueError(f"VisualRandomization.camera_rotation_error must be in [0, 10] degrees, got {self.camera_rotation_error!r}")
+            raise ValueError("VisualRandomization.camera_rotation_error must be in " f"[0, 10] degrees, got {self.camera_rotation_error!r}")
         if not isinstance(self.raycast_misregistration, bool):
-            raise ValueError(f"VisualRandomization.raycast_misregistration must be True or False, got {self.raycast_misregistration!r}")
+            raise ValueError("VisualRandomization.raycast_misregistration must be " f"True or False, got {self.raycast_misregistration!r}")
         if self.depth_noise is not None and not isinstance(self.depth_noise, DepthNoise):
             raise ValueError(f"VisualRandomization.depth_noise must be a DepthNoise or None, got {self.depth_noise!r}")
 
@@ -130,7 +130,7 @@ class VisualRandomization:
                     data[key] = tuple(data[key])
             return cls(**data)
         raise ValueError(
-            f"visual_randomization must be None, False, True, a dict of VisualRandomization fields or a VisualRandomization, got {value!r}"
+            "visual_randomization must be None, False, True, a dict of " f"VisualRandomization fields or a VisualRandomization, got {value!r}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -285,7 +285,7 @@ def randomized_raycast(
     ws = raycaster.workspace
     if visuals.raycast_misregistration:
         if camera_centres is None or not 1 <= len(camera_centres) <= CAMERA_SLOTS:
-            raise ValueError(f"raycast_misregistration needs the calibrated centres of 1 to {CAMERA_SLOTS} cameras, got {camera_centres!r}")
+            raise ValueError("raycast_misregistration needs the calibrated centres " f"of 1 to {CAMERA_SLOTS} cameras, got {camera_centres!r}")
         k = len(camera_centres)
         maps = misregistered_heightmaps(maps, ws, camera_centres, visuals.camera_offsets[:k], visuals.camera_rotations[:k], background_color)
     if visuals.depth_noise is None:

@@ -63,7 +63,8 @@ class OracleConfig:
     finger_margin: float = 0.004  # the swept strip starts this far off the object's side
     pad_below_tcp: float = JawGeometry.pad_below_tcp  # the pads' lower edge lies this far below the TCP
     finger_clearance: float = JawGeometry.finger_clearance  # a strip is free if nothing in it rises above the pads' lower edge + this
-    grasp_tolerance: float = 0.02  # a grasp this little blocked is tried before any push (the pads push small things aside)
+    # A grasp this little blocked is tried before any push (the pads push small things aside).
+    grasp_tolerance: float = 0.02
     push_start_gap: float = 0.012  # a push starts this far outside the target's edge
     occluder_tolerance: float = 0.01  # as the env's occlusion test: higher than the target's top by this
     # When an action repeats a tried one (mpg_envs.policies.action_memory.RepeatRule's defaults).

@@ -148,7 +148,7 @@ def check_settled(world, scene: SceneFile, arrangement: Arrangement, visible: fl
     distance, angle = pose_errors(world, scene)
     if np.nanmax(distance) > LOAD_TOLERANCE_M or np.nanmax(angle) > LOAD_TOLERANCE_DEG:
         k = int(np.nanargmax(distance / LOAD_TOLERANCE_M + angle / LOAD_TOLERANCE_DEG))
-        raise ArrangementError(f"{arrangement.name}: {scene.objects[k].label} moved {1000 * distance[k]:.1f} mm, {angle[k]:.1f} deg while settling")
+        raise ArrangementError(f"{arrangement.name}: {scene.objects[k].label} moved " f"{1000 * distance[k]:.1f} mm, {angle[k]:.1f} deg while settling")
     low, high = arrangement.visible
     if not low <= visible <= high:
         raise ArrangementError(f"{arrangement.name}: the target is {visible:.2f} visible, outside the band [{low:g}, {high:g}]")

@@ -222,7 +222,7 @@ def _place(lay: _Layout, rng: np.random.Generator, half: np.ndarray) -> list[Blo
     if lay.anchor != "free":
         target = _corners(*turned[0])
         inward = float(rng.uniform(4.0, 12.0))
-        for axis, local_axis in ((0, np.array([1.0, 0.0])), (1, np.array([0.0, 1.0])))[: 1 if lay.anchor == "edge" else 2]:
+        for _axis, local_axis in ((0, np.array([1.0, 0.0])), (1, np.array([0.0, 1.0])))[: 1 if lay.anchor == "edge" else 2]:
             out = local_axis @ rot  # the layout's outward direction, a world axis
             k = int(np.argmax(np.abs(out)))
             sign = float(np.sign(out[k]))

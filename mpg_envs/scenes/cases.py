@@ -146,7 +146,7 @@ def load_cases(name_or_path: str | Path, peers_dir: str | Path | None = None) ->
         return challenge_set()
     if name in ("epg", "gti"):
         if peers_dir is None:
-            raise ValueError(f"case set {name!r} is read from the peers' files: name the folder holding them (peers_dir, mpg-eval --peers)")
+            raise ValueError(f"case set {name!r} is read from the peers' files: name " "the folder holding them (peers_dir, mpg-eval --peers)")
         return epg_set(Path(peers_dir)) if name == "epg" else gti_set(Path(peers_dir))
     path = Path(name_or_path).expanduser()
     if name.strip() and path.is_file():

@@ -167,7 +167,7 @@ def resolve_outside(
     ws = workspace
     what = (
         f"{len(outside)} object(s) outside the workspace (x in [{ws.x_min}, {ws.x_max}], y in [{ws.y_min}, "
-        f"{ws.y_max}], z in [{BELOW_TABLE}, {ws.z_max}]: on the table) {when}: {describe_objects(scene, outside, positions)}"
+        f"{ws.y_max}], z in [{BELOW_TABLE}, {ws.z_max}]: on the table) " f"{when}: {describe_objects(scene, outside, positions)}"
     )
     if not drop_outside:
         raise SceneFileError(f"scene {scene.source!r}: {what}. Pass reset(options={{'drop_outside': True}}) to leave them out.")
@@ -305,7 +305,7 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
             changed = (f"scene file {str(path)!r}: {label}'s mesh {asset.source!r} changed since the scene was saved "
                        f"(sha256 {digests[asset.source][:12]}..., recorded {str(obj['sha256'])[:12]}...)")
             if not allow_changed_meshes:
-                raise SceneFileError(f"{changed}; restore the mesh, or read_scene(..., allow_changed_meshes=True) to load it as it is now")
+                raise SceneFileError(f"{changed}; restore the mesh, or read_scene(..., " "allow_changed_meshes=True) to load it as it is now")
             warnings.warn(f"{changed}; loading the mesh as it is now", stacklevel=3)
         objects.append(SceneObject(dataclasses.replace(asset, rgba=rgba), position, quat, active, label))
     if not objects:

@@ -56,7 +56,7 @@ def seed_split(seed: int) -> str:
     for split, seeds in FAMILY_SEED_RANGES.items():
         if seed in seeds:
             return split
-    raise ValueError(f"object-set seed {seed} lies in no split; valid: {', '.join(f'{k} {v.start}-{v.stop - 1}' for k, v in FAMILY_SEED_RANGES.items())}")
+    raise ValueError(f"object-set seed {seed} lies in no split; valid: " f"{', '.join(f'{k} {v.start}-{v.stop - 1}' for k, v in FAMILY_SEED_RANGES.items())}")
 
 
 def family_object_set(

@@ -296,7 +296,7 @@ def _isolated_solid(
     if solid.method == "hull-fallback":
         hull_volume = sum(mesh_volume(v, f) for v, f in solid.parts)
         note = (
-            f"convex decomposition {failure}; using its convex hull instead ({hull_volume / solid.volume:.3f} x its volume, "
+            f"convex decomposition {failure}; using its convex hull " f"instead ({hull_volume / solid.volume:.3f} x its volume, "
             f"within the {HULL_FALLBACK_RATIO:g} allowed)"
         )
     else:

@@ -9,7 +9,8 @@ meshes. The pieces live in modules of their own and are re-exported here:
 * :mod:`mpg_envs.simulation.families` -- the procedural sets (:func:`family_object_set`);
 * :mod:`mpg_envs.simulation.meshes` -- mesh files (:func:`load_mesh_file`) and
   :mod:`mpg_envs.simulation.mesh_folder` -- folders of them, in parallel, a mesh that fails skipped
-  with a warning (:func:`load_mesh_folder`, :class:`MeshFolderObjects`), decomposed in worker processes (:mod:`~mpg_envs.simulation.decomposition`,
+  with a warning (:func:`load_mesh_folder`, :class:`MeshFolderObjects`), decomposed in worker
+  processes (:mod:`~mpg_envs.simulation.decomposition`,
   :mod:`~mpg_envs.simulation.isolated_call`) and fitted to the gripper (:mod:`~mpg_envs.simulation.gripper_fit`);
 * :mod:`mpg_envs.simulation.random_urdfs` -- pybullet's ``random_urdfs`` objects (:func:`load_random_urdfs`);
   its test split ships packed as the set ``"random_urdfs_test"`` (:mod:`~mpg_envs.simulation.object_packs`),
@@ -121,7 +122,8 @@ def load_object_set(
     seed: int = 0,
     cache_dir: str | os.PathLike[str] | None = None,
 ) -> list[ObjectAsset]:
-    """An object set by name (``"blocks"``, a procedural family, ``"random_urdfs_test"``) or by the path of a folder of OBJ/STL meshes.
+    """An object set by name (``"blocks"``, a procedural family, ``"random_urdfs_test"``) or by
+    the path of a folder of OBJ/STL meshes.
 
     ``"random_urdfs_test"`` is pybullet's ``random_urdfs`` test split as shipped: fitted to the
     gripper and packed beside the test scenes (no pybullet needed; ``seed`` and ``cache_dir``
@@ -146,7 +148,7 @@ def load_object_set(
     if str(name_or_path).strip() and path.is_dir():
         return load_mesh_folder(path, seed=seed, cache_dir=cache_dir)
     raise ValueError(
-        f"unknown object set {str(name_or_path)!r}: valid choices are {', '.join(map(repr, NAMED_SETS))}, one of {list(PROCEDURAL_SETS)} or the path of an "
+        f"unknown object set {str(name_or_path)!r}: valid choices are " f"{', '.join(map(repr, NAMED_SETS))}, one of {list(PROCEDURAL_SETS)} or the path of an "
         f"existing folder of {'/'.join(MESH_SUFFIXES)} meshes"
     )
 

@@ -63,8 +63,8 @@ def _integer(name: str, value: Any, low: int, meaning: str) -> None:
 
 
 def observation_space(workspace: Workspace = Workspace()) -> spaces.Dict:
-    """The observation space of every MPG env (see the Environments page of the documentation): colour, depth and mask heightmaps
-    and the occlusion flag."""
+    """The observation space of every MPG env (see the Environments page of the documentation):
+    colour, depth and mask heightmaps and the occlusion flag."""
     size = workspace.shape
     return spaces.Dict(
         {

@@ -39,7 +39,9 @@ class SimCheckpoint:
 
     def __init__(self, sim: EpisodeSim):
         self.sim = sim
-        self.world = WorldCheckpoint(sim._built())
+        if sim.world is None:
+            raise RuntimeError("no world yet: reset the env (or build a world) first")
+        self.world = WorldCheckpoint(sim.world)
         self.random_state = None if sim.random is None else sim.random.bit_generator.state
 
     def restore(self) -> None:
