@@ -118,8 +118,8 @@ def test_window_episode_success_counts_each_finished_episode_once_at_its_end(tmp
     rows = [(1, 0, 0), (2, 0, 1), (3, 1, 0), (4, 2, 0), (5, 2, 0), (6, 2, 1), (7, 3, 0)]
     path = tmp_path / "run" / "Stage5" / "progress.csv"
     path.parent.mkdir(parents=True)
-    path.write_text("iteration,episode,primitive,target_grasped,is_success\n"
-                    + "".join(f"{i},{e},grasp,{s},{s}\n" for i, e, s in rows))
+    path.write_text("iteration,episode,primitive,loss,epsilon,target_grasped,num_motions,is_success\n"
+                    + "".join(f"{i},{e},grasp,0.1,0.5,{s},1,{s}\n" for i, e, s in rows))
     data = read_progress(path)
     x, y = window_episode_success(data, 3)
     assert x.tolist() == [3, 6] and y.tolist() == [0.5, 1.0]

@@ -260,7 +260,7 @@ def test_checkpoint_of_another_architecture_is_refused(tmp_path, capsys):
     garbage = tmp_path / "garbage.safetensors"
     garbage.write_bytes(b"not a checkpoint")
     assert eval_main(["--policy", str(garbage), "--env", "MPG-Stage2-v0", "--episodes", "1"]) == 2
-    assert "not an MPGNet" in capsys.readouterr().err
+    assert "is not a safetensors file" in capsys.readouterr().err
     assert eval_main(["--policy", "oracle", "--env", "Nope-v0"]) == 2
 
 
