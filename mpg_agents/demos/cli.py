@@ -46,9 +46,7 @@ def _parser() -> argparse.ArgumentParser:
         default=0,
         help="episode i is reset with seed + i (held-out test seeds: 500000 on; tuning: 700000 on)",
     )
-    parser.add_argument(
-        "--out", required=True, help="a new or empty folder for the dataset (Minari's data/ inside)"
-    )
+    parser.add_argument("--out", required=True, help="a new or empty folder for the dataset (Minari's data/ inside)")
     parser.add_argument("--num-objects", type=int, help="objects per scene (default: the env's)")
     parser.add_argument(
         "--env-option",
@@ -66,16 +64,13 @@ def _parser() -> argparse.ArgumentParser:
         "--format",
         choices=("parquet", "hdf5", "arrow"),
         default="parquet",
-        help="Minari's storage: parquet (compressed, lossless; default), hdf5 (needs h5py) "
-        "or arrow (neither compressed)",
+        help="Minari's storage: parquet (compressed, lossless; default), hdf5 (needs h5py) or arrow (neither compressed)",
     )
     parser.add_argument(
         "--dataset-id",
         help="the Minari id, (namespace/)name-vN (default: the --out folder's name, -v0 added)",
     )
-    parser.add_argument(
-        "--device", choices=("auto", "cpu", "cuda"), help="network policies: where the network runs"
-    )
+    parser.add_argument("--device", choices=("auto", "cpu", "cuda"), help="network policies: where the network runs")
     parser.add_argument("--quiet", action="store_true", help="no line per episode")
     return parser
 
@@ -96,9 +91,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.policy not in BUILTIN:
             check_checkpoint(args.policy)
         check_new_folder(args.out)
-        check_dataset_id(
-            args.dataset_id if args.dataset_id is not None else default_dataset_id(args.out)
-        )
+        check_dataset_id(args.dataset_id if args.dataset_id is not None else default_dataset_id(args.out))
         env_kwargs = parse_env_options(args.env_option)
         if args.num_objects is not None:
             env_kwargs["num_objects"] = args.num_objects

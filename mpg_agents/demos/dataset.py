@@ -7,7 +7,9 @@ turned off), each episode's reset seed and options, the env's spec (so
 ``dataset.recover_environment()`` makes the same env: the MPG ids are registered with their
 entry point), the infos as fixed columns (:mod:`mpg_agents.demos.step_info`) and per episode the
 policy's name, success, end reason and motions. The dataset's own metadata carries, under
-``"mpg"``, the env id and keywords, the policy, the seeds, the package and MuJoCo versions.
+``"mpg"``, the env id and keywords, the policy, the seeds, the package and MuJoCo versions, and
+the action space's primitives in order (``mpg_envs.grid.actions.decode_action(primitives, a)``
+turns a flat action into ``(primitive, rotation, row, col)`` without making the env).
 
 :func:`load_demos` opens ``DIR`` as a ``minari.MinariDataset``; with
 ``MINARI_DATASETS_PATH=ROOT`` and ``DIR = ROOT/<dataset id>``, ``minari.load_dataset(id)`` finds
@@ -63,9 +65,7 @@ def _minari() -> Any:
     try:
         import minari  # noqa: PLC0415  (optional extra: the demos)
     except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ImportError(
-            'recording or reading demonstrations needs Minari: pip install "mpg-grasp[demos]"'
-        ) from exc
+        raise ImportError('recording or reading demonstrations needs Minari: pip install "mpg-grasp[demos]"') from exc
     return minari
 
 
@@ -100,9 +100,7 @@ def check_new_folder(path: str | Path) -> Path:
         held = "a dataset" if (path / DATA / "metadata.json").is_file() else "files"
         raise ValueError(f"--out {str(path)!r} already holds {held}; give a new or empty folder")
     if not path.parent.is_dir():
-        raise ValueError(
-            f"--out {str(path)!r}: its parent folder {str(path.parent)!r} does not exist"
-        )
+        raise ValueError(f"--out {str(path)!r}: its parent folder {str(path.parent)!r} does not exist")
     return path
 
 
@@ -135,16 +133,12 @@ class DemoWriter:
         if data_format not in FORMATS:
             raise ValueError(f"data format {data_format!r} is not one of {FORMATS}")
         self.folder = check_new_folder(folder)
-        self.dataset_id = check_dataset_id(
-            default_dataset_id(self.folder) if dataset_id is None else dataset_id
-        )
+        self.dataset_id = check_dataset_id(default_dataset_id(self.folder) if dataset_id is None else dataset_id)
         minari = _minari()
         from minari.dataset.minari_storage import MinariStorage  # noqa: PLC0415  (optional extra)
 
         if env.spec is None:
-            raise ValueError(
-                "the env has no spec (it was not made by gym.make): a dataset could not recover it"
-            )
+            raise ValueError("the env has no spec (it was not made by gym.make): a dataset could not recover it")
         self.folder.mkdir(exist_ok=True)
         self.storage = MinariStorage.new(
             self.folder / DATA,
@@ -172,6 +166,7 @@ class DemoWriter:
                     "episodes": job.episodes,
                     "reset_options": _json_ready(job.options()),
                     "info_fields": list(FIELD_NAMES),
+                    "action_primitives": list(mpg_envs.env_primitives(env)),
                     "package_version": str(mpg_envs.__version__),
                     "mujoco": running_mujoco(),
                 },
@@ -186,9 +181,7 @@ class DemoWriter:
             ValueError: an episode out of order.
         """
         if episode.index != self.episodes:
-            raise ValueError(
-                f"episodes are written in order: expected episode {self.episodes}, got {episode.index}"
-            )
+            raise ValueError(f"episodes are written in order: expected episode {self.episodes}, got {episode.index}")
         from minari.data_collector.episode_buffer import EpisodeBuffer  # noqa: PLC0415  (optional extra)
 
         buffer = EpisodeBuffer(
@@ -258,11 +251,7 @@ def _digest_value(h: Any, value: Any) -> None:
         return
     array = np.asarray(value)
     if array.dtype.kind in "OSU":  # text (HDF5 gives bytes, Arrow str): as str
-        h.update(
-            json.dumps(
-                [v.decode() if isinstance(v, bytes) else str(v) for v in array.reshape(-1).tolist()]
-            ).encode()
-        )
+        h.update(json.dumps([v.decode() if isinstance(v, bytes) else str(v) for v in array.reshape(-1).tolist()]).encode())
     else:
         h.update(f"{array.dtype.str}{array.shape}".encode())
         h.update(np.ascontiguousarray(array).tobytes())
@@ -278,9 +267,7 @@ def dataset_digest(folder: str | Path) -> str:
     raw = json.loads((storage.data_path / "metadata.json").read_text())
     h.update(json.dumps({k: raw.get(k) for k in DIGESTED_METADATA}, sort_keys=True).encode())
     indices = range(storage.total_episodes)
-    for metadata, episode in zip(
-        storage.get_episode_metadata(indices), storage.get_episodes(indices)
-    ):
+    for metadata, episode in zip(storage.get_episode_metadata(indices), storage.get_episodes(indices)):
         h.update(json.dumps(_json_ready(dict(metadata)), sort_keys=True, default=str).encode())
         _digest_value(h, {k: v for k, v in episode.items() if k != "id"})
     return h.hexdigest()
@@ -298,9 +285,7 @@ class Replay:
     @property
     def matches(self) -> bool:
         """Same rewards and observations."""
-        return self.observations_equal and np.array_equal(
-            self.recorded_rewards, self.replayed_rewards
-        )
+        return self.observations_equal and np.array_equal(self.recorded_rewards, self.replayed_rewards)
 
 
 def _equal(a: Any, b: Any) -> bool:

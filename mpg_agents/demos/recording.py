@@ -46,11 +46,7 @@ class DemoJob:
     reset_options: tuple[tuple[str, Any], ...] | None = None
 
     def __post_init__(self) -> None:
-        if (
-            isinstance(self.episodes, bool)
-            or not isinstance(self.episodes, int)
-            or self.episodes < 1
-        ):
+        if isinstance(self.episodes, bool) or not isinstance(self.episodes, int) or self.episodes < 1:
             raise ValueError(f"episodes must be a positive integer, got {self.episodes!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
@@ -134,9 +130,7 @@ def _stack(values: Sequence[Any]) -> dict[str, np.ndarray] | np.ndarray:
     return np.stack([np.asarray(v) for v in values])
 
 
-def record_episode(
-    policy: Any, env: gym.Env, index: int, seed: int, options: dict[str, Any] | None = None
-) -> RecordedEpisode:
+def record_episode(policy: Any, env: gym.Env, index: int, seed: int, options: dict[str, Any] | None = None) -> RecordedEpisode:
     """Run episode ``index`` (reset seed ``seed + index``, reset ``options``) to its end and keep it."""
     start = time.perf_counter()
     episode_seed = seed + index
@@ -190,9 +184,7 @@ def _record_in_worker(index: int) -> RecordedEpisode:
     return record_episode(policy, env, index, job.seed, job.options())
 
 
-def record_episodes(
-    job: DemoJob, workers: int = 1, env: gym.Env | None = None
-) -> Iterator[RecordedEpisode]:
+def record_episodes(job: DemoJob, workers: int = 1, env: gym.Env | None = None) -> Iterator[RecordedEpisode]:
     """Every episode of ``job``, in index order; ``workers`` > 1 runs them on that many worker
     processes (one compute thread each), a record coming back as soon as it and every one
     before it are done. An episode that raises ends the iteration with its exception.

@@ -81,26 +81,16 @@ def _scalar(field: InfoField, value: Any, row: int) -> Any:
     """``value`` as ``field``'s Python type; a clear error for one of another type."""
     if field.kind == "str":
         if not isinstance(value, str):
-            raise ValueError(
-                f"info[{field.name!r}] of step {row} must be a string or None, got {value!r}"
-            )
+            raise ValueError(f"info[{field.name!r}] of step {row} must be a string or None, got {value!r}")
         return value
     if field.kind == "bool":
         if not isinstance(value, (bool, np.bool_)):
-            raise ValueError(
-                f"info[{field.name!r}] of step {row} must be a bool or None, got {value!r}"
-            )
+            raise ValueError(f"info[{field.name!r}] of step {row} must be a bool or None, got {value!r}")
         return bool(value)
-    if isinstance(value, (bool, np.bool_)) or not isinstance(
-        value, (int, float, np.integer, np.floating)
-    ):
-        raise ValueError(
-            f"info[{field.name!r}] of step {row} must be a number or None, got {value!r}"
-        )
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"info[{field.name!r}] of step {row} must be a number or None, got {value!r}")
     if field.kind == "int" and float(value) != int(value):
-        raise ValueError(
-            f"info[{field.name!r}] of step {row} must be a whole number, got {value!r}"
-        )
+        raise ValueError(f"info[{field.name!r}] of step {row} must be a whole number, got {value!r}")
     return _CASTS[field.kind](value)
 
 
@@ -112,9 +102,7 @@ def _cell(field: InfoField, info: Mapping[str, Any], row: int) -> Any:
         return [field.missing] * field.size
     values = list(np.asarray(value).reshape(-1)) if isinstance(value, np.ndarray) else list(value)
     if len(values) != field.size:
-        raise ValueError(
-            f"info[{field.name!r}] of step {row} must hold {field.size} numbers, got {value!r}"
-        )
+        raise ValueError(f"info[{field.name!r}] of step {row} must hold {field.size} numbers, got {value!r}")
     return [_scalar(field, v, row) for v in values]
 
 
@@ -162,9 +150,7 @@ def encode_infos(infos: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         if field.size is None:
             columns[field.name] = cells
         else:
-            columns[field.name] = np.asarray(
-                cells, dtype=np.int64 if field.kind == "int" else np.float64
-            )
+            columns[field.name] = np.asarray(cells, dtype=np.int64 if field.kind == "int" else np.float64)
     columns[OTHER] = [other_entries(info) for info in infos]
     return columns
 
@@ -179,9 +165,7 @@ def decode_infos(columns: Mapping[str, Any]) -> list[dict[str, Any]]:
     """
     missing = [name for name in FIELD_NAMES if name not in columns]
     if missing:
-        raise ValueError(
-            f"the infos lack the columns {missing}; a recorded dataset has {list(FIELD_NAMES)}"
-        )
+        raise ValueError(f"the infos lack the columns {missing}; a recorded dataset has {list(FIELD_NAMES)}")
     lengths = {name: len(columns[name]) for name in FIELD_NAMES}
     if len(set(lengths.values())) != 1:
         raise ValueError(f"the info columns differ in length: {lengths}")

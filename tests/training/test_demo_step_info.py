@@ -56,9 +56,7 @@ def test_columns_hold_every_field_with_missing_values_filled():
     assert columns["position"][1].tolist() == [0.5, -0.1, 0.02]
     assert columns["grasp_failure"] == ["", ""]  # None: no failure
     assert columns["wrong_grasp"] == [False, True] and columns["lifted"] == [False, True]
-    assert columns["visible_fraction"][0] == 0.25 and math.isnan(
-        columns["visible_fraction"][1]
-    )  # None -> NaN
+    assert columns["visible_fraction"][0] == 0.25 and math.isnan(columns["visible_fraction"][1])  # None -> NaN
     assert columns["objects_left"] == [15, 14]
     assert columns["target"] == [3, -1]  # reported at the reset only
     assert columns["end_reason"] == ["", ""]
@@ -69,11 +67,7 @@ def test_columns_hold_every_field_with_missing_values_filled():
 
 def test_decoding_gives_the_steps_back():
     rows = decode_infos(encode_infos([RESET, STEP]))
-    assert (
-        rows[0]["primitive"] is None
-        and rows[0]["target"] == 3
-        and rows[0]["visible_fraction"] == 0.25
-    )
+    assert rows[0]["primitive"] is None and rows[0]["target"] == 3 and rows[0]["visible_fraction"] == 0.25
     assert rows[0]["pixel"] is None and rows[0]["position"] is None
     step = rows[1]
     for key, value in STEP.items():
@@ -87,15 +81,9 @@ def test_decoding_gives_the_steps_back():
 
 
 def test_decoding_reads_text_as_bytes_as_hdf5_returns_it():
-    columns = encode_infos(
-        [RESET, dict(STEP, end_reason="wrong_object", grasp_failure="not_lifted")]
-    )
+    columns = encode_infos([RESET, dict(STEP, end_reason="wrong_object", grasp_failure="not_lifted")])
     as_hdf5 = {
-        k: (
-            np.array([s.encode() for s in v], dtype=object)
-            if isinstance(v, list) and isinstance(v[0], str)
-            else v
-        )
+        k: (np.array([s.encode() for s in v], dtype=object) if isinstance(v, list) and isinstance(v[0], str) else v)
         for k, v in columns.items()
     }
     rows = decode_infos(as_hdf5)

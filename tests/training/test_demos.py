@@ -22,6 +22,7 @@ from mpg_agents.demos.dataset import (  # noqa: E402
     replay_episode,
 )
 from mpg_agents.demos.step_info import FIELD_NAMES, decode_infos  # noqa: E402
+from mpg_envs.grid.actions import decode_action  # noqa: E402
 
 COMMAND = [
     "--policy",
@@ -53,10 +54,7 @@ def test_a_recorded_dataset_loads_offline_and_replays_to_the_same_rewards(record
     seeds = [m["seed"] for m in dataset.storage.get_episode_metadata(range(2))]
     assert seeds == [5, 6]
     episode = dataset[0]
-    assert (
-        episode.observations["color"].dtype == np.uint8
-        and episode.observations["depth"].dtype == np.float32
-    )
+    assert episode.observations["color"].dtype == np.uint8 and episode.observations["depth"].dtype == np.float32
     assert len(episode.observations["depth"]) == len(episode.actions) + 1
     # The per-step info the metrics read, one column per field, row 0 the reset's.
     assert set(episode.infos) == set(FIELD_NAMES)
@@ -72,12 +70,10 @@ def test_a_recorded_dataset_loads_offline_and_replays_to_the_same_rewards(record
     )
     assert replay.recorded_rewards.tolist() == [1.0] * len(replay.recorded_rewards)
     mpg = dataset.storage.metadata["mpg"]
-    assert (mpg["env_id"], mpg["policy"], mpg["seed"], mpg["env_kwargs"]) == (
-        "MPG-Stage2-v0",
-        "oracle",
-        5,
-        {"num_objects": 2},
-    )
+    assert (mpg["env_id"], mpg["policy"], mpg["seed"], mpg["env_kwargs"]) == ("MPG-Stage2-v0", "oracle", 5, {"num_objects": 2})
+    # A flat action decodes without the simulator, to the rotation and pixel the info recorded.
+    first = decode_action(mpg["action_primitives"], int(episode.actions[0]))
+    assert (first.primitive, first.rotation, (first.row, first.col)) == ("grasp", steps[1]["rotation"], steps[1]["pixel"])
 
 
 def test_the_same_command_gives_the_same_data_on_two_workers(recorded, tmp_path):
