@@ -7,8 +7,9 @@ import importlib.util
 import json
 import sys
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import gymnasium as gym
 
@@ -21,8 +22,17 @@ from mpg_envs.threads import requested_threads
 # settings) or the simulation (an env's keywords) import them inside, when they run (noqa: PLC0415).
 
 __all__ = [
-    "UsageError", "check_checkpoint", "check_env_id", "check_env_options", "check_net_setting", "check_output",
-    "check_q_star_flag", "check_seed_flag", "check_thread_setting", "fail", "read_config",
+    "UsageError",
+    "check_checkpoint",
+    "check_env_id",
+    "check_env_options",
+    "check_net_setting",
+    "check_output",
+    "check_q_star_flag",
+    "check_seed_flag",
+    "check_thread_setting",
+    "fail",
+    "read_config",
 ]
 
 
@@ -50,7 +60,7 @@ def read_config(path: str | None) -> dict[str, Any]:
     if not isinstance(settings, dict):
         raise UsageError(
             f"config file {path!r} holds a {type(settings).__name__}; valid: a JSON object (or TOML table) of "
-            f"settings by name, e.g. {{\"steps\": 1000, \"stages\": {{\"Stage2\": {{...}}}}}}"
+            f'settings by name, e.g. {{"steps": 1000, "stages": {{"Stage2": {{...}}}}}}'
         )
     return settings
 

@@ -135,7 +135,9 @@ def check_arguments(args: argparse.Namespace) -> str:
     check_env_id(args.env)
     if args.policy not in BUILTIN:
         if not Path(args.policy).exists():
-            raise UsageError(f"unknown policy {args.policy!r}; valid: {', '.join(BUILTIN)} or the path of a .safetensors checkpoint")
+            raise UsageError(
+                f"unknown policy {args.policy!r}; valid: {', '.join(BUILTIN)} or the path of a .safetensors checkpoint"
+            )
         check_checkpoint(args.policy)
     device = resolve_device(args.device)
     if Path(args.out).exists() and not Path(args.out).is_dir():
@@ -149,14 +151,31 @@ def check_arguments(args: argparse.Namespace) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="MPG demo: a policy on a few seeded scenes.")
-    parser.add_argument("--policy", default="shipped", help="shipped (the trained checkpoint), oracle, random, grasp-only or a checkpoint path")
-    parser.add_argument("--env", default=DEMO_ENV, help=f"a registered env id (default: {DEMO_ENV}, the hard track, " "15 objects; MPG-Occluded-v0: the paper's test scenes)")
+    parser.add_argument(
+        "--policy", default="shipped", help="shipped (the trained checkpoint), oracle, random, grasp-only or a checkpoint path"
+    )
+    parser.add_argument(
+        "--env",
+        default=DEMO_ENV,
+        help=f"a registered env id (default: {DEMO_ENV}, the hard track, "
+        "15 objects; MPG-Occluded-v0: the paper's test scenes)",
+    )
     parser.add_argument("--episodes", type=int, default=3, help="episodes to run (default 3)")
     # A held-out test seed (the shipped net trained on its own seeds), so the demo shows a
     # scene it never trained on.
-    parser.add_argument("--seed", type=int, default=DEMO_SEED, help=f"episode i is reset with seed + i (default {DEMO_SEED}, a held-out test seed)")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=DEMO_SEED,
+        help=f"episode i is reset with seed + i (default {DEMO_SEED}, a held-out test seed)",
+    )
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps_<k>.png (default demo_out)")
-    parser.add_argument("--device", choices=DEVICES, default="auto", help="a network policy's device: auto (default: CUDA when available), cpu or cuda")
+    parser.add_argument(
+        "--device",
+        choices=DEVICES,
+        default="auto",
+        help="a network policy's device: auto (default: CUDA when available), cpu or cuda",
+    )
     args = parser.parse_args(argv)
     try:
         device = check_arguments(args)
@@ -175,7 +194,10 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # a checkpoint of another architecture or action space
         env.close()
         return fail(exc)
-    print(f"policy {policy.name} on {args.env}, {args.episodes} episodes " f"from seed {args.seed}, {threads} torch threads, {device}")
+    print(
+        f"policy {policy.name} on {args.env}, {args.episodes} episodes "
+        f"from seed {args.seed}, {threads} torch threads, {device}"
+    )
 
     def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
         if episode == 0:
@@ -194,7 +216,9 @@ def main(argv: list[str] | None = None) -> int:
     except WriteFailed as exc:  # a picture the disk refused: no "pictures in" over a folder without them
         env.close()
         return fail(exc)
-    grasps = "n/a" if result.grasp_success_rate is None else f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
+    grasps = (
+        "n/a" if result.grasp_success_rate is None else f"{100 * result.grasp_success_rate:.0f}% of {result.grasp_attempts}"
+    )
     print(
         f"task success {round(result.task_success_rate * args.episodes)}/{args.episodes} "
         f"({100 * result.task_success_rate:.0f}%), mean motions {result.average_motions:.2f}, "

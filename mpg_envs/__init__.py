@@ -22,10 +22,10 @@ from typing import Any
 import gymnasium as gym
 
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, PixelActionSpace, decode_action, encode_action
-from mpg_envs.tasks.stages import STAGES, StageSpec
-from mpg_envs.tasks.tracks import TRACKS
 from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace
 from mpg_envs.integrations.wrappers import ContinuousAction, GridAction, ImageObservation
+from mpg_envs.tasks.stages import STAGES, StageSpec
+from mpg_envs.tasks.tracks import TRACKS
 
 ENV_IDS: tuple[str, ...] = tuple(spec.env_id for spec in STAGES.values())
 
@@ -48,7 +48,9 @@ def _register() -> None:
     for track in TRACKS.values():  # a stage with fixed keywords (mpg_envs.tasks.tracks)
         if track.env_id not in gym.registry:
             kwargs = {"stage": track.stage, **track.options}
-            gym.register(id=track.env_id, entry_point="mpg_envs.tasks.env:MPGEnv", kwargs=kwargs, max_episode_steps=track.max_motions)
+            gym.register(
+                id=track.env_id, entry_point="mpg_envs.tasks.env:MPGEnv", kwargs=kwargs, max_episode_steps=track.max_motions
+            )
 
 
 def make(env_id: str, **kwargs) -> gym.Env:

@@ -52,12 +52,7 @@ class WriteFailed(OSError):
 def _reason(exc: BaseException, folder: Path | None = None) -> str:
     """The system's reason of an ``OSError`` (``"No space left on device"``), else its text; a
     ``folder`` that exists yet has no room for a new file (``/proc``) is said so."""
-    if (
-        isinstance(exc, OSError)
-        and exc.errno == errno.ENOENT
-        and folder is not None
-        and folder.is_dir()
-    ):
+    if isinstance(exc, OSError) and exc.errno == errno.ENOENT and folder is not None and folder.is_dir():
         return f"the folder {str(folder)!r} takes no new files"
     if isinstance(exc, OSError) and exc.strerror:
         return exc.strerror
@@ -91,13 +86,7 @@ def _refuse_non_regular(target: Path, path: str | os.PathLike[str]) -> None:
     if stat.S_ISDIR(mode):
         raise WriteFailed(path, "it is a folder; give a file path")
     if not stat.S_ISREG(mode):
-        kind = (
-            "a character device"
-            if stat.S_ISCHR(mode)
-            else "a block device"
-            if stat.S_ISBLK(mode)
-            else "not a regular file"
-        )
+        kind = "a character device" if stat.S_ISCHR(mode) else "a block device" if stat.S_ISBLK(mode) else "not a regular file"
         raise WriteFailed(path, f"it is {kind}; give the path of a regular file")
 
 
@@ -119,9 +108,7 @@ def written_whole(path: str | os.PathLike[str]) -> Iterator[Path]:
         " (the old file is kept)" if target.exists() else " (nothing written)",
     )
     try:
-        fd, name = tempfile.mkstemp(
-            prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
-        )
+        fd, name = tempfile.mkstemp(prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent)
     except OSError as exc:
         raise WriteFailed(path, _reason(exc, target.parent)) from None
     os.close(fd)
@@ -172,9 +159,7 @@ def check_writable(path: str | os.PathLike[str]) -> None:
     target = _target(path)
     _refuse_non_regular(target, path)
     if not target.parent.is_dir():
-        raise WriteFailed(
-            path, f"the folder {str(Path(path).parent)!r} does not exist; create it first"
-        )
+        raise WriteFailed(path, f"the folder {str(Path(path).parent)!r} does not exist; create it first")
     if target.exists() and not os.access(target, os.W_OK):
         raise WriteFailed(path, "permission denied")
     try:

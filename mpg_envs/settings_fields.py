@@ -3,8 +3,9 @@ dict): the one check that every key names a field, shared by the env's and the a
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import fields
-from typing import Any, Mapping
+from typing import Any
 
 
 def check_known_fields(cls: type, data: Mapping[str, Any], what: str) -> None:

@@ -37,13 +37,18 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-from typing import Iterator, Mapping
 
 THREADS_ENV = "MPG_NUM_THREADS"
 """Environment variable that fixes the thread count (a positive integer)."""
 
-WORKER_THREAD_ENV: dict[str, str] = {"OMP_NUM_THREADS": "1", "MPG_NUM_THREADS": "1", "OMP_WAIT_POLICY": "PASSIVE", "MKL_NUM_THREADS": "1"}
+WORKER_THREAD_ENV: dict[str, str] = {
+    "OMP_NUM_THREADS": "1",
+    "MPG_NUM_THREADS": "1",
+    "OMP_WAIT_POLICY": "PASSIVE",
+    "MKL_NUM_THREADS": "1",
+}
 """What a worker process needs before it imports torch to compute on one passive thread (what
 :func:`worker_init` sets once it runs); :func:`one_thread_children` puts it in place while
 workers start, so they inherit it."""

@@ -37,7 +37,7 @@ def test_the_tools_and_their_settings_are_the_projects():
     dev = project["project"]["optional-dependencies"]["dev"]
     assert any(d.startswith("ruff>=") for d in dev) and any(d.startswith("mypy>=") for d in dev)
     ruff, mypy = project["tool"]["ruff"], project["tool"]["mypy"]
-    assert ruff["line-length"] == 100
+    assert ruff["line-length"] == 127
     assert {"E", "F", "W", "I", "B", "UP", "PLC0415"} <= set(ruff["lint"]["select"])
     assert mypy["files"] == ["mpg_envs", "mpg_agents"] and mypy["check_untyped_defs"] is True
 

@@ -14,8 +14,9 @@ Its parts: :attr:`MPGAgent.q_net` (:class:`~mpg_agents.acting.q_function.MPGQFun
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Mapping, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 import torch
@@ -27,10 +28,10 @@ from mpg_agents.acting.coordination import check_coordination, usable_primitives
 from mpg_agents.acting.decision import Decision, alternatives, decide
 from mpg_agents.acting.discriminator import Discriminator
 from mpg_agents.acting.grasp_threshold import GraspThreshold, from_header
-from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.acting.spaces import resolve_primitives
 from mpg_agents.acting.weights import load_mpgnet_weights, read_checkpoint_header, save_mpgnet
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 
 
 def checkpoint_settings(
@@ -168,7 +169,9 @@ class AgentMethods:
     def save_weights(self, path: str | Path, extra: Mapping[str, Any] | None = None) -> None:
         """Write the network to ``path``: safetensors with a JSON header holding Q*_g, the
         coordination and ``extra``."""
-        save_mpgnet(self.q_net.mpgnet, path, q_star=self.q_star, extra={**dict(extra or {}), "coordination": self.coordination})
+        save_mpgnet(
+            self.q_net.mpgnet, path, q_star=self.q_star, extra={**dict(extra or {}), "coordination": self.coordination}
+        )
 
     def load_weights(self, path: str | Path, strict_branches: bool = True) -> dict[str, Any]:
         """Load a :meth:`save_weights` file; Q*_g is taken from it when it has one. Returns its
@@ -202,7 +205,7 @@ class MPGAgent(AgentMethods):
         self.threshold = threshold if threshold is not None else GraspThreshold()
 
     @classmethod
-    def build(cls, observation_space: spaces.Dict, action_space: spaces.Discrete, **settings: Any) -> "MPGAgent":
+    def build(cls, observation_space: spaces.Dict, action_space: spaces.Discrete, **settings: Any) -> MPGAgent:
         """A fresh agent for an env's spaces.
 
         Args:
@@ -248,7 +251,7 @@ class MPGAgent(AgentMethods):
         """Where the network's tensors are."""
         return next(self.parameters()).device
 
-    def to(self, device: torch.device | str) -> "MPGAgent":
+    def to(self, device: torch.device | str) -> MPGAgent:
         """Move the network (and Q*_g's buffer) to ``device``; returns the agent."""
         self.q_net.to(device)
         self.threshold.to(device)

@@ -6,8 +6,9 @@ these keywords and resolve them against an env's spaces here (:meth:`AgentSettin
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields, replace
-from typing import Any, Mapping, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 from gymnasium import spaces
 
@@ -88,7 +89,9 @@ class AgentSettings:
             ValueError: the spaces are not MPG's, or a setting is unknown.
         """
         action_primitives = resolve_primitives(action_space, self.primitives)
-        cfg = agent_net_config(self.variant, self.net_config, self.branches if self.branches is not None else action_primitives)
+        cfg = agent_net_config(
+            self.variant, self.net_config, self.branches if self.branches is not None else action_primitives
+        )
         check_observation_space(observation_space, cfg.heightmap_size)
         check_action_space(action_space, action_primitives, cfg)  # type: ignore[arg-type]
         geometry = self.geometry
@@ -96,7 +99,7 @@ class AgentSettings:
             geometry = finger_geometry()
         return ResolvedSettings(action_primitives, cfg, geometry)
 
-    def replace(self, **changes: Any) -> "AgentSettings":
+    def replace(self, **changes: Any) -> AgentSettings:
         """A copy with ``changes``."""
         return replace(self, **changes)
 

@@ -33,7 +33,7 @@ decides between push and grasp by its own rule, without move.
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from mpg_envs.grid.actions import check_primitives
 

@@ -8,14 +8,15 @@ are computed. Then the best action of that primitive's Q maps is taken where it 
 
 from __future__ import annotations
 
-from typing import Mapping, NamedTuple
+from collections.abc import Mapping
+from typing import NamedTuple
 
 import torch
 from torch import Tensor
 
 from mpg_agents.acting.coordination import choose_primitive
-from mpg_agents.network.mpgnet import EncodedObs, MPGNet
 from mpg_agents.acting.q_function import MPGQFunction, mask_outside
+from mpg_agents.network.mpgnet import EncodedObs, MPGNet
 from mpg_agents.network.regions import region_max
 from mpg_envs.grid.actions import encode_action
 

@@ -33,5 +33,7 @@ def resolve_device(name: str | torch.device) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if kind == "cuda" and not torch.cuda.is_available():
-        raise ValueError(f"device {name!r} asked for, but this machine has no CUDA device (PyTorch sees none); use cpu or auto")
+        raise ValueError(
+            f"device {name!r} asked for, but this machine has no CUDA device (PyTorch sees none); use cpu or auto"
+        )
     return torch.device(name)

@@ -6,14 +6,15 @@ Stage II grasp net, frozen).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import torch
 
+from mpg_agents.acting.weights import load_mpgnet
 from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
-from mpg_agents.acting.weights import load_mpgnet
 
 
 class Discriminator:
@@ -30,7 +31,7 @@ class Discriminator:
     @classmethod
     def from_weights(
         cls, path: str | Path, geometry: FingerGeometry | None = None, device: torch.device | str = "cpu"
-    ) -> "Discriminator":
+    ) -> Discriminator:
         """A discriminator from a saved MPGNet (e.g. the Stage II grasp net) on ``device``;
         ``geometry``: the grasp geometry of the envs it scores for (default: the default env's)."""
         net, _ = load_mpgnet(path, primitives=("grasp",), geometry=geometry)

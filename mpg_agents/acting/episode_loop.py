@@ -12,8 +12,9 @@ each resets its env its own way (seeds, options) and reads what it needs from th
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Generic, Iterator, Mapping, TypeVar
+from typing import Any, Generic, TypeVar
 
 import gymnasium as gym
 
@@ -65,8 +66,16 @@ def episode_steps(
         action = action_of(choice)
         next_obs, reward, terminated, truncated, info = env.step(action)
         step = Step(
-            obs, choice, action, next_obs, float(reward), bool(terminated), bool(truncated), info,
-            chosen - start, time.perf_counter() - chosen,
+            obs,
+            choice,
+            action,
+            next_obs,
+            float(reward),
+            bool(terminated),
+            bool(truncated),
+            info,
+            chosen - start,
+            time.perf_counter() - chosen,
         )
         yield step
         if step.done:

@@ -30,10 +30,11 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from numbers import Real
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -42,9 +43,9 @@ from torch import nn
 
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+from mpg_envs.files import write_text_whole
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.tasks.stages import STAGES
-from mpg_envs.files import write_text_whole
 
 if TYPE_CHECKING:
     from mpg_agents.acting.agent import MPGAgent
@@ -153,7 +154,9 @@ def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = 0.5) -> f
     if len(target_grasp_q) == 0:
         raise ValueError("Q*_g needs the Q of at least one grasp that took the target")
     q_star = float(np.quantile(target_grasp_q, quantile))
-    check_in_range(q_star, f"the Q*_g estimated from {len(target_grasp_q)} grasps that took the target (a diverged grasp net?)")
+    check_in_range(
+        q_star, f"the Q*_g estimated from {len(target_grasp_q)} grasps that took the target (a diverged grasp net?)"
+    )
     return q_star
 
 
@@ -177,7 +180,11 @@ class Calibration:
 
 
 def calibrate_q_star(
-    agent: "MPGAgent", env: gym.Env, episodes: int, seed: int, quantile: float = 0.5,
+    agent: MPGAgent,
+    env: gym.Env,
+    episodes: int,
+    seed: int,
+    quantile: float = 0.5,
     on_episode: Callable[[int, int, int], None] | None = None,
     on_skip: Callable[[int, Exception], None] | None = None,
 ) -> Calibration:
@@ -241,7 +248,11 @@ def from_header(header: Mapping[str, Any]) -> float | None:
 
 
 def write_calibration(
-    path: str | Path, calibration: Calibration, iteration: int, q_star_before: float | None, continue_history: bool,
+    path: str | Path,
+    calibration: Calibration,
+    iteration: int,
+    q_star_before: float | None,
+    continue_history: bool,
 ) -> dict[str, Any]:
     """Write ``calibration.json``: the latest measurement whole, and one line per calibration.
 
@@ -256,9 +267,15 @@ def write_calibration(
     c = calibration
     history.append({"iteration": iteration, "q_star": c.q_star, "target_grasps": len(c.target_grasp_q), "grasps": c.grasps})
     record = {
-        "iteration": iteration, "episodes": c.episodes, "grasps": c.grasps, "target_grasps": len(c.target_grasp_q),
-        "quantile": c.quantile, "q_star_before": as_record(q_star_before),
-        "q_star": c.q_star, "target_grasp_q": list(c.target_grasp_q), "history": history,
+        "iteration": iteration,
+        "episodes": c.episodes,
+        "grasps": c.grasps,
+        "target_grasps": len(c.target_grasp_q),
+        "quantile": c.quantile,
+        "q_star_before": as_record(q_star_before),
+        "q_star": c.q_star,
+        "target_grasp_q": list(c.target_grasp_q),
+        "history": history,
     }
     write_text_whole(path, json.dumps(record, indent=1))  # a full disk keeps the old history
     return record

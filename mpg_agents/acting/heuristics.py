@@ -6,7 +6,7 @@ They read the observation alone (target mask and depth heightmap), as a real rob
 from __future__ import annotations
 
 import math
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 import cv2
 import numpy as np

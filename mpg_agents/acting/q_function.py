@@ -14,7 +14,8 @@ allows (a grasp-only checkpoint on ``MPG-Occluded-v0``): it acts with the primit
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import torch
 from gymnasium import spaces
@@ -58,7 +59,9 @@ class MPGQFunction(nn.Module):
         super().__init__()
         self._setup(net_config, action_primitives, geometry)
 
-    def _setup(self, net_config: MPGNetConfig, action_primitives: Sequence[str], geometry: FingerGeometry | None = None) -> None:
+    def _setup(
+        self, net_config: MPGNetConfig, action_primitives: Sequence[str], geometry: FingerGeometry | None = None
+    ) -> None:
         """Build the network (also called by the SB3 adapter, whose ``__init__`` is SB3's)."""
         self.action_primitives: tuple[str, ...] = check_primitives(action_primitives)
         # What a decision may choose: the env's primitives the network has a branch for.

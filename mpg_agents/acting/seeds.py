@@ -10,8 +10,9 @@ seeds (700000-) that evaluations use.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from numbers import Integral
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import gymnasium as gym
@@ -57,7 +58,10 @@ MAX_SKIPPED_SEEDS = 50
 
 
 def reset_first_valid(
-    env: "gym.Env", seed_of: Callable[[int], int], k: int, options: dict[str, Any] | None = None,
+    env: gym.Env,
+    seed_of: Callable[[int], int],
+    k: int,
+    options: dict[str, Any] | None = None,
     on_skip: Callable[[int, Exception], None] | None = None,
 ) -> tuple[dict[str, Any], dict[str, Any], int]:
     """Reset ``env`` with the seed of episode ``k``, or of the next episodes when a seed gives
@@ -79,7 +83,9 @@ def reset_first_valid(
             return obs, info, k + attempt
         except InvalidSceneError as exc:
             if attempt == MAX_SKIPPED_SEEDS:
-                raise InvalidSceneError(f"{MAX_SKIPPED_SEEDS + 1} seeds in a row from episode {k} gave no valid scene: {exc}") from exc
+                raise InvalidSceneError(
+                    f"{MAX_SKIPPED_SEEDS + 1} seeds in a row from episode {k} gave no valid scene: {exc}"
+                ) from exc
             if on_skip is not None:
                 on_skip(k + attempt, exc)
     raise AssertionError("unreachable")

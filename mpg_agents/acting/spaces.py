@@ -4,7 +4,8 @@ the env's grasp geometry (what the finger masks are made with)."""
 from __future__ import annotations
 
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -82,8 +83,6 @@ def check_observation_space(space: spaces.Space, size: int) -> None:
         if key not in space.spaces:
             raise ValueError(f"observation space lacks {key!r}; MPGNet needs keys {sorted(shapes)}")
         if tuple(space.spaces[key].shape or ()) not in allowed:
-            raise ValueError(
-                f"observation space {key!r} has shape {space.spaces[key].shape}; expected one of {allowed}"
-            )
+            raise ValueError(f"observation space {key!r} has shape {space.spaces[key].shape}; expected one of {allowed}")
     if space.spaces["color"].dtype != np.uint8:
         warnings.warn("colour observations are not uint8; MPGNet reads them on the 0..255 scale", stacklevel=3)

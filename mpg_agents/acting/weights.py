@@ -12,8 +12,9 @@ infinite values; ``save_mpgnet`` refuses to write them.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import torch
 from safetensors import safe_open
@@ -81,9 +82,7 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
         with safe_open(str(path), framework="pt") as f:
             meta = f.metadata() or {}
     except Exception as exc:  # noqa: BLE001 - re-raised naming the file
-        raise ValueError(
-            f"{path} is not a safetensors file ({exc}); MPGNet weights are saved with save_weights()"
-        ) from exc
+        raise ValueError(f"{path} is not a safetensors file ({exc}); MPGNet weights are saved with save_weights()") from exc
     if "mpgnet" not in meta:
         raise ValueError(f"{path} has no 'mpgnet' metadata header; it was not written by save_mpgnet/save_weights")
     try:
@@ -97,9 +96,13 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
         )
     for field in ("config", "primitives"):
         if field not in header:
-            raise ValueError(f"{path}: its header has no {field!r} ({HEADER_FIELDS[field]}); " "it was not written by save_mpgnet/save_weights")
+            raise ValueError(
+                f"{path}: its header has no {field!r} ({HEADER_FIELDS[field]}); it was not written by save_mpgnet/save_weights"
+            )
     if not isinstance(header["config"], dict):
-        raise ValueError(f"{path}: its header's 'config' is a {type(header['config']).__name__}; valid: {HEADER_FIELDS['config']}")
+        raise ValueError(
+            f"{path}: its header's 'config' is a {type(header['config']).__name__}; valid: {HEADER_FIELDS['config']}"
+        )
     primitives = header["primitives"]
     if not isinstance(primitives, list) or not all(isinstance(p, str) for p in primitives):
         raise ValueError(f"{path}: its header's 'primitives' is {primitives!r}; valid: {HEADER_FIELDS['primitives']}")
@@ -108,7 +111,9 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
     except ValueError as exc:
         raise ValueError(f"{path}: its header's 'primitives': {exc}") from None
     if not isinstance(header.get("extra", {}), dict):
-        raise ValueError(f"{path}: its header's 'extra' is a {type(header['extra']).__name__}; valid: {HEADER_FIELDS['extra']}")
+        raise ValueError(
+            f"{path}: its header's 'extra' is a {type(header['extra']).__name__}; valid: {HEADER_FIELDS['extra']}"
+        )
     q_star = header.get("q_star")
     if q_star is not None:
         try:
@@ -120,14 +125,24 @@ def read_checkpoint_header(path: str | Path) -> dict[str, Any]:
 
 HEADER_FIELDS: dict[str, str] = {
     "config": "a JSON object of MPGNetConfig fields, the network's settings",
-    "primitives": "a JSON list of the branches it holds, e.g. [\"push\", \"grasp\"]",
+    "primitives": 'a JSON list of the branches it holds, e.g. ["push", "grasp"]',
     "extra": "a JSON object (what training and export recorded), or none",
 }
 """The header fields :func:`read_checkpoint_header` checks beyond the format and Q*_g, and
 what each must be."""
 
-_STORED_TYPES = {"F16": "float16", "BF16": "bfloat16", "F32": "float32", "F64": "float64", "I64": "int64", "I32": "int32",
-                 "I16": "int16", "I8": "int8", "U8": "uint8", "BOOL": "bool"}
+_STORED_TYPES = {
+    "F16": "float16",
+    "BF16": "bfloat16",
+    "F32": "float32",
+    "F64": "float64",
+    "I64": "int64",
+    "I32": "int32",
+    "I16": "int16",
+    "I8": "int8",
+    "U8": "uint8",
+    "BOOL": "bool",
+}
 
 
 def stored_float_type(header: Mapping[str, Any]) -> str:
@@ -151,7 +166,8 @@ def check_tensor_dtypes(path: str | Path, header: Mapping[str, Any] | None = Non
             if stored != expected:
                 why = "its header says float16: an exported copy" if floating == "float16" else "as training writes weights"
                 raise ValueError(
-                    f"checkpoint {path}: tensor {key!r} is stored as " f"{stored}, expected {expected} ({why}); the file was "
+                    f"checkpoint {path}: tensor {key!r} is stored as "
+                    f"{stored}, expected {expected} ({why}); the file was "
                     f"re-saved with other types: use the checkpoint as training or mpg-export wrote it"
                 )
 
@@ -160,8 +176,10 @@ def check_finite(tensors: Mapping[str, Any], what: str) -> None:
     """``ValueError`` naming ``what`` and its floating tensors that hold NaN or infinite values."""
     bad = [k for k, t in tensors.items() if torch.is_floating_point(t) and not bool(torch.isfinite(t).all())]
     if bad:
-        raise ValueError(f"{what} has NaN or infinite values in {len(bad)} tensor(s): {', '.join(bad[:5])}"
-                         f"{' ...' if len(bad) > 5 else ''}; weights must be finite (a diverged training?)")
+        raise ValueError(
+            f"{what} has NaN or infinite values in {len(bad)} tensor(s): {', '.join(bad[:5])}"
+            f"{' ...' if len(bad) > 5 else ''}; weights must be finite (a diverged training?)"
+        )
 
 
 def load_mpgnet_weights(net: MPGNet, path: str | Path, strict_branches: bool = True) -> dict[str, Any]:
@@ -236,7 +254,13 @@ def load_mpgnet(
 
 
 SETTINGS_WITHOUT_WEIGHTS: tuple[str, ...] = (
-    "rough_mask", "grasp_region", "target_margin_px", "move_region", "move_band_m", "grasp_fingers", "move_fingers",
+    "rough_mask",
+    "grasp_region",
+    "target_margin_px",
+    "move_region",
+    "move_band_m",
+    "grasp_fingers",
+    "move_fingers",
     "finger_tolerance_m",
 )
 """Network settings that change where Q counts, not any weight: an exported checkpoint may
@@ -245,8 +269,13 @@ change them (:func:`export_weights`). The execution fields (``channels_last``,
 
 
 def export_weights(
-    src: str | Path, dst: str | Path, primitives: tuple[str, ...] | None = None, half: bool = True,
-    settings: Mapping[str, Any] | None = None, coordination: str | None = None, q_star: float | None = None,
+    src: str | Path,
+    dst: str | Path,
+    primitives: tuple[str, ...] | None = None,
+    half: bool = True,
+    settings: Mapping[str, Any] | None = None,
+    coordination: str | None = None,
+    q_star: float | None = None,
     grasp_retries: int | None = None,
 ) -> Path:
     """A lean copy of an MPGNet checkpoint for shipping: only ``primitives``' branches (and
@@ -263,14 +292,18 @@ def export_weights(
     once after that many grasps in a row that did not take the target; 0: never), the default of
     :class:`~mpg_agents.evaluation.policy_zoo.NetworkPolicy`.
     """
-    if grasp_retries is not None and (isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0):
+    if grasp_retries is not None and (
+        isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0
+    ):
         raise ValueError(f"grasp_retries must be a non-negative integer (0: never push instead), got {grasp_retries!r}")
     if same_file(dst, src):
         raise ValueError(f"the copy {str(dst)!r} is the source checkpoint {str(src)!r}; write it to another file")
     settings = dict(settings or {})
     weighty = sorted(set(settings) - set(SETTINGS_WITHOUT_WEIGHTS))
     if weighty:
-        raise ValueError(f"settings {weighty} change the architecture or its weights; only {SETTINGS_WITHOUT_WEIGHTS} may change")
+        raise ValueError(
+            f"settings {weighty} change the architecture or its weights; only {SETTINGS_WITHOUT_WEIGHTS} may change"
+        )
     net, header = load_mpgnet(src, primitives=primitives)
     if settings:
         net.config = MPGNetConfig.from_checkpoint(net.config.to_dict(), **settings)

@@ -23,15 +23,16 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import gymnasium as gym
 
 from mpg_agents.evaluation.evaluate import EpisodeRecord, env_id_of, run_episode
-from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, describe_failures, failures_line
+from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_envs._version import __version__
 from mpg_envs.scenes.cases import Case, CaseSet, jitter_scene
 from mpg_envs.scenes.scene_io import SCENE_FORMAT, SceneFile, SceneFileError
@@ -89,7 +90,11 @@ class CaseRow:
     def cells(self) -> list[str]:
         """The row's table cells: case, visible fraction, successes, mean motions, mis-picks per
         run, grasp success."""
-        gsr = "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.0f}% ({self.target_grasps}/{self.grasp_attempts})"
+        gsr = (
+            "n/a"
+            if self.grasp_success_rate is None
+            else f"{100 * self.grasp_success_rate:.0f}% ({self.target_grasps}/{self.grasp_attempts})"
+        )
         visible = "n/a" if self.visible_fraction is None else f"{self.visible_fraction:.2f}"
         return [self.case, visible, f"{self.successes}/{self.runs}", f"{self.mean_motions:.2f}", f"{self.mis_picks:.2f}", gsr]
 
@@ -227,8 +232,10 @@ def check_case_set(case_set: CaseSet, env: gym.Env) -> list[SceneFile]:
             continue
         scenes.append(scene)
     if bad:
-        raise SceneFileError(f"case set {case_set.name!r}: {len(bad)} of {len(case_set)} cases cannot be loaded, "
-                             f"nothing was run: {'; '.join(bad)}")
+        raise SceneFileError(
+            f"case set {case_set.name!r}: {len(bad)} of {len(case_set)} cases cannot be loaded, "
+            f"nothing was run: {'; '.join(bad)}"
+        )
     return scenes
 
 
@@ -245,8 +252,10 @@ def without_output(case_set: CaseSet, output: str | Path | None) -> CaseSet:
     out = Path(output).resolve()
     same = [c for c in case_set if not isinstance(c.scene, SceneFile) and Path(c.scene).resolve() == out]
     if same and _is_scene_file(out):
-        raise ValueError(f"{str(output)!r} is the scene file of case {same[0].name!r}: the result would overwrite it; "
-                         "write the result to another file")
+        raise ValueError(
+            f"{str(output)!r} is the scene file of case {same[0].name!r}: the result would overwrite it; "
+            "write the result to another file"
+        )
     return replace(case_set, cases=tuple(c for c in case_set if c not in same)) if same else case_set
 
 

@@ -20,9 +20,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -132,12 +133,14 @@ class PairedComparison:
             + (
                 f"\n  MuJoCo: {name_a} on {self.mujoco[0]}, {name_b} on {self.mujoco[1]}: different major "
                 "versions, so the difference is the simulator's as much as the policies'"
-                if self.across_mujoco else ""
+                if self.across_mujoco
+                else ""
             )
             + (
                 "\n  motions by primitive, difference per episode: "
                 + ", ".join(f"{p} {d:+.2f}" for p, d in self.primitive_differences.items())
-                if self.primitive_differences else ""
+                if self.primitive_differences
+                else ""
             )
         )
 
@@ -159,7 +162,9 @@ def compare_paired(a: EvalRecords, b: EvalRecords, seed: int = 0, across_mujoco:
         try:
             check_one_mujoco({"A": a.mujoco, "B": b.mujoco}, "this paired comparison")
         except MuJoCoVersionError as exc:
-            raise MuJoCoVersionError(f"{exc} (across_mujoco=True, compare_evals.py --across-mujoco, pairs them anyway)") from None
+            raise MuJoCoVersionError(
+                f"{exc} (across_mujoco=True, compare_evals.py --across-mujoco, pairs them anyway)"
+            ) from None
     seeds = sorted(set(a.by_seed) & set(b.by_seed))
     if len(seeds) < 2:
         raise ValueError(f"the two sides share {len(seeds)} episode seeds; a paired comparison needs at least 2")
@@ -169,11 +174,16 @@ def compare_paired(a: EvalRecords, b: EvalRecords, seed: int = 0, across_mujoco:
     d_motions = motions[0] - motions[1]
     return PairedComparison(
         episodes=len(seeds),
-        success_a=float(success[0].mean()), success_b=float(success[1].mean()),
-        success_difference=float(d_success.mean()), success_interval=bootstrap_mean_interval(d_success, seed=seed),
-        motions_a=float(motions[0].mean()), motions_b=float(motions[1].mean()),
-        motions_difference=float(d_motions.mean()), motions_interval=bootstrap_mean_interval(d_motions, seed=seed),
-        fewer_motions_a=int((d_motions < 0).sum()), fewer_motions_b=int((d_motions > 0).sum()),
+        success_a=float(success[0].mean()),
+        success_b=float(success[1].mean()),
+        success_difference=float(d_success.mean()),
+        success_interval=bootstrap_mean_interval(d_success, seed=seed),
+        motions_a=float(motions[0].mean()),
+        motions_b=float(motions[1].mean()),
+        motions_difference=float(d_motions.mean()),
+        motions_interval=bootstrap_mean_interval(d_motions, seed=seed),
+        fewer_motions_a=int((d_motions < 0).sum()),
+        fewer_motions_b=int((d_motions > 0).sum()),
         primitive_differences=_primitive_differences(a, b, seeds),
         mujoco=(a.mujoco, b.mujoco),
     )
@@ -199,12 +209,15 @@ def _points(fraction: float) -> str:
 
 def compare_main(argv: Sequence[str] | None = None) -> int:
     """The command line of ``benchmarks/compare_evals.py``: A minus B, paired, from eval JSON files."""
-    parser = argparse.ArgumentParser(description="Two policies on the same episodes: paired differences of success and motions.")
+    parser = argparse.ArgumentParser(
+        description="Two policies on the same episodes: paired differences of success and motions."
+    )
     parser.add_argument("--a", nargs="+", required=True, help="mpg-eval --json files of policy A")
     parser.add_argument("--b", nargs="+", required=True, help="mpg-eval --json files of policy B")
     parser.add_argument("--names", help="two labels, comma-separated (default: the policies' names)")
     parser.add_argument(
-        "--across-mujoco", action="store_true",
+        "--across-mujoco",
+        action="store_true",
         help="pair A and B of different MuJoCo major versions (refused otherwise): what the MuJoCo version changes",
     )
     args = parser.parse_args(argv)

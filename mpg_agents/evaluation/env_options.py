@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import ast
 import inspect
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 RESERVED = ("num_objects",)
 """Options with a flag of their own (``--num-objects``)."""

@@ -23,17 +23,17 @@ import logging
 import multiprocessing as mp
 import os
 import time
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any
 
+import mpg_envs  # registers the envs in a fresh worker
 from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, registered_options, run_episodes, summarise
 from mpg_agents.evaluation.failures import EpisodeFailure
 from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
-
-import mpg_envs  # registers the envs in a fresh worker
 from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
 from mpg_envs.threads import one_thread_children, worker_init
 
@@ -187,7 +187,9 @@ RecordHook = Callable[[EvalJob, EpisodeRecord], None]
 BACKENDS = ("ray", "processes")
 
 
-def _run_in_process(jobs: Sequence[EvalJob], on_record: RecordHook | None, keep_going: bool) -> tuple[list[list[ChunkResult]], list[float]]:
+def _run_in_process(
+    jobs: Sequence[EvalJob], on_record: RecordHook | None, keep_going: bool
+) -> tuple[list[list[ChunkResult]], list[float]]:
     """Every job as one chunk, one after the other; the time each finished."""
     start = time.perf_counter()
     chunks, done_at = [], []
@@ -206,7 +208,11 @@ def _run_on_ray(
     chunks: list[list[ChunkResult]] = [[] for _ in jobs]
     done_at = [0.0] * len(jobs)
     remote = ray.remote(num_cpus=1)(_ray_chunk)
-    pending = {remote.remote(job, indices, keep_going): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, chunks_per_job)}
+    pending = {
+        remote.remote(job, indices, keep_going): j
+        for j, job in enumerate(jobs)
+        for indices in chunk_indices(job.episodes, chunks_per_job)
+    }
     while pending:
         ready, _ = ray.wait(list(pending), num_returns=1)
         j = pending.pop(ready[0])
@@ -229,7 +235,9 @@ def _run_on_processes(
         done_at = [0.0] * len(jobs)
         with ProcessPoolExecutor(workers, mp_context=mp.get_context("forkserver"), initializer=worker_init) as pool:
             pending = {
-                pool.submit(run_chunk, job, indices, None, keep_going): j for j, job in enumerate(jobs) for indices in chunk_indices(job.episodes, workers)
+                pool.submit(run_chunk, job, indices, None, keep_going): j
+                for j, job in enumerate(jobs)
+                for indices in chunk_indices(job.episodes, workers)
             }
             while pending:
                 finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
@@ -288,7 +296,13 @@ def evaluate_jobs(
         records = [r for c in job_chunks for r in c.records]
         results.append(
             summarise(
-                records, first.policy_name, first.env_id, first.num_objects, job.seed, job_wall, used_workers,
+                records,
+                first.policy_name,
+                first.env_id,
+                first.num_objects,
+                job.seed,
+                job_wall,
+                used_workers,
                 {**registered_options(job.env_id), **dict(job.env_kwargs)},  # a track's own keywords too
                 [f for c in job_chunks for f in c.failures],
             )

@@ -17,8 +17,9 @@ over workers (:mod:`mpg_agents.evaluation.eval_runner`) gives the same records.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -77,7 +78,9 @@ class EpisodeRecord:
     def describe(self) -> str:
         outcome = "success" if self.success else "failure"
         used = ", ".join(f"{n} {p}" for p, n in self.primitives.items() if n)
-        return f"episode {self.index} (seed {self.seed}): {outcome} after " f"{self.motions} motions ({used}); end: {self.end_reason}"
+        return (
+            f"episode {self.index} (seed {self.seed}): {outcome} after {self.motions} motions ({used}); end: {self.end_reason}"
+        )
 
 
 @dataclass
@@ -134,21 +137,45 @@ class EvalResult:
             motions += f" [{self.motions_interval[0]:.2f}, {self.motions_interval[1]:.2f}]"
         rows = [
             ("policy", self.policy),
-            ("env", f"{self.env_id} ({self.num_objects} objects)" + "".join(f", {k}={v}" for k, v in self.env_options.items())),
-            ("episodes", f"{self.episodes} (seeds {self.seed}..{self.seed + self.episodes + len(self.failures) - 1}"
-                         + (f"; {len(self.failures)} more failed, left out)" if self.failures else ")")),
+            (
+                "env",
+                f"{self.env_id} ({self.num_objects} objects)" + "".join(f", {k}={v}" for k, v in self.env_options.items()),
+            ),
+            (
+                "episodes",
+                f"{self.episodes} (seeds {self.seed}..{self.seed + self.episodes + len(self.failures) - 1}"
+                + (f"; {len(self.failures)} more failed, left out)" if self.failures else ")"),
+            ),
             *((("failed", describe_failures(self.failures)),) if self.failures else ()),
             ("task success rate", f"{100 * self.task_success_rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]"),
             ("average motion number", motions),
-            ("  in successful episodes", "n/a" if self.average_motions_success is None else f"{self.average_motions_success:.2f}"),
-            ("  without a mis-pick", f"{100 * self.clean_success_rate:.1f}% [{100 * self.clean_success_interval[0]:.1f}, " f"{100 * self.clean_success_interval[1]:.1f}]"),
+            (
+                "  in successful episodes",
+                "n/a" if self.average_motions_success is None else f"{self.average_motions_success:.2f}",
+            ),
+            (
+                "  without a mis-pick",
+                f"{100 * self.clean_success_rate:.1f}% [{100 * self.clean_success_interval[0]:.1f}, "
+                f"{100 * self.clean_success_interval[1]:.1f}]",
+            ),
             ("mis-picks per episode", f"{self.mispicks_per_episode:.2f}"),
-            ("grasp success rate", "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.1f}% of {self.grasp_attempts}"),
+            (
+                "grasp success rate",
+                "n/a" if self.grasp_success_rate is None else f"{100 * self.grasp_success_rate:.1f}% of {self.grasp_attempts}",
+            ),
             ("finding the target", finding_line(self.finding)),
-            ("success by visibility", ", ".join(f"{band}: {c['successes']}/{c['episodes']}" for band, c in self.success_by_visibility.items()) or "n/a"),
+            (
+                "success by visibility",
+                ", ".join(f"{band}: {c['successes']}/{c['episodes']}" for band, c in self.success_by_visibility.items())
+                or "n/a",
+            ),
             ("primitives used", ", ".join(f"{p} {n}" for p, n in self.primitive_counts.items())),
             ("episodes ended by", ", ".join(f"{r} {n}" for r, n in self.end_reasons.items())),
-            ("seconds per motion", f"{self.seconds_per_motion:.2f} ({self.workers} " f"worker{'s' if self.workers > 1 else ''}, {self.wall_seconds:.1f} s)"),
+            (
+                "seconds per motion",
+                f"{self.seconds_per_motion:.2f} ({self.workers} "
+                f"worker{'s' if self.workers > 1 else ''}, {self.wall_seconds:.1f} s)",
+            ),
         ]
         width = max(len(k) for k, _ in rows)
         return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
@@ -315,7 +342,12 @@ def success_by_visibility(records: Sequence[EpisodeRecord]) -> dict[str, dict[st
         band = [r for r in records if r.visible_fraction is not None and visibility_band(r.visible_fraction) == label]
         if band:
             k = sum(r.success for r in band)
-            cells[label] = {"episodes": len(band), "successes": k, "rate": k / len(band), "interval": list(wilson_interval(k, len(band)))}
+            cells[label] = {
+                "episodes": len(band),
+                "successes": k,
+                "rate": k / len(band),
+                "interval": list(wilson_interval(k, len(band))),
+            }
     return cells
 
 

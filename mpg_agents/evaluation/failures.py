@@ -9,8 +9,9 @@ line for a command line's stderr (the same error told once, :func:`describe_fail
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Sequence
+from typing import Any
 
 __all__ = ["EpisodeFailure", "NothingFinished", "describe_failures", "failures_line"]
 

@@ -36,9 +36,7 @@ class FindingRecord(Protocol):
     def wrong_grasps(self) -> int: ...
 
 
-def first_sight(
-    visible_at_reset: float | None, visible_after: Sequence[float | None]
-) -> int | None:
+def first_sight(visible_at_reset: float | None, visible_after: Sequence[float | None]) -> int | None:
     """The motions after which the target first showed: 0 when ``visible_at_reset`` is above 0,
     else the first ``k`` whose ``visible_after[k - 1]`` (the visible fraction after motion ``k``)
     is; ``None`` when it never did or the reset reported none."""
@@ -99,9 +97,7 @@ def finding_summary(records: Iterable[FindingRecord]) -> dict[str, Any]:
     if told:
         lookalikes = sum(int(r.lookalike_grasps or 0) for r in told)  # none is None here
         summary["lookalike_grasps_per_episode"] = lookalikes / len(told)
-        summary["other_mispicks_per_episode"] = (
-            sum(r.wrong_grasps for r in told) - lookalikes
-        ) / len(told)
+        summary["other_mispicks_per_episode"] = (sum(r.wrong_grasps for r in told) - lookalikes) / len(told)
     return summary
 
 

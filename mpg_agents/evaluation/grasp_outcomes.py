@@ -23,7 +23,8 @@ geometry alone says.
 from __future__ import annotations
 
 from collections import Counter
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -85,7 +86,12 @@ class GraspProbe:
 
 
 def grasp_records(
-    policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int, angle_trials: bool = False,
+    policy_name: str,
+    env_id: str,
+    num_objects: int,
+    episodes: int,
+    seed: int,
+    angle_trials: bool = False,
     grasp_fingers: str | None = None,
 ) -> tuple[str, float, list[dict], list[dict]]:
     """The policy's name, its Q*_g, every grasp and every move or push of ``episodes`` greedy
@@ -104,17 +110,28 @@ def grasp_records(
 
     def on_step(index: int, reward: float, info: dict) -> None:
         if info["primitive"] != "grasp":
-            others.append({
-                "seed": seed + index, "primitive": info["primitive"], "covered_before": bool(info["occluded_before"]),
-                "covered_after": bool(info["occluded"]), "held_nothing": info["primitive"] == "move" and not info["grasp_success"],
-            })
+            others.append(
+                {
+                    "seed": seed + index,
+                    "primitive": info["primitive"],
+                    "covered_before": bool(info["occluded_before"]),
+                    "covered_after": bool(info["occluded"]),
+                    "held_nothing": info["primitive"] == "move" and not info["grasp_success"],
+                }
+            )
         else:
-            records.append({
-                "seed": seed + index, "q": acting.q, "occluded": bool(info["occluded_before"]),
-                "target": bool(info["target_grasped"]), "wrong": bool(info["wrong_grasp"]),
-                "failure": info["grasp_failure"], "other_angle_takes": acting.other_angle_takes,
-                "blocked": acting.blocked,
-            })
+            records.append(
+                {
+                    "seed": seed + index,
+                    "q": acting.q,
+                    "occluded": bool(info["occluded_before"]),
+                    "target": bool(info["target_grasped"]),
+                    "wrong": bool(info["wrong_grasp"]),
+                    "failure": info["grasp_failure"],
+                    "other_angle_takes": acting.other_angle_takes,
+                    "blocked": acting.blocked,
+                }
+            )
 
     run_episodes(acting, env, range(episodes), seed, on_step=on_step)
     env.close()

@@ -11,8 +11,9 @@ left it uncovered; ``benchmarks/visibility_steps.py`` prints both for ``mpg-eval
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, visibility_band
@@ -29,7 +30,7 @@ class MotionRecord:
     wrong_grasp: bool = False  # the grasp lifted another object
 
     @classmethod
-    def from_info(cls, info: Mapping[str, Any], visible_before: float | None) -> "MotionRecord":
+    def from_info(cls, info: Mapping[str, Any], visible_before: float | None) -> MotionRecord:
         """The record of a step from its ``info`` and the visible fraction the step started from
         (the reset's or the previous step's ``info["visible_fraction"]``)."""
         covered = info.get("occluded_before")
@@ -42,7 +43,7 @@ class MotionRecord:
         )
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "MotionRecord":
+    def from_dict(cls, data: Mapping[str, Any]) -> MotionRecord:
         """A record read back from JSON (:func:`dataclasses.asdict`'s keys).
 
         Raises:
@@ -53,7 +54,13 @@ class MotionRecord:
             raise ValueError(f"a motion record needs {sorted(missing)}; got keys {sorted(data)}")
         if data["primitive"] not in PRIMITIVES:
             raise ValueError(f"a motion's primitive must be one of {PRIMITIVES}, got {data['primitive']!r}")
-        return cls(**{k: data[k] for k in ("primitive", "covered_before", "visible_before", "target_grasped", "wrong_grasp") if k in data})
+        return cls(
+            **{
+                k: data[k]
+                for k in ("primitive", "covered_before", "visible_before", "target_grasped", "wrong_grasp")
+                if k in data
+            }
+        )
 
 
 @dataclass(frozen=True)
@@ -82,7 +89,12 @@ def motions_by_visibility(steps: Iterable[MotionRecord]) -> dict[tuple[str, bool
         tally[0] += 1
         tally[1] += int(step.target_grasped)
         tally[2] += int(step.wrong_grasp)
-    order = {(p, c, b): (i, j, k) for i, p in enumerate(PRIMITIVES) for j, c in enumerate((True, False)) for k, b in enumerate(VISIBILITY_BAND_LABELS)}
+    order = {
+        (p, c, b): (i, j, k)
+        for i, p in enumerate(PRIMITIVES)
+        for j, c in enumerate((True, False))
+        for k, b in enumerate(VISIBILITY_BAND_LABELS)
+    }
     return {key: VisibilityCount(*counts[key]) for key in sorted(counts, key=order.__getitem__)}
 
 
@@ -119,7 +131,11 @@ def visibility_table(counts: Mapping[tuple[str, bool, str], VisibilityCount], ep
             if not total:
                 continue
             cells = [_cell(primitive, c) for c in row.values()]
-            lines.append(f"| {primitive} | {'covered' if covered else 'uncovered'} | " + " | ".join(cells) + f" | {total / episodes:.2f} |")
+            lines.append(
+                f"| {primitive} | {'covered' if covered else 'uncovered'} | "
+                + " | ".join(cells)
+                + f" | {total / episodes:.2f} |"
+            )
     return "\n".join(lines)
 
 

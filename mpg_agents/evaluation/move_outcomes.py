@@ -88,7 +88,9 @@ class MoveProbe:
         record["oracle_lifts"] = None
         if occluders:
             plans = oracle.grasp_plans(u, occluders[0], depth, ids, require_fit=False)
-            record["oracle_lifts"] = bool(plans) and self._lifts(plans[0].rotation, plans[0].row, plans[0].col, depth, occluders[0])
+            record["oracle_lifts"] = bool(plans) and self._lifts(
+                plans[0].rotation, plans[0].row, plans[0].col, depth, occluders[0]
+            )
         return record
 
 
@@ -107,15 +109,23 @@ def summarise_moves(records: list[dict[str, Any]], angle_limit_deg: float = ANGL
         "on": {k: sum(r["on"] == k for r in records) for k in ON_WHAT},
         "lifted_on": {k: sum(r["lifted"] for r in records if r["on"] == k) for k in ON_WHAT},
         "angle_limit_deg": angle_limit_deg,
-        "occluder_on_axis": len(near), "occluder_on_axis_lifted": sum(r["lifted"] for r in near),
-        "occluder_off_axis": len(far), "occluder_off_axis_lifted": sum(r["lifted"] for r in far),
+        "occluder_on_axis": len(near),
+        "occluder_on_axis_lifted": sum(r["lifted"] for r in near),
+        "occluder_off_axis": len(far),
+        "occluder_off_axis_lifted": sum(r["lifted"] for r in far),
         "any_angle_lifts": sum(r["any_angle_lifts"] for r in records),
-        "oracle_tried": len(with_oracle), "oracle_lifts": sum(r["oracle_lifts"] for r in with_oracle),
+        "oracle_tried": len(with_oracle),
+        "oracle_lifts": sum(r["oracle_lifts"] for r in with_oracle),
     }
 
 
 def move_records(
-    policy_name: str, env_id: str, num_objects: int, episodes: int, seed: int, move_region: str | None = None,
+    policy_name: str,
+    env_id: str,
+    num_objects: int,
+    episodes: int,
+    seed: int,
+    move_region: str | None = None,
     move_fingers: str | None = None,
 ) -> tuple[str, list[dict[str, Any]]]:
     """The policy's name and a look at every move of ``episodes`` greedy episodes (episode ``i``

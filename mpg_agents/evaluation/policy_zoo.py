@@ -24,9 +24,10 @@ name, e.g. ``stage2_grasp_small.safetensors (grasp-only net)`` on ``MPG-Occluded
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping, Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping, Sequence, cast
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
@@ -114,10 +115,20 @@ class NetworkPolicy:
     """
 
     def __init__(
-        self, path: str | Path, env: gym.Env, coordination: str | None = None, name: str | None = None,
-        grasp_region: str | None = None, avoid_repeats: bool = False, target_margin_px: int | None = None,
-        move_region: str | None = None, q_star: float | None = None, grasp_fingers: str | None = None,
-        move_fingers: str | None = None, device: str | None = None, grasp_retries: int | None = None,
+        self,
+        path: str | Path,
+        env: gym.Env,
+        coordination: str | None = None,
+        name: str | None = None,
+        grasp_region: str | None = None,
+        avoid_repeats: bool = False,
+        target_margin_px: int | None = None,
+        move_region: str | None = None,
+        q_star: float | None = None,
+        grasp_fingers: str | None = None,
+        move_fingers: str | None = None,
+        device: str | None = None,
+        grasp_retries: int | None = None,
     ):
         # Start-up time: torch and the agent load here, so the heuristics, the oracle and the
         # command lines run without them.
@@ -141,8 +152,11 @@ class NetworkPolicy:
         if move_fingers is not None:
             overrides["move_fingers"] = move_fingers
         self.policy = MPGAgent.from_weights(
-            path, cast(gym.spaces.Dict, env.observation_space), cast(gym.spaces.Discrete, env.action_space),
-            net_overrides=overrides, geometry=finger_geometry(env),
+            path,
+            cast(gym.spaces.Dict, env.observation_space),
+            cast(gym.spaces.Discrete, env.action_space),
+            net_overrides=overrides,
+            geometry=finger_geometry(env),
         )
         self.policy.to(resolve_device(device if device is not None else "auto"))
         if coordination is not None:
@@ -151,9 +165,11 @@ class NetworkPolicy:
             self.policy.set_q_star(check_override(q_star))
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
         if self.policy.coordination != "max_q" and {"grasp", "push"} <= set(self.primitives) and self.policy.q_star is None:
-            warnings.warn(f"checkpoint {path} carries no Q*_g (null: never calibrated): its {self.policy.coordination!r} "
-                          "coordination compares the best grasp and push Q instead; pass --q-star (mpg-calibrate measures one)",
-                          stacklevel=2)
+            warnings.warn(
+                f"checkpoint {path} carries no Q*_g (null: never calibrated): its {self.policy.coordination!r} "
+                "coordination compares the best grasp and push Q instead; pass --q-star (mpg-calibrate measures one)",
+                stacklevel=2,
+            )
         self.name = (name or path.name) + net_suffix(self.primitives, self.policy.action_primitives)
         if grasp_region is not None:
             self.name += f" [grasp region: {grasp_region}]"
@@ -172,7 +188,9 @@ class NetworkPolicy:
 
             grasp_retries = read_checkpoint_header(path).get("extra", {}).get("grasp_retries", 0)
         if isinstance(grasp_retries, bool) or not isinstance(grasp_retries, int) or grasp_retries < 0:
-            raise ValueError("grasp_retries must be a non-negative integer (0: off) " f"or None (the checkpoint's), got {grasp_retries!r}")
+            raise ValueError(
+                f"grasp_retries must be a non-negative integer (0: off) or None (the checkpoint's), got {grasp_retries!r}"
+            )
         fallback = [p for p in ("push", "move") if p in self.primitives]
         self.grasp_retries = grasp_retries if grasp_retries and fallback else None  # a grasp-only net has nothing else to do
         self._instead_of_grasp = fallback[0] if fallback else None
@@ -192,7 +210,9 @@ class NetworkPolicy:
 
     def act(self, obs: Mapping[str, np.ndarray]) -> int:
         # Called again after a grasp: that grasp did not take the target (it would have ended the episode).
-        instead = self._instead_of_grasp if self.grasp_retries is not None and self._grasps_in_a_row >= self.grasp_retries else None
+        instead = (
+            self._instead_of_grasp if self.grasp_retries is not None and self._grasps_in_a_row >= self.grasp_retries else None
+        )
         forbidden = None
         if self.memory is not None and len(self.memory):
             depth = np.asarray(obs["depth"])

@@ -11,7 +11,7 @@ Both delegate to SciPy (``binomtest(...).proportion_ci`` and ``stats.bootstrap``
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy import stats

@@ -21,13 +21,14 @@ from __future__ import annotations
 import dataclasses
 import json
 import tomllib
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 from mpg_agents.evaluation.comparison import load_eval_records
-from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, summarise
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
+from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, summarise
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
 from mpg_envs.simulation.mujoco_version import MUJOCO_KEY
@@ -126,14 +127,18 @@ def merged_result(paths: Sequence[str | Path]) -> EvalResult:
         data["steps"] = tuple(MotionRecord.from_dict(m) for m in data.get("steps", ()))
         records.append(EpisodeRecord(index=index, **data))
     result = summarise(
-        records, first["policy"], cell.env_id, int(cell.num_objects or 0), min(cell.by_seed), 0.0, env_options=first.get("env_options", {})
+        records,
+        first["policy"],
+        cell.env_id,
+        int(cell.num_objects or 0),
+        min(cell.by_seed),
+        0.0,
+        env_options=first.get("env_options", {}),
     )
     return dataclasses.replace(result, versions={**first.get("versions", {}), MUJOCO_KEY: cell.mujoco})
 
 
-def table_from_evals(
-    track: str, cells: Mapping[str, Sequence[str | Path]], objects: int
-) -> tuple[dict[str, Any], str, str]:
+def table_from_evals(track: str, cells: Mapping[str, Sequence[str | Path]], objects: int) -> tuple[dict[str, Any], str, str]:
     """A table of ``track`` at ``objects`` objects from recorded evaluations: ``cells`` maps a
     row label to the ``mpg-eval --json`` files of its seed blocks. Returns the report, the text
     and the Markdown table, as :func:`run_table` does."""
@@ -141,7 +146,9 @@ def table_from_evals(
     results = {(label, objects): merged_result(paths) for label, paths in cells.items()}
     for (label, _), result in results.items():
         if result.env_id != spec.env_id or result.num_objects != objects:
-            raise ValueError(f"{label}: its files are {result.env_id} with " f"{result.num_objects} objects, not {spec.env_id} with {objects}")
+            raise ValueError(
+                f"{label}: its files are {result.env_id} with {result.num_objects} objects, not {spec.env_id} with {objects}"
+            )
     labels = list(cells)
     header, body, paper_rows = table_rows(labels, [objects], results, spec, {label: label for label in labels})
     report = {

@@ -20,8 +20,9 @@ other scenes and motions on another major version.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 from mpg_agents.evaluation.evaluate import EvalResult
 from mpg_envs.simulation.mujoco_version import check_one_mujoco, recorded_mujoco
@@ -43,8 +44,12 @@ class Track:
 TRACKS: dict[str, Track] = {
     "table1": Track("table1", ENV_ID, paper_rows=True, strict_columns=False, scenes="blocks, Table I's rules"),
     "hard": Track("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True, scenes="blocks"),
-    "hard-novel": Track("hard-novel", "MPG-OccludedHardNovel-v0", paper_rows=False, strict_columns=True, scenes="unseen shapes"),
-    "hard-camera": Track("hard-camera", "MPG-OccludedHardCamera-v0", paper_rows=False, strict_columns=True, scenes="camera images of blocks"),
+    "hard-novel": Track(
+        "hard-novel", "MPG-OccludedHardNovel-v0", paper_rows=False, strict_columns=True, scenes="unseen shapes"
+    ),
+    "hard-camera": Track(
+        "hard-camera", "MPG-OccludedHardCamera-v0", paper_rows=False, strict_columns=True, scenes="camera images of blocks"
+    ),
 }
 """The tracks by name: the paper's Table I, the strict, hidden-target hard track, and the
 hard track on unseen objects and on camera observations."""
@@ -189,7 +194,9 @@ def table_rows(
     for policy in policies:
         results = [cells[(policy, n)] for n in objects if (policy, n) in cells]
         row = [labels[policy] if labels and policy in labels else _row_label(policy, results)]
-        row += _cells_text(objects, {n: cell_json(cells[(policy, n)]) for n in objects if (policy, n) in cells}, track.strict_columns)
+        row += _cells_text(
+            objects, {n: cell_json(cells[(policy, n)]) for n in objects if (policy, n) in cells}, track.strict_columns
+        )
         body.append(row)
     return header, body, paper_count
 
@@ -210,7 +217,10 @@ def tracks_rows(
     check_table_mujoco(cells)
     for name in tracks:
         if name not in TRACKS or not TRACKS[name].strict_columns:
-            raise ValueError(f"tracks_rows lays out strict tracks only, got {name!r}; " f"valid: {[t for t, s in TRACKS.items() if s.strict_columns]}")
+            raise ValueError(
+                f"tracks_rows lays out strict tracks only, got {name!r}; "
+                f"valid: {[t for t, s in TRACKS.items() if s.strict_columns]}"
+            )
     header = ["Track", "Method"] + _header(objects, True)
     body = []
     for name in tracks:
@@ -258,6 +268,9 @@ def format_text(header: list[str], body: list[list[str]], paper_rows: int) -> st
 def format_markdown(header: list[str], body: list[list[str]], text_columns: int = 1) -> str:
     """The same table as GitHub Markdown: the first ``text_columns`` columns aligned left,
     the figures right."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * text_columns + ["---:"] * (len(header) - text_columns)) + "|"]
+    lines = [
+        "| " + " | ".join(header) + " |",
+        "|" + "|".join(["---"] * text_columns + ["---:"] * (len(header) - text_columns)) + "|",
+    ]
     lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in body]
     return "\n".join(lines)

@@ -35,9 +35,10 @@ from __future__ import annotations
 import glob
 import json
 import tomllib
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
 from mpg_agents.evaluation.evaluate import EvalResult, registered_options
@@ -88,11 +89,16 @@ class CellRequest:
         if result.env_id != self.env_id or result.num_objects != self.objects:
             problems.append(f"it is {result.env_id} with {result.num_objects} objects, not {self.env_id} with {self.objects}")
         if seeds != list(range(self.seed, self.seed + self.episodes)):
-            problems.append(f"its seeds are {seeds[0]}..{seeds[-1]} ({len(seeds)} " f"episodes), not {self.seed}..{self.seed + self.episodes - 1}")
+            problems.append(
+                f"its seeds are {seeds[0]}..{seeds[-1]} ({len(seeds)} "
+                f"episodes), not {self.seed}..{self.seed + self.episodes - 1}"
+            )
         if json.loads(json.dumps(result.env_options)) != self.recorded_env_options():
             problems.append(f"its env options are {result.env_options}, not {self.recorded_env_options()}")
         if problems:
-            raise CellMismatchError(f"{source} is not the cell ({self.track}, {self.spec.label!r}, {self.objects} objects): " + "; ".join(problems))
+            raise CellMismatchError(
+                f"{source} is not the cell ({self.track}, {self.spec.label!r}, {self.objects} objects): " + "; ".join(problems)
+            )
 
 
 def _names_policy(name: str, policy: str) -> bool:
@@ -122,11 +128,15 @@ class ReusedCell:
         if self.evals is not None:
             files = sorted(glob.glob(self.evals))
             if not files:
-                raise CellMismatchError(f"reused cell ({self.track}, {self.label!r}, {self.objects}): no file matches {self.evals!r}")
+                raise CellMismatchError(
+                    f"reused cell ({self.track}, {self.label!r}, {self.objects}): no file matches {self.evals!r}"
+                )
             result = merged_result(files)
             request.check(result, self.evals)
             if not _names_policy(result.policy, request.spec.policy):
-                raise CellMismatchError(f"{self.evals} is policy {result.policy!r}, not {request.spec.policy!r} (label {self.label!r})")
+                raise CellMismatchError(
+                    f"{self.evals} is policy {result.policy!r}, not {request.spec.policy!r} (label {self.label!r})"
+                )
             return cell_json(result)
         return self._row(request)
 
@@ -134,17 +144,33 @@ class ReusedCell:
         path = str(self.table)
         report = json.loads(Path(path).read_text())
         entry = {k: v for k, v in request.policy_entry().items() if k != "label"}
-        asked = {"env": request.env_id, "seed": request.seed, "episodes": request.episodes, "env_options": dict(request.env_options)}
-        found = {"env": report.get("env"), "seed": report.get("seed"), "episodes": report.get("episodes"), "env_options": report.get("env_options")}
+        asked = {
+            "env": request.env_id,
+            "seed": request.seed,
+            "episodes": request.episodes,
+            "env_options": dict(request.env_options),
+        }
+        found = {
+            "env": report.get("env"),
+            "seed": report.get("seed"),
+            "episodes": report.get("episodes"),
+            "env_options": report.get("env_options"),
+        }
         if found != json.loads(json.dumps(asked)):
             raise CellMismatchError(f"{path} ran {found}, the table asks {asked}")
         if report.get("policies", {}).get(self.label) != entry:
-            raise CellMismatchError(f"{path} ran label {self.label!r} as " f"{report.get('policies', {}).get(self.label)}, the policy file says {entry}")
+            raise CellMismatchError(
+                f"{path} ran label {self.label!r} as "
+                f"{report.get('policies', {}).get(self.label)}, the policy file says {entry}"
+            )
         cell = report.get("rows", {}).get(self.label, {}).get(str(self.objects))
         if cell is None:
             raise CellMismatchError(f"{path} has no cell for {self.label!r} at {self.objects} objects")
         if cell["episodes"] != request.episodes or cell["env_options"] != request.recorded_env_options():
-            raise CellMismatchError(f"{path}: {self.label!r} at {self.objects} objects ran " f"{cell['episodes']} episodes with env options {cell['env_options']}")
+            raise CellMismatchError(
+                f"{path}: {self.label!r} at {self.objects} objects ran "
+                f"{cell['episodes']} episodes with env options {cell['env_options']}"
+            )
         return dict(cell)
 
 
@@ -168,7 +194,9 @@ def read_reused(path: str | Path) -> dict[tuple[str, str, int], ReusedCell]:
         unknown = set(entry) - {"track", "label", "objects", "evals", "table"}
         if unknown:
             raise ValueError(f"{where}: unknown keys {sorted(unknown)}")
-        cell = ReusedCell(str(entry["track"]), str(entry["label"]), int(entry["objects"]), entry.get("evals"), entry.get("table"))
+        cell = ReusedCell(
+            str(entry["track"]), str(entry["label"]), int(entry["objects"]), entry.get("evals"), entry.get("table")
+        )
         key = (cell.track, cell.label, cell.objects)
         if key in cells:
             raise ValueError(f"{where}: {key} is given twice")
@@ -235,7 +263,9 @@ def _run_seeds(
     on_record: Callable[[EvalJob, Any], None] | None,
 ) -> tuple[EvalResult, float]:
     """The cell's policy and env on ``episodes`` seeds from ``seed``: the result and its wall seconds."""
-    job = EvalJob(request.spec.policy, request.env_id, episodes, seed, request.objects, request.spec.settings, request.env_options)
+    job = EvalJob(
+        request.spec.policy, request.env_id, episodes, seed, request.objects, request.spec.settings, request.env_options
+    )
     (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
     return result, timing.wall_seconds
 
@@ -266,7 +296,9 @@ def _run_in_blocks(
             write_cell_file(request, result, block)
             seconds += wall
         elif json.loads(block.read_text()).get("table_policy") != request.policy_entry():
-            raise CellMismatchError(f"{block} ran another policy entry than {request.policy_entry()}: delete {folder} to run the cell again")
+            raise CellMismatchError(
+                f"{block} ran another policy entry than {request.policy_entry()}: delete {folder} to run the cell again"
+            )
         files.append(block)
     result = merged_result(files)
     request.check(result, str(folder))
@@ -303,14 +335,18 @@ def make_track_table(
     blocks of that many seeds, each kept as it ends (``<cell>.blocks/``; a stopped cell resumes
     at its first missing block), then pooled into the cell file: for cells that take longer
     than a sitting."""
-    if block_episodes is not None and (isinstance(block_episodes, bool) or not isinstance(block_episodes, int) or block_episodes < 1):
+    if block_episodes is not None and (
+        isinstance(block_episodes, bool) or not isinstance(block_episodes, int) or block_episodes < 1
+    ):
         raise ValueError(f"block_episodes must be a positive integer or None, got {block_episodes!r}")
     labels = [s.label for s in specs]
     if len(set(labels)) != len(labels):
         raise ValueError(f"policy labels must differ, got {labels}")
     for name in tracks:
         if name not in TRACKS or not TRACKS[name].strict_columns:
-            raise ValueError(f"unknown or non-strict track {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}")
+            raise ValueError(
+                f"unknown or non-strict track {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}"
+            )
     reused = dict(reused or {})
     strangers = sorted({label for _, label, _ in reused} - set(labels))
     if strangers:
@@ -324,7 +360,17 @@ def make_track_table(
             for n in objects:
                 request = CellRequest(name, spec, n, episodes, seed, extra)
                 path = Path(out) / name / "cells" / cell_file_name(spec.label, n)
-                found = _cell(request, path, reused.get((name, spec.label, n)), run, workers, ray_address, backend, on_record, block_episodes)
+                found = _cell(
+                    request,
+                    path,
+                    reused.get((name, spec.label, n)),
+                    run,
+                    workers,
+                    ray_address,
+                    backend,
+                    on_record,
+                    block_episodes,
+                )
                 if found is None:
                     missing.append([name, spec.label, n])
                     continue
@@ -350,13 +396,25 @@ def make_track_table(
         "mujoco": mujoco_versions,
     }
     grid_header, grid_body = tracks_success_rows(tracks, labels, objects, cells)
-    markdown = "\n\n".join([
-        "Success [95% interval] in mean motions:", format_markdown(grid_header, grid_body),
-        "Every figure:", format_markdown(header, body, text_columns=2),
-    ])
+    markdown = "\n\n".join(
+        [
+            "Success [95% interval] in mean motions:",
+            format_markdown(grid_header, grid_body),
+            "Every figure:",
+            format_markdown(header, body, text_columns=2),
+        ]
+    )
     if cells:
         markdown += f"\n\nMeasured on MuJoCo {', '.join(mujoco_versions)}."
     if missing:
         counts = {name: sum(1 for m in missing if m[0] == name) for name in tracks}
-        markdown += "\n\nNot run yet: " + "; ".join(f"{TRACKS[name].scenes} ({TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells" for name, k in counts.items() if k) + "."
+        markdown += (
+            "\n\nNot run yet: "
+            + "; ".join(
+                f"{TRACKS[name].scenes} ({TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells"
+                for name, k in counts.items()
+                if k
+            )
+            + "."
+        )
     return report, markdown

@@ -4,8 +4,9 @@ titled, with a colour bar in Q units and the chosen action drawn and named."""
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import cv2
 import numpy as np

@@ -19,8 +19,9 @@ its episode runs, and the seeds in a row that gave it no valid scene.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import asdict
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,7 +34,7 @@ if TYPE_CHECKING:
     from mpg_agents.learning.learner import Learner
 
 
-def train_with_actors(learner: "Learner", bar: Any = None) -> None:
+def train_with_actors(learner: Learner, bar: Any = None) -> None:
     """Run ``learner``'s remaining iterations with its config's actors (``bar``: a progress bar)."""
     c, cfg = learner.counters, learner.config
     specs = [ActorSpec(cfg, learner.stage, a, c.iteration, learner.objects_now(c.iteration)) for a in range(cfg.actors)]
@@ -55,7 +56,7 @@ def train_with_actors(learner: "Learner", bar: Any = None) -> None:
                 learner.save_or_stop()
 
 
-def next_request(learner: "Learner", ledger: "ActorLedger", actor: int) -> ActRequest:
+def next_request(learner: Learner, ledger: ActorLedger, actor: int) -> ActRequest:
     """``actor``'s next request: the global epsilon and object count, the learner's weights when due."""
     c, policy = learner.counters, learner.policy
     if ledger.stale(c.gradient_steps, policy.q_star):
@@ -68,7 +69,7 @@ def next_request(learner: "Learner", ledger: "ActorLedger", actor: int) -> ActRe
     return ledger.request(actor, learner.epsilon(), learner.objects_now(c.iteration), next_episode)
 
 
-def learn_from_step(learner: "Learner", step: ActorStep) -> None:
+def learn_from_step(learner: Learner, step: ActorStep) -> None:
     """The learner's iteration for an actor's step: its trials and the step stored, learnt from
     (:meth:`~mpg_agents.learning.learner.Learner.learn_owed`), counted and logged; at its
     episode's end, the stage's periodic Q*_g calibration."""
@@ -82,10 +83,11 @@ def learn_from_step(learner: "Learner", step: ActorStep) -> None:
         setattr(c, name, getattr(c, name) + value)
     learner.store(step.obs, step.next_obs, choice.action, step.reward, step.terminated)
     loss = learner.learn_owed(2 if step.trials else 1)
-    learner.record(choice, step.reward, step.info, loss, step.choose_seconds, step.step_seconds, learning, step.episode, step.done)
+    learner.record(
+        choice, step.reward, step.info, loss, step.choose_seconds, step.step_seconds, learning, step.episode, step.done
+    )
     if step.done:
         learner.calibrate_if_due()
-
 
 
 class ActorLedger:
@@ -136,7 +138,9 @@ class ActorLedger:
             self.running[a] = False
             self.skips[a] += 1
             if self.skips[a] > most_skips:
-                raise InvalidSceneError(f"{self.skips[a]} seeds in a row up to episode {step.episode} gave no valid scene: {step.skipped}")
+                raise InvalidSceneError(
+                    f"{self.skips[a]} seeds in a row up to episode {step.episode} gave no valid scene: {step.skipped}"
+                )
             return
         self.skips[a] = 0
         self.running[a] = not step.done

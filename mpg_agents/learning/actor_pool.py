@@ -24,14 +24,15 @@ import multiprocessing as mp
 import os
 import signal
 import traceback
+from collections.abc import Sequence
 from multiprocessing.connection import wait
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
-from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
-from mpg_envs.threads import one_thread_children, worker_init
 from mpg_agents.learning.actors import Actor, ActorSpec, ActorStep, ActRequest
 from mpg_agents.learning.train_config import TrainConfig
+from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
+from mpg_envs.threads import one_thread_children, worker_init
 
 RAY_INSTALL = "pip install 'mpg-grasp[ray]'"
 """How to get Ray (the package's extra)."""
@@ -52,8 +53,10 @@ def check_actor_backend(config: TrainConfig) -> str:
     if backend == "auto":
         backend = "ray" if ray_installed() or config.ray_address is not None else "processes"
     if backend == "ray" and not ray_installed():
-        raise ValueError(f"training setting actor_backend 'ray' needs Ray, which is not installed: {RAY_INSTALL}, "
-                         "or train with actor_backend 'processes' (--actor-backend processes)")
+        raise ValueError(
+            f"training setting actor_backend 'ray' needs Ray, which is not installed: {RAY_INSTALL}, "
+            "or train with actor_backend 'processes' (--actor-backend processes)"
+        )
     return backend
 
 
@@ -83,7 +86,7 @@ class ActorPool:
         """Stop every actor (steps in flight are dropped)."""
         raise NotImplementedError
 
-    def __enter__(self) -> "ActorPool":
+    def __enter__(self) -> ActorPool:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -139,7 +142,9 @@ class ProcessActorPool(ActorPool):
             with one_thread_children():  # inherited by the children before they import torch
                 for spec in specs:
                     parent, child = context.Pipe()
-                    proc = context.Process(target=_actor_process, args=(spec, child), name=f"mpg-actor-{spec.index}", daemon=True)
+                    proc = context.Process(
+                        target=_actor_process, args=(spec, child), name=f"mpg-actor-{spec.index}", daemon=True
+                    )
                     proc.start()
                     child.close()
                     self._conns.append(parent)
@@ -220,7 +225,12 @@ class RayActorPool(ActorPool):
                 # A local Ray's workers import this very package (a source checkout included).
                 root = str(Path(__file__).resolve().parents[2])
                 env_vars["PYTHONPATH"] = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)
-                ray.init(num_cpus=len(specs), runtime_env={"env_vars": env_vars}, include_dashboard=False, logging_level=logging.WARNING)
+                ray.init(
+                    num_cpus=len(specs),
+                    runtime_env={"env_vars": env_vars},
+                    include_dashboard=False,
+                    logging_level=logging.WARNING,
+                )
             else:
                 ray.init(address=address, runtime_env={"env_vars": env_vars}, logging_level=logging.WARNING)
             self._started = True

@@ -19,8 +19,9 @@ its pool started at): a resumed run draws afresh. Each actor computes on one tor
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -43,7 +44,9 @@ from mpg_envs.tasks.config import EnvConfig
 
 
 # ------------------------------------------------------------------ shared by learner and actors
-def make_training_env(stage: TrainingStage, config: TrainConfig, num_objects: int | None, device: torch.device | str) -> gym.Env:
+def make_training_env(
+    stage: TrainingStage, config: TrainConfig, num_objects: int | None, device: torch.device | str
+) -> gym.Env:
     """The stage's training env (its rewards, the discriminator on ``device`` that scores states);
     refuses objects held out for testing (:func:`~mpg_envs.simulation.objects.check_not_held_out`)."""
     kwargs: dict[str, Any] = {}
@@ -52,7 +55,9 @@ def make_training_env(stage: TrainingStage, config: TrainConfig, num_objects: in
     options = dict(stage.env_options)  # the stage's object set, visual randomization, observation, config
     env_config = stage_env_config(options, stage.reward)
     if config.discriminator is not None:
-        kwargs["grasp_scorer"] = Discriminator.from_weights(config.discriminator, geometry_of_config(env_config or EnvConfig()), device)
+        kwargs["grasp_scorer"] = Discriminator.from_weights(
+            config.discriminator, geometry_of_config(env_config or EnvConfig()), device
+        )
     if env_config is not None:
         kwargs["config"] = env_config
     for key, value in options.items():
@@ -68,24 +73,42 @@ def build_agent(stage: TrainingStage, config: TrainConfig, env: gym.Env) -> MPGA
     """A fresh agent with the stage's branches and coordination and the config's network."""
     space: Any = env.unwrapped
     return MPGAgent.build(
-        space.observation_space, space.action_space, variant=config.variant, branches=stage.branches or PRIMITIVES,
-        coordination=stage.coordination, net_config=config.net_config, geometry=finger_geometry(env),
+        space.observation_space,
+        space.action_space,
+        variant=config.variant,
+        branches=stage.branches or PRIMITIVES,
+        coordination=stage.coordination,
+        net_config=config.net_config,
+        geometry=finger_geometry(env),
     )
 
 
-def make_explorer(policy: MPGAgent, stage: TrainingStage, primitives: tuple[str, ...], rng: np.random.Generator, config: TrainConfig) -> Explorer:
+def make_explorer(
+    policy: MPGAgent, stage: TrainingStage, primitives: tuple[str, ...], rng: np.random.Generator, config: TrainConfig
+) -> Explorer:
     """The exploration of ``policy``'s network settings (where a greedy action may act) on ``rng``."""
     net_cfg = policy.net_config
     return Explorer(
-        primitives, rng, config.heuristic_after_failed_grasps, random_primitive=stage.coordination == "max_q",
-        grasp_on_target=net_cfg.grasp_region in ("target", "visible"), usable=policy.usable_primitives,
-        target_margin_px=net_cfg.target_margin_px, move_band_m=net_cfg.move_band_m if net_cfg.move_region == "top" else None,
-        visible_band_m=net_cfg.visible_band_m if net_cfg.grasp_region == "visible" else None)
+        primitives,
+        rng,
+        config.heuristic_after_failed_grasps,
+        random_primitive=stage.coordination == "max_q",
+        grasp_on_target=net_cfg.grasp_region in ("target", "visible"),
+        usable=policy.usable_primitives,
+        target_margin_px=net_cfg.target_margin_px,
+        move_band_m=net_cfg.move_band_m if net_cfg.move_region == "top" else None,
+        visible_band_m=net_cfg.visible_band_m if net_cfg.grasp_region == "visible" else None,
+    )
 
 
 def choose_action(
-    policy: MPGAgent, explorer: Explorer, stage: TrainingStage, obs: Mapping[str, np.ndarray], epsilon: float,
-    pushes_in_episode: int, failed_grasps_in_a_row: int,
+    policy: MPGAgent,
+    explorer: Explorer,
+    stage: TrainingStage,
+    obs: Mapping[str, np.ndarray],
+    epsilon: float,
+    pushes_in_episode: int,
+    failed_grasps_in_a_row: int,
 ) -> Choice:
     """The action to take: the policy's decision (a grasp forced after the stage's push budget),
     then exploration and the training aids."""
@@ -209,12 +232,27 @@ class Actor:
         obs = self.obs
         assert obs is not None
         start = time.perf_counter()
-        choice = choose_action(self.policy, self.explorer, self.spec.stage, obs, request.epsilon,
-                               self.pushes_in_episode, self.failed_grasps_in_a_row)
+        choice = choose_action(
+            self.policy,
+            self.explorer,
+            self.spec.stage,
+            obs,
+            request.epsilon,
+            self.pushes_in_episode,
+            self.failed_grasps_in_a_row,
+        )
         trials: list[tuple[Mapping[str, Any], int, float, bool]] = []
         counts = TrialCounts()
-        try_alternatives(self.env.unwrapped, self.policy, self.spec.stage, counts, obs, choice, self.rng,
-                         lambda _, next_obs, action, reward, terminated: trials.append((next_obs, action, reward, terminated)))
+        try_alternatives(
+            self.env.unwrapped,
+            self.policy,
+            self.spec.stage,
+            counts,
+            obs,
+            choice,
+            self.rng,
+            lambda _, next_obs, action, reward, terminated: trials.append((next_obs, action, reward, terminated)),
+        )
         chosen = time.perf_counter()
         next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
         stepped = time.perf_counter()
@@ -223,8 +261,22 @@ class Actor:
         if choice.primitive == "push":
             self.pushes_in_episode += 1
         self.obs = None if terminated or truncated else next_obs
-        return ActorStep(self.spec.index, self.episode, None, obs, choice, next_obs, float(reward), bool(terminated), bool(truncated),
-                         info, trials, counts, chosen - start, stepped - chosen)
+        return ActorStep(
+            self.spec.index,
+            self.episode,
+            None,
+            obs,
+            choice,
+            next_obs,
+            float(reward),
+            bool(terminated),
+            bool(truncated),
+            info,
+            trials,
+            counts,
+            chosen - start,
+            stepped - chosen,
+        )
 
     def _reset(self, request: ActRequest) -> str | None:
         """Start episode ``request.episode``; returns why its seed gave no valid scene, if it did not."""

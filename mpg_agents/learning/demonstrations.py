@@ -14,8 +14,9 @@ dropped otherwise (the net has no Q map to train for it).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import gymnasium as gym
 
@@ -25,6 +26,7 @@ from mpg_envs.policies.oracle import OraclePolicy
 
 AddTransition = Callable[[Mapping[str, Any], Mapping[str, Any], int, float, bool], None]
 """``add(obs, next_obs, action, reward, terminated)``: stores one unbatched transition."""
+
 
 @dataclass(frozen=True)
 class DemoStats:

@@ -13,14 +13,14 @@ One seeded generator drives every random choice; its state is saved with the run
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 import numpy as np
 import torch
 
-from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_agents.acting.decision import Decision
+from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_agents.network.regions import footprint_top, grasp_pixels
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.workspace import NUM_ROTATIONS
@@ -142,4 +142,3 @@ class Explorer:
             else:
                 row, col = (int(v) for v in self.rng.integers(size, size=2))
         return int(self.rng.integers(NUM_ROTATIONS)), row, col
-

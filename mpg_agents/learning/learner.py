@@ -32,9 +32,10 @@ import json
 import math
 import signal
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -42,26 +43,32 @@ import torch
 from tqdm import tqdm
 
 import mpg_envs  # noqa: F401  (registers the envs)
+from mpg_agents.acting.device import resolve_device
+from mpg_agents.acting.episode_loop import Step, episode_steps
+from mpg_agents.acting.grasp_threshold import (
+    calibrate_q_star,
+    estimate_q_star,
+    format_q_star,
+    from_header,
+    starting_q_star,
+    write_calibration,
+)
+from mpg_agents.acting.q_function import MPGQFunction
+from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_agents.learning.actor_feed import train_with_actors
 from mpg_agents.learning.actor_pool import check_actor_backend
 from mpg_agents.learning.actors import build_agent, choose_action, make_explorer, make_training_env
 from mpg_agents.learning.demonstrations import collect_demonstrations
-from mpg_agents.acting.device import resolve_device
-from mpg_agents.acting.episode_loop import Step, episode_steps
 from mpg_agents.learning.exploration import Choice, linear_epsilon
-from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, format_q_star, from_header
-from mpg_agents.acting.grasp_threshold import starting_q_star, write_calibration
-from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
 from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
-from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
-from mpg_agents.learning.trials import TRIAL_COUNTERS, try_alternatives
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
-from mpg_agents.acting.weights import load_mpgnet_weights
+from mpg_agents.learning.trials import TRIAL_COUNTERS, try_alternatives
 from mpg_envs.simulation.objects import check_not_held_out
 
 
@@ -96,7 +103,9 @@ class Learner:
         self.stage = stage_for_env(stage) if isinstance(stage, str) else stage
         self.steps = config.steps if config.steps is not None else self.stage.iterations
         # Before the run folder exists: a held-out object set is refused with nothing written.
-        check_not_held_out(gym.spec(self.stage.env_id).kwargs.get("object_set", "blocks"), what=f"training on {self.stage.env_id}")
+        check_not_held_out(
+            gym.spec(self.stage.env_id).kwargs.get("object_set", "blocks"), what=f"training on {self.stage.env_id}"
+        )
         if config.actors > 1:
             check_actor_backend(config)  # Ray asked for and missing: refused before anything is written
         self.out = prepare_run_folder(out)
@@ -126,7 +135,12 @@ class Learner:
             self.net.branches[to].load_state_dict(self.net.branches[source].state_dict())
         self.target.load_state_dict(self.net.state_dict())
         self.replay = PrioritizedHeightmapReplayBuffer(
-            config.replay_capacity, env.observation_space, env.action_space, device=self.device, alpha=config.priority_alpha, seed=config.seed
+            config.replay_capacity,
+            env.observation_space,
+            env.action_space,
+            device=self.device,
+            alpha=config.priority_alpha,
+            seed=config.seed,
         )
         self.rng = np.random.default_rng(config.seed)
         self.explorer = make_explorer(self.policy, self.stage, self.primitives, self.rng, config)
@@ -159,16 +173,25 @@ class Learner:
         self.counters = Counters(**counters)
         if q_star is not None:  # the Q*_g the saved weights carry
             self.policy.set_q_star(q_star)
-        self.log(f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})"
-                 + (f" with changed settings: {'; '.join(changed)}" if changed else ""))
+        self.log(
+            f"resuming {self.out} at iteration {self.counters.iteration} (replay {self.replay.size()})"
+            + (f" with changed settings: {'; '.join(changed)}" if changed else "")
+        )
 
     def save_state(self) -> None:
         """Write weights and the full resumable state (atomically), the log's rows first."""
         if self._log is not None:
             self._log.sync()  # the state counts these rows: they must be on disk before it is
         save_run_state(
-            self.out, online=self.net, target=self.target, q_star=self.policy.q_star, optimizer=self.optimizer,
-            replay=self.replay, rng=self.rng, counters=asdict(self.counters), config=self._saved_config(),
+            self.out,
+            online=self.net,
+            target=self.target,
+            q_star=self.policy.q_star,
+            optimizer=self.optimizer,
+            replay=self.replay,
+            rng=self.rng,
+            counters=asdict(self.counters),
+            config=self._saved_config(),
         )
         self.policy.save_weights(self.out / "weights.safetensors", extra={"env_id": self.stage.env_id})
 
@@ -229,8 +252,14 @@ class Learner:
             self._calibration_env = make_training_env(self.stage, self.config, unwrapped.num_objects, self.device)
         try:
             measured = calibrate_q_star(
-                self.policy, self._calibration_env, episodes, self.config.seed, self.stage.calibration_quantile,
-                on_skip=lambda k, error: self.log(f"{self.stage.name}: calibration episode {k} skipped, no valid scene ({error})"),
+                self.policy,
+                self._calibration_env,
+                episodes,
+                self.config.seed,
+                self.stage.calibration_quantile,
+                on_skip=lambda k, error: self.log(
+                    f"{self.stage.name}: calibration episode {k} skipped, no valid scene ({error})"
+                ),
             )
         except (ValueError, RuntimeError) as exc:
             raise type(exc)(f"stage {self.stage.name}: {exc}") from exc
@@ -238,10 +267,12 @@ class Learner:
         self.policy.set_q_star(measured.q_star)
         c = self.counters
         write_calibration(self.out / "calibration.json", measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
-        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {measured.q_star:.4g} "
-                 f"in its scenes at iteration {c.iteration} "
-                 f"({len(measured.target_grasp_q)} of {measured.grasps} "
-                 f"greedy grasps took the target in {episodes} episodes)")
+        self.log(
+            f"{self.stage.name}: Q*_g {format_q_star(before)} -> {measured.q_star:.4g} "
+            f"in its scenes at iteration {c.iteration} "
+            f"({len(measured.target_grasp_q)} of {measured.grasps} "
+            f"greedy grasps took the target in {episodes} episodes)"
+        )
         c.calibrated_at = c.iteration
         self.save_state()
         return measured.q_star
@@ -257,9 +288,11 @@ class Learner:
             return self.policy.q_star
         before = self.policy.q_star
         self.policy.set_q_star(estimate_q_star(taken, self.stage.calibration_quantile))
-        self.log(f"{self.stage.name}: Q*_g {format_q_star(before)} -> {format_q_star(self.policy.q_star)} "
-                 f"from its last {len(taken)} "
-                 "greedy grasps that took the target")
+        self.log(
+            f"{self.stage.name}: Q*_g {format_q_star(before)} -> {format_q_star(self.policy.q_star)} "
+            f"from its last {len(taken)} "
+            "greedy grasps that took the target"
+        )
         self.save_state()
         return self.policy.q_star
 
@@ -268,8 +301,11 @@ class Learner:
         (a resumed run keeps them and collects none). Every primitive the net has a branch for
         is kept, frozen ones too (:func:`td_step` leaves them out); the counters stay at 0."""
         stats = collect_demonstrations(
-            self.env, self.config.demonstration_episodes, episode_seed(self.config.seed, 0, demonstration=True),
-            self.policy.branches, self.store,
+            self.env,
+            self.config.demonstration_episodes,
+            episode_seed(self.config.seed, 0, demonstration=True),
+            self.policy.branches,
+            self.store,
         )
         self.log(f"{self.stage.name}: {stats.summary()}")
         self.save_state()
@@ -325,8 +361,18 @@ class Learner:
             c.episode += 1
             self.calibrate_if_due()
 
-    def record(self, choice: Choice, reward: float, info: dict[str, Any], loss: float, t_decide: float, t_act: float,
-               learning: float, episode: int, done: bool) -> None:
+    def record(
+        self,
+        choice: Choice,
+        reward: float,
+        info: dict[str, Any],
+        loss: float,
+        t_decide: float,
+        t_act: float,
+        learning: float,
+        episode: int,
+        done: bool,
+    ) -> None:
         """Count and log an iteration of episode ``episode`` (``learning``: when its learning began)."""
         c = self.counters
         c.iteration += 1
@@ -341,8 +387,20 @@ class Learner:
             c.window_grasps = c.window_target_grasps = 0
         assert self._log is not None
         self._log.record(
-            IterationRecord(c.iteration, episode, choice.primitive, choice.how, reward, loss, self.epsilon(), info,
-                            t_decide, t_act, t_decide + t_act + time.perf_counter() - learning, rate)
+            IterationRecord(
+                c.iteration,
+                episode,
+                choice.primitive,
+                choice.how,
+                reward,
+                loss,
+                self.epsilon(),
+                info,
+                t_decide,
+                t_act,
+                t_decide + t_act + time.perf_counter() - learning,
+                rate,
+            )
         )
         if done:
             self._log.episode_end(c.iteration, info)
@@ -372,7 +430,9 @@ class Learner:
     def act(self, obs: Mapping[str, Any]) -> Choice:
         """The action to take: the policy's decision, then exploration and the training aids."""
         c = self.counters
-        return choose_action(self.policy, self.explorer, self.stage, obs, self.epsilon(), c.pushes_in_episode, c.failed_grasps_in_a_row)
+        return choose_action(
+            self.policy, self.explorer, self.stage, obs, self.epsilon(), c.pushes_in_episode, c.failed_grasps_in_a_row
+        )
 
     def learn_owed(self, units: int) -> float:
         """The gradient steps ``units`` env steps earn at ``replay_ratio`` (the fraction carried
@@ -390,7 +450,13 @@ class Learner:
             return float("nan")
         batch = self.replay.sample(min(self.config.batch_size, self.replay.size()))
         result = td_step(
-            self.policy.q_net, self.target_q, self.optimizer, batch, self.config.step_config(), self.active_branches(), self.replay,
+            self.policy.q_net,
+            self.target_q,
+            self.optimizer,
+            batch,
+            self.config.step_config(),
+            self.active_branches(),
+            self.replay,
         )
         if result.trained:
             self.counters.gradient_steps += 1

@@ -16,16 +16,17 @@ are skipped on a re-run.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, as_record, from_header
+from mpg_agents.acting.weights import read_checkpoint_header
 from mpg_agents.learning.learner import Learner
 from mpg_agents.learning.run_folder import RunLock, prepare_run_folder
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.training_stages import TRAINING_STAGES, TrainingStage
-from mpg_agents.acting.weights import read_checkpoint_header
 from mpg_envs.files import write_text_whole
 
 
@@ -38,7 +39,11 @@ class PipelineConfig:
 
 
 def run_pipeline(
-    cfg: PipelineConfig, out: str | Path, init: str | None = None, log: Callable[[str], None] = print, resume_anyway: bool = False,
+    cfg: PipelineConfig,
+    out: str | Path,
+    init: str | None = None,
+    log: Callable[[str], None] = print,
+    resume_anyway: bool = False,
 ) -> dict[str, Any]:
     """Run the stages in order; returns ``{stage: summary}`` plus the final weights and their Q*_g.
 
@@ -50,7 +55,9 @@ def run_pipeline(
         return _run_stages(cfg, out, init, log, resume_anyway)
 
 
-def _run_stages(cfg: PipelineConfig, out: Path, init: str | None, log: Callable[[str], None], resume_anyway: bool) -> dict[str, Any]:
+def _run_stages(
+    cfg: PipelineConfig, out: Path, init: str | None, log: Callable[[str], None], resume_anyway: bool
+) -> dict[str, Any]:
     summary: dict[str, Any] = {}
     weights = init
     discriminator: str | None = cfg.base.discriminator

@@ -5,8 +5,8 @@ from __future__ import annotations
 import csv
 import io
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -44,7 +44,9 @@ def read_progress(path: str | Path) -> dict[str, np.ndarray]:
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise ValueError(f"{path} is not a text CSV file (byte {exc.start} is not UTF-8); mpg-train writes progress.csv as text") from None
+        raise ValueError(
+            f"{path} is not a text CSV file (byte {exc.start} is not UTF-8); mpg-train writes progress.csv as text"
+        ) from None
     try:
         rows = list(csv.reader(io.StringIO(text, newline="")))
     except csv.Error as exc:
@@ -54,17 +56,23 @@ def read_progress(path: str | Path) -> dict[str, np.ndarray]:
     header = rows[0]
     missing = [c for c in PLOTTED_COLUMNS if c not in header]
     if missing:
-        raise ValueError(f"{path} lacks the columns {', '.join(missing)} that the curves are drawn from "
-                         f"(its header: {','.join(header)[:80]!r}); mpg-train's progress.csv has them")
+        raise ValueError(
+            f"{path} lacks the columns {', '.join(missing)} that the curves are drawn from "
+            f"(its header: {','.join(header)[:80]!r}); mpg-train's progress.csv has them"
+        )
     body = rows[1:]
     if body and len(body[-1]) < len(header) and not text.endswith(("\n", "\r")):
-        warnings.warn(f"{path} line {len(rows)}: the last row is cut short (a training still writing it?); left out", stacklevel=2)
+        warnings.warn(
+            f"{path} line {len(rows)}: the last row is cut short (a training still writing it?); left out", stacklevel=2
+        )
         body = body[:-1]
     if not body:
         raise ValueError(f"{path} has no iterations yet")
     for n, row in enumerate(body, start=2):
         if len(row) != len(header):
-            raise ValueError(f"{path} line {n}: {len(row)} fields where the header has {len(header)} (a truncated or damaged row)")
+            raise ValueError(
+                f"{path} line {n}: {len(row)} fields where the header has {len(header)} (a truncated or damaged row)"
+            )
     out: dict[str, np.ndarray] = {}
     for k, key in enumerate(header):
         values = [r[k] for r in body]
@@ -81,8 +89,10 @@ def read_progress(path: str | Path) -> dict[str, np.ndarray]:
     iterations = out["iteration"]
     bad = np.flatnonzero(~np.isfinite(iterations) | (iterations != np.round(iterations)) | (iterations < 0))
     if bad.size:
-        raise ValueError(f"{path} line {int(bad[0]) + 2}: iteration is {body[int(bad[0])][header.index('iteration')]!r}, "
-                         "not a whole number >= 0")
+        raise ValueError(
+            f"{path} line {int(bad[0]) + 2}: iteration is {body[int(bad[0])][header.index('iteration')]!r}, "
+            "not a whole number >= 0"
+        )
     return out
 
 
@@ -110,8 +120,14 @@ def check_image_path(out: str | Path | None) -> None:
         return
     valid, suffix = image_suffixes(), Path(out).suffix
     if suffix.lower() not in valid:
-        said = f"its suffix {suffix!r} names no format the curves are written in" if suffix else "it has no suffix to name the picture's format"
-        raise ValueError(f"{str(out)!r}: {said}; end it with one of {', '.join(valid)} (e.g. {Path(out).stem or 'curves'}.png)")
+        said = (
+            f"its suffix {suffix!r} names no format the curves are written in"
+            if suffix
+            else "it has no suffix to name the picture's format"
+        )
+        raise ValueError(
+            f"{str(out)!r}: {said}; end it with one of {', '.join(valid)} (e.g. {Path(out).stem or 'curves'}.png)"
+        )
 
 
 def image_suffixes() -> tuple[str, ...]:
@@ -229,11 +245,16 @@ def plot_run(run: str | Path, out: str | Path | None = None, window: int = 200) 
     shown = min(window, longest)  # a run shorter than the window: one window of what there is
     note = "" if shown == window else f"\n(the run is shorter than the {window}-iteration window)"
     axes[0, 0].set(
-        title=f"target grasp success per {shown} iterations{note}", xlabel="iteration", ylabel="success rate", ylim=(-0.02, 1.02)
+        title=f"target grasp success per {shown} iterations{note}",
+        xlabel="iteration",
+        ylabel="success rate",
+        ylim=(-0.02, 1.02),
     )
     axes[0, 1].set(title="Huber loss (moving average)", xlabel="iteration", ylabel="loss")
     if no_loss:
-        axes[0, 1].text(0.5, 0.5, "no training steps yet in " + ", ".join(no_loss), ha="center", transform=axes[0, 1].transAxes)
+        axes[0, 1].text(
+            0.5, 0.5, "no training steps yet in " + ", ".join(no_loss), ha="center", transform=axes[0, 1].transAxes
+        )
     axes[1, 0].set(title="exploration epsilon", xlabel="iteration", ylabel="epsilon")
     axes[1, 1].set(title="motions per finished episode", xlabel="iteration (episode end)", ylabel="motions")
     for ax in axes.flat:
@@ -276,10 +297,18 @@ def plot_compare(runs: Sequence[tuple[str, str | Path]], stage: str, out: str | 
         grasps.plot(*window_success(data, window), marker="o", label=label)
         if "is_success" in data:
             episodes.plot(*window_episode_success(data, window), marker="o", label=label)
-    grasps.set(title=f"{stage}: target grasp success per {window} iterations", xlabel="iteration",
-               ylabel="target grasps / grasps", ylim=(-0.02, 1.02))
-    episodes.set(title=f"{stage}: training episodes that took the target, per {window} it.",
-                 xlabel="iteration", ylabel="successful episodes / episodes", ylim=(-0.02, 1.02))
+    grasps.set(
+        title=f"{stage}: target grasp success per {window} iterations",
+        xlabel="iteration",
+        ylabel="target grasps / grasps",
+        ylim=(-0.02, 1.02),
+    )
+    episodes.set(
+        title=f"{stage}: training episodes that took the target, per {window} it.",
+        xlabel="iteration",
+        ylabel="successful episodes / episodes",
+        ylim=(-0.02, 1.02),
+    )
     for ax in (grasps, episodes):
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
@@ -293,8 +322,13 @@ def plot_compare(runs: Sequence[tuple[str, str | Path]], stage: str, out: str | 
     return out
 
 
-def plot_runs(runs: Sequence[str | Path], out: str | Path | None = None, window: int = 200, stage: str | None = None,
-              labels: Sequence[str] | None = None) -> Path:
+def plot_runs(
+    runs: Sequence[str | Path],
+    out: str | Path | None = None,
+    window: int = 200,
+    stage: str | None = None,
+    labels: Sequence[str] | None = None,
+) -> Path:
     """``mpg-plot``: one run or pipeline (:func:`plot_run`), or ``stage`` of several runs on one
     axis (:func:`plot_compare`, labelled by ``labels`` or the folder names); returns the picture's path."""
     if not stage and len(runs) == 1:

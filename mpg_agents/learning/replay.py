@@ -286,9 +286,7 @@ class PrioritizedHeightmapReplayBuffer:
         if self.size() == 0:
             raise ValueError("cannot sample from an empty replay buffer")
         cumulative = np.cumsum(self.priorities[: self.size()].reshape(-1) ** self.alpha)
-        draws = (self._rng.random(batch_size) if self._rng is not None else np.random.random(batch_size)) * cumulative[
-            -1
-        ]
+        draws = (self._rng.random(batch_size) if self._rng is not None else np.random.random(batch_size)) * cumulative[-1]
         flat = np.minimum(np.searchsorted(cumulative, draws, side="right"), cumulative.size - 1)
         return self.samples_at(flat, env)
 
@@ -309,8 +307,14 @@ class PrioritizedHeightmapReplayBuffer:
         )
 
     def batch(
-        self, obs: dict[str, np.ndarray], actions: np.ndarray, next_obs: dict[str, np.ndarray], dones: np.ndarray,
-        rewards: np.ndarray, indices: np.ndarray, env: Any = None,
+        self,
+        obs: dict[str, np.ndarray],
+        actions: np.ndarray,
+        next_obs: dict[str, np.ndarray],
+        dones: np.ndarray,
+        rewards: np.ndarray,
+        indices: np.ndarray,
+        env: Any = None,
     ) -> ReplaySamples:
         """Decoded arrays as the sample type, on the buffer's device (the SB3 adapter returns SB3's type)."""
         if env is not None:
@@ -371,7 +375,14 @@ class PrioritizedHeightmapReplayBuffer:
 
 def sb3_dict_buffer_nbytes(buffer: Any) -> int:
     """Bytes SB3's own ``DictReplayBuffer`` holds (its preallocated arrays), for comparisons."""
-    arrays = (*buffer.observations.values(), *buffer.next_observations.values(), buffer.actions, buffer.rewards, buffer.dones, buffer.timeouts)
+    arrays = (
+        *buffer.observations.values(),
+        *buffer.next_observations.values(),
+        buffer.actions,
+        buffer.rewards,
+        buffer.dones,
+        buffer.timeouts,
+    )
     return sum(a.nbytes for a in arrays)
 
 

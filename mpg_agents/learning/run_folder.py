@@ -20,8 +20,9 @@ import json
 import os
 import socket
 import time
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from mpg_envs.files import WriteFailed, check_folder_writable
 
@@ -65,14 +66,18 @@ def prepare_run_folder(out: str | Path) -> Path:
     if out.is_dir() and not is_run_folder(out):
         held = sorted(p.name + ("/" if p.is_dir() else "") for p in out.iterdir())
         shown = ", ".join(held[:5]) + (f" and {len(held) - 5} more" if len(held) > 5 else "")
-        raise ValueError(f"run folder {str(out)!r} is not empty and holds no run of this project ({shown}); "
-                         "a run would overwrite them: give a new or empty folder, or an earlier run's folder to resume it")
+        raise ValueError(
+            f"run folder {str(out)!r} is not empty and holds no run of this project ({shown}); "
+            "a run would overwrite them: give a new or empty folder, or an earlier run's folder to resume it"
+        )
     try:
         check_folder_writable(out)  # a read-only folder or disk, /proc: refused before any work
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # WriteFailed names why
         reason = exc.reason if isinstance(exc, WriteFailed) else exc.strerror or str(exc)
-        raise ValueError(f"run folder {str(out)!r} cannot be written ({reason}); give --out a folder you may write in") from None
+        raise ValueError(
+            f"run folder {str(out)!r} cannot be written ({reason}); give --out a folder you may write in"
+        ) from None
     return out
 
 
@@ -104,7 +109,9 @@ class RunLock:
             ) from None
         handle.seek(0)
         handle.truncate()
-        handle.write(json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}))
+        handle.write(
+            json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+        )
         handle.flush()
         _HELD[self.key] = [handle, 1]
 
@@ -121,7 +128,7 @@ class RunLock:
             del _HELD[self.key]
             held[0].close()  # closing the descriptor drops the flock
 
-    def __enter__(self) -> "RunLock":
+    def __enter__(self) -> RunLock:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -162,12 +169,16 @@ def check_resume(out: Path, saved: Mapping[str, Any], asked: Mapping[str, Any], 
     saved_env = saved.get("stage", {}).get("env_id", saved.get("env_id"))
     asked_env = asked.get("stage", {}).get("env_id")
     if saved_env != asked_env or saved.get("variant") != asked.get("variant"):
-        raise ValueError(f"{out} holds a run of {saved_env} ({saved.get('variant')}); "
-                         f"asked for {asked_env} ({asked.get('variant')}): use another --out")
+        raise ValueError(
+            f"{out} holds a run of {saved_env} ({saved.get('variant')}); "
+            f"asked for {asked_env} ({asked.get('variant')}): use another --out"
+        )
     changed = resume_differences(saved, asked)
     if changed and not resume_anyway:
-        raise ValueError(f"{out} holds a run with other settings ({'; '.join(changed)}): give the run's own settings, "
-                         "another --out, or --resume-anyway to continue it with the new ones (the record keeps the new ones)")
+        raise ValueError(
+            f"{out} holds a run with other settings ({'; '.join(changed)}): give the run's own settings, "
+            "another --out, or --resume-anyway to continue it with the new ones (the record keeps the new ones)"
+        )
     return changed
 
 

@@ -24,9 +24,9 @@ import torch
 from safetensors.torch import load_file, save
 
 from mpg_agents.acting.grasp_threshold import from_header
-from mpg_agents.network.mpgnet import MPGNet
-from mpg_agents.learning.replay import Frame, PrioritizedHeightmapReplayBuffer
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
+from mpg_agents.learning.replay import Frame, PrioritizedHeightmapReplayBuffer
+from mpg_agents.network.mpgnet import MPGNet
 from mpg_envs.files import WriteFailed, write_bytes_whole, write_text_whole, written_whole
 
 STATE_FORMAT = "mpg-train-state-v1"
@@ -73,7 +73,9 @@ def save_replay(buffer: PrioritizedHeightmapReplayBuffer, path: Path) -> None:
         return frames[id(frame)]
 
     obs_idx = np.array([[index(f) for f in row] for row in buffer.obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
-    next_idx = np.array([[index(f) for f in row] for row in buffer.next_obs_frames[:n]], dtype=np.int64).reshape(n, buffer.n_envs)
+    next_idx = np.array([[index(f) for f in row] for row in buffer.next_obs_frames[:n]], dtype=np.int64).reshape(
+        n, buffer.n_envs
+    )
     arrays: dict[str, Any] = {  # np.savez's keywords
         "obs_idx": obs_idx,
         "next_idx": next_idx,

@@ -17,8 +17,9 @@ On a sampled batch (paper, Sections III-C and Training Details):
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import torch

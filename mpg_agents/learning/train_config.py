@@ -9,9 +9,10 @@ What a stage trains (env, branches, curriculum, alternation, ...) is its
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from numbers import Integral, Real
-from typing import Any, Callable
+from typing import Any
 
 from mpg_agents.acting.grasp_threshold import UNCALIBRATED, check_in_range
 from mpg_agents.acting.seeds import check_seed
@@ -86,7 +87,7 @@ class TrainConfig:
         return data
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "TrainConfig":
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         """The config a :meth:`to_dict` or a ``--config`` file describes.
 
         Raises:
@@ -119,7 +120,9 @@ def _integer(name: str, value: Any, low: int, optional: bool = False) -> None:
         raise ValueError(f"training setting {name} must be an integer >= {low}{none}, got {value!r}")
 
 
-def _number(name: str, value: Any, low: float, high: float, valid: str, optional: bool = False, above_low: bool = False) -> None:
+def _number(
+    name: str, value: Any, low: float, high: float, valid: str, optional: bool = False, above_low: bool = False
+) -> None:
     """``value`` a finite real number in ``[low, high]``, or ``(low, high]`` with ``above_low``
     (not a bool, not a string). A strict bound, not ``low = math.ulp(0.0)``: a process that
     flushes denormals to zero reads the smallest positive float as 0 and would let 0 pass."""
@@ -132,8 +135,12 @@ def _number(name: str, value: Any, low: float, high: float, valid: str, optional
 
 def _pair(name: str, value: Any, valid: str, ok: Callable[[float, float], bool]) -> None:
     """``value`` two real numbers that pass ``ok``."""
-    numbers = (not isinstance(value, (str, bytes)) and hasattr(value, "__len__") and len(value) == 2
-               and all(isinstance(v, Real) and not isinstance(v, bool) for v in value))
+    numbers = (
+        not isinstance(value, (str, bytes))
+        and hasattr(value, "__len__")
+        and len(value) == 2
+        and all(isinstance(v, Real) and not isinstance(v, bool) for v in value)
+    )
     if not numbers or not ok(float(value[0]), float(value[1])):
         raise ValueError(f"training setting {name} must be {valid}, got {value!r}")
 
@@ -162,13 +169,19 @@ def check_train_config(cfg: TrainConfig) -> None:
     _integer("replay_capacity", cfg.replay_capacity, 1)
     _number("priority_alpha", cfg.priority_alpha, 0.0, inf, "a finite number >= 0")
     _integer("target_update_every", cfg.target_update_every, 1)
-    _number("replay_ratio", cfg.replay_ratio, 0.0, inf, "a positive finite number (gradient steps per env step)", above_low=True)
+    _number(
+        "replay_ratio", cfg.replay_ratio, 0.0, inf, "a positive finite number (gradient steps per env step)", above_low=True
+    )
     if not isinstance(cfg.grasp_symmetry, bool):
         raise ValueError(f"training setting grasp_symmetry must be true or false, got {cfg.grasp_symmetry!r}")
     _number("max_grad_norm", cfg.max_grad_norm, 0.0, inf, "a positive finite number", optional=True, above_low=True)
     if cfg.q_bounds is not None:
-        _pair("q_bounds", cfg.q_bounds, "two finite numbers [low, high] with low < high",
-              lambda a, b: math.isfinite(a) and math.isfinite(b) and a < b)
+        _pair(
+            "q_bounds",
+            cfg.q_bounds,
+            "two finite numbers [low, high] with low < high",
+            lambda a, b: math.isfinite(a) and math.isfinite(b) and a < b,
+        )
     _integer("heuristic_after_failed_grasps", cfg.heuristic_after_failed_grasps, 0)
     check_in_range(cfg.q_star, "training setting q_star (None: the starting weights')")
     _integer("demonstration_episodes", cfg.demonstration_episodes, 0)
@@ -180,10 +193,17 @@ def check_train_config(cfg: TrainConfig) -> None:
     _integer("actors", cfg.actors, 1)
     _integer("weights_refresh", cfg.weights_refresh, 1)
     if cfg.actor_backend not in ACTOR_BACKENDS:
-        raise ValueError(f"training setting actor_backend must be one of {', '.join(ACTOR_BACKENDS)}, got {cfg.actor_backend!r}")
-    if cfg.ray_address is not None and (not isinstance(cfg.ray_address, str) or cfg.actors == 1 or cfg.actor_backend == "processes"):
-        raise ValueError(f"training setting ray_address is the Ray cluster the actors run on: a string with actors > 1 and "
-                         f"actor_backend 'ray' or 'auto', got {cfg.ray_address!r} with " f"actors={cfg.actors}, actor_backend={cfg.actor_backend!r}")
+        raise ValueError(
+            f"training setting actor_backend must be one of {', '.join(ACTOR_BACKENDS)}, got {cfg.actor_backend!r}"
+        )
+    if cfg.ray_address is not None and (
+        not isinstance(cfg.ray_address, str) or cfg.actors == 1 or cfg.actor_backend == "processes"
+    ):
+        raise ValueError(
+            f"training setting ray_address is the Ray cluster the actors run on: a string with actors > 1 and "
+            f"actor_backend 'ray' or 'auto', got {cfg.ray_address!r} with "
+            f"actors={cfg.actors}, actor_backend={cfg.actor_backend!r}"
+        )
     if not isinstance(cfg.net_config, dict):
         raise ValueError(f"training setting net_config must be a table of MPGNetConfig fields, got {cfg.net_config!r}")
 

@@ -16,15 +16,29 @@ import csv
 import io
 import os
 import warnings
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from mpg_envs.files import write_text_whole
 
 CSV_COLUMNS = [
-    "iteration", "episode", "primitive", "how", "reward", "loss", "epsilon", "grasp_success", "target_grasped",
-    "is_success", "num_motions", "grasp_success_rate", "decide_s", "act_s", "iteration_s",
+    "iteration",
+    "episode",
+    "primitive",
+    "how",
+    "reward",
+    "loss",
+    "epsilon",
+    "grasp_success",
+    "target_grasped",
+    "is_success",
+    "num_motions",
+    "grasp_success_rate",
+    "decide_s",
+    "act_s",
+    "iteration_s",
 ]
 
 
@@ -48,9 +62,20 @@ class IterationRecord:
     def csv_row(self) -> list[Any]:
         info, rate = self.info, self.grasp_success_rate
         return [
-            self.iteration, self.episode, self.primitive, self.how, f"{self.reward:.3f}", f"{self.loss:.5f}",
-            f"{self.epsilon:.4f}", int(info["grasp_success"]), int(info["target_grasped"]), int(info["is_success"]),
-            info["num_motions"], "" if rate is None else f"{rate:.4f}", f"{self.decide_s:.3f}", f"{self.act_s:.3f}",
+            self.iteration,
+            self.episode,
+            self.primitive,
+            self.how,
+            f"{self.reward:.3f}",
+            f"{self.loss:.5f}",
+            f"{self.epsilon:.4f}",
+            int(info["grasp_success"]),
+            int(info["target_grasped"]),
+            int(info["is_success"]),
+            info["num_motions"],
+            "" if rate is None else f"{rate:.4f}",
+            f"{self.decide_s:.3f}",
+            f"{self.act_s:.3f}",
             f"{self.iteration_s:.3f}",
         ]
 
@@ -75,8 +100,11 @@ def rewind_progress(path: str | Path, iteration: int) -> int:
                     rows[it] = row
     missing = [it for it in range(1, iteration + 1) if it not in rows]
     if missing:
-        warnings.warn(f"{path} lacks the rows of {len(missing)} iterations ({missing[:5]}{' ...' if len(missing) > 5 else ''}) "
-                      f"that its saved state (iteration {iteration}) has done; they cannot be written again", stacklevel=2)
+        warnings.warn(
+            f"{path} lacks the rows of {len(missing)} iterations ({missing[:5]}{' ...' if len(missing) > 5 else ''}) "
+            f"that its saved state (iteration {iteration}) has done; they cannot be written again",
+            stacklevel=2,
+        )
     text = io.StringIO()
     writer = csv.writer(text)
     writer.writerow(CSV_COLUMNS)
@@ -128,7 +156,7 @@ class TrainingLog:
         self._file.close()
         self.writer.close()
 
-    def __enter__(self) -> "TrainingLog":
+    def __enter__(self) -> TrainingLog:
         return self
 
     def __exit__(self, *exc: Any) -> None:

@@ -20,9 +20,9 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Sequence
 
 from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
 
@@ -63,8 +63,19 @@ class RunSpec:
 
     def command(self) -> list[str]:
         """The ``mpg-train`` command line of this run."""
-        return [sys.executable, "-m", "mpg_agents.cli", "--pipeline", "--config", self.config, "--out", str(self.folder),
-                "--seed", str(self.seed), *RUNS[self.run]]
+        return [
+            sys.executable,
+            "-m",
+            "mpg_agents.cli",
+            "--pipeline",
+            "--config",
+            self.config,
+            "--out",
+            str(self.folder),
+            "--seed",
+            str(self.seed),
+            *RUNS[self.run],
+        ]
 
     @property
     def finished(self) -> bool:
@@ -96,7 +107,9 @@ def train_run(spec: RunSpec) -> RunResult:
     return RunResult(spec.run, spec.seed, str(spec.folder), status, round(time.perf_counter() - start, 1))
 
 
-def plan_runs(runs: Sequence[str], seeds: Sequence[int], config: str | Path = DEFAULT_CONFIG, out: str | Path = "runs") -> list[RunSpec]:
+def plan_runs(
+    runs: Sequence[str], seeds: Sequence[int], config: str | Path = DEFAULT_CONFIG, out: str | Path = "runs"
+) -> list[RunSpec]:
     """Every (run, seed) pair as a :class:`RunSpec`, seeds innermost.
 
     Raises:
@@ -130,8 +143,12 @@ def _int_list(text: str) -> list[int]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``mpg-train-runs``: train several runs as Ray tasks; prints one JSON object at the end."""
-    parser = argparse.ArgumentParser(description="Train MPGNet, its ablations and the learned baselines, " "each for several seeds, as Ray tasks (resumable).")
-    parser.add_argument("--runs", default="mpgnet,grasp-only", help=f"comma-separated, of {', '.join(RUNS)} (default mpgnet,grasp-only)")
+    parser = argparse.ArgumentParser(
+        description="Train MPGNet, its ablations and the learned baselines, each for several seeds, as Ray tasks (resumable)."
+    )
+    parser.add_argument(
+        "--runs", default="mpgnet,grasp-only", help=f"comma-separated, of {', '.join(RUNS)} (default mpgnet,grasp-only)"
+    )
     parser.add_argument("--seeds", type=_int_list, default=[0, 1], help="comma-separated training seeds (default 0,1)")
     parser.add_argument("--config", default=str(DEFAULT_CONFIG), help="the training config every run shares")
     parser.add_argument("--out", default="runs", help="one folder <run>-s<seed> per run under this")

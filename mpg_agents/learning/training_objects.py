@@ -38,18 +38,25 @@ def object_set_entries(value: Any, what: str = "object_set") -> list[tuple[str, 
     """
     items = [value] if isinstance(value, str) else list(value) if isinstance(value, (list, tuple)) else None
     if not items or not all(isinstance(item, str) for item in items):
-        raise ValueError(f"{what}: object_set must be a set name or a non-empty list of 'name' or 'name:seed' strings, got {value!r}")
+        raise ValueError(
+            f"{what}: object_set must be a set name or a non-empty list of 'name' or 'name:seed' strings, got {value!r}"
+        )
     valid = ("blocks", *PROCEDURAL_SETS)
     entries = []
     for item in items:
         name, _, seed_text = item.partition(":")
         if name not in valid:
-            raise ValueError(f"{what}: object set {name!r} cannot be trained on; " f"valid: {list(valid)} (held-out test sets are refused)")
+            raise ValueError(
+                f"{what}: object set {name!r} cannot be trained on; valid: {list(valid)} (held-out test sets are refused)"
+            )
         seed = None
         if seed_text:
             if not seed_text.isdigit() or int(seed_text) not in FAMILY_SEED_RANGES["train"]:
                 train = FAMILY_SEED_RANGES["train"]
-                raise ValueError(f"{what}: {item!r}: a training set's seed must be an integer " f"in [{train.start}, {train.stop - 1}], got {seed_text!r}")
+                raise ValueError(
+                    f"{what}: {item!r}: a training set's seed must be an integer "
+                    f"in [{train.start}, {train.stop - 1}], got {seed_text!r}"
+                )
             seed = int(seed_text)
         entries.append((name, seed))
     return entries
@@ -65,7 +72,10 @@ def stage_env_config(options: dict[str, Any], reward: Any = None) -> EnvConfig |
     """
     table = options.get("config", {})
     if not isinstance(table, dict) or "reward" in table:
-        raise ValueError("env_options config must be a table of EnvConfig fields other " f"than reward (a stage's reward is its own), got {table!r}")
+        raise ValueError(
+            "env_options config must be a table of EnvConfig fields other "
+            f"than reward (a stage's reward is its own), got {table!r}"
+        )
     if not table and not reward:
         return None
     base = config_of(dict(table))

@@ -12,18 +12,18 @@ table holds only how the agent trains on them.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 from mpg_agents.acting.coordination import check_coordination
+from mpg_agents.learning.training_objects import OBS_MODES, STAGE_ENV_OPTIONS, object_set_entries, stage_env_config
 from mpg_envs.grid.actions import check_primitives
-from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
-from mpg_envs.settings_fields import check_known_fields
 from mpg_envs.perception.visual_randomization import VisualRandomization
 from mpg_envs.scenes.arranged import ArrangedScenes
-from mpg_agents.learning.training_objects import OBS_MODES, STAGE_ENV_OPTIONS, object_set_entries, stage_env_config
-
+from mpg_envs.settings_fields import check_known_fields
+from mpg_envs.tasks.rewards import RewardConfig
 
 MAX_MOVE_TRIALS = 8
 """The most move trials per move (each costs about a move's simulation)."""
@@ -132,14 +132,18 @@ class TrainingStage:
     env_options: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self) -> None:
-        options = dict(self.env_options.items() if isinstance(self.env_options, Mapping) else (tuple(p) for p in self.env_options))
+        options = dict(
+            self.env_options.items() if isinstance(self.env_options, Mapping) else (tuple(p) for p in self.env_options)
+        )
         unknown = sorted(set(options) - set(STAGE_ENV_OPTIONS))
         if unknown:
             raise ValueError(f"stage {self.name}: env_options takes {list(STAGE_ENV_OPTIONS)}, got {unknown}")
         if "object_set" in options:
             entries = object_set_entries(options["object_set"], f"stage {self.name}")
-            options["object_set"] = entries[0][0] if len(entries) == 1 and entries[0][1] is None else tuple(
-                name if seed is None else f"{name}:{seed}" for name, seed in entries
+            options["object_set"] = (
+                entries[0][0]
+                if len(entries) == 1 and entries[0][1] is None
+                else tuple(name if seed is None else f"{name}:{seed}" for name, seed in entries)
             )
         if "visual_randomization" in options:
             VisualRandomization.from_option(options["visual_randomization"])  # raises naming what is wrong
@@ -148,7 +152,9 @@ class TrainingStage:
         if "config" in options:
             stage_env_config(options)  # raises naming what is wrong
         if options.get("obs_mode", "raycast") not in OBS_MODES:
-            raise ValueError(f"stage {self.name}: env_options obs_mode must be one of {list(OBS_MODES)}, got {options['obs_mode']!r}")
+            raise ValueError(
+                f"stage {self.name}: env_options obs_mode must be one of {list(OBS_MODES)}, got {options['obs_mode']!r}"
+            )
         object.__setattr__(self, "env_options", tuple(sorted(options.items())))
         for name in ("rival_trials", "covered_grasp_trials"):
             if not isinstance(getattr(self, name), bool):
@@ -161,7 +167,9 @@ class TrainingStage:
         known = {f.name for f in fields(RewardConfig)}
         for pair in pairs:
             if len(pair) != 2 or pair[0] not in known:
-                raise ValueError(f"stage {self.name}: reward takes RewardConfig fields {sorted(known)} with values, got {pair}")
+                raise ValueError(
+                    f"stage {self.name}: reward takes RewardConfig fields {sorted(known)} with values, got {pair}"
+                )
         object.__setattr__(self, "reward", tuple(sorted(pairs)))
         if self.branches is not None:
             object.__setattr__(self, "branches", check_primitives(self.branches))
@@ -184,9 +192,15 @@ class TrainingStage:
         if self.finish_trainable:
             object.__setattr__(self, "finish_trainable", check_primitives(self.finish_trainable))
         if not 0 <= self.finish_iterations < self.iterations:
-            raise ValueError(f"stage {self.name}: finish_iterations must be in [0, " f"iterations={self.iterations}), got {self.finish_iterations}")
+            raise ValueError(
+                f"stage {self.name}: finish_iterations must be in [0, "
+                f"iterations={self.iterations}), got {self.finish_iterations}"
+            )
         if bool(self.finish_iterations) != bool(self.finish_trainable):
-            raise ValueError(f"stage {self.name}: finish_iterations and finish_trainable go " f"together (got {self.finish_iterations}, {self.finish_trainable})")
+            raise ValueError(
+                f"stage {self.name}: finish_iterations and finish_trainable go "
+                f"together (got {self.finish_iterations}, {self.finish_trainable})"
+            )
         if self.trainable is not None:
             object.__setattr__(self, "trainable", check_primitives(self.trainable))
         if self.objects is not None:
@@ -200,7 +214,9 @@ class TrainingStage:
         if not 0.0 <= self.calibration_quantile <= 1.0:
             raise ValueError(f"stage {self.name}: calibration_quantile must be in [0, 1], got {self.calibration_quantile}")
         if self.calibrate_every < 0 or (self.calibrate_every and not self.calibration_episodes):
-            raise ValueError(f"stage {self.name}: calibrate_every must be 0, or >= 1 " f"with calibration_episodes, got {self.calibrate_every}")
+            raise ValueError(
+                f"stage {self.name}: calibrate_every must be 0, or >= 1 with calibration_episodes, got {self.calibrate_every}"
+            )
         if self.calibration_episodes and self.calibrates_q_star:
             raise ValueError(f"stage {self.name}: calibrates_q_star and calibration_episodes both set Q*_g; choose one")
         if self.alternate_every < 0 or self.iterations < 1:
@@ -245,7 +261,7 @@ class TrainingStage:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "TrainingStage":
+    def from_dict(cls, data: Mapping[str, Any]) -> TrainingStage:
         check_known_fields(cls, data, "training stage settings")
         kwargs: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**kwargs)
@@ -257,7 +273,11 @@ TRAINING_STAGES: tuple[TrainingStage, ...] = (
     TrainingStage("Stage3", "MPG-Stage3-v0", trainable=("move",), objects=(2, 4), uses_discriminator=True, iterations=600),
     TrainingStage("Stage4", "MPG-Stage4-v0", trainable=("push",), uses_discriminator=True, push_budget=5, iterations=600),
     TrainingStage(
-        "Stage5", "MPG-Stage5-v0", trainable=("move", "push", "grasp"), alternate_every=50, uses_discriminator=True,
+        "Stage5",
+        "MPG-Stage5-v0",
+        trainable=("move", "push", "grasp"),
+        alternate_every=50,
+        uses_discriminator=True,
         iterations=1500,
     ),
 )
@@ -300,7 +320,8 @@ def without_alternation(stages: Sequence[TrainingStage]) -> tuple[TrainingStage,
         _without_unused_calibration(
             replace(s, alternate_every=0, alternate_shares=(), finish_iterations=0, finish_trainable=(), coordination="max_q")
         )
-        if s.alternate_every or s.finish_iterations else s
+        if s.alternate_every or s.finish_iterations
+        else s
         for s in stages
     )
 
@@ -331,7 +352,9 @@ WITHOUT_MOVE_VERSUS_PUSH = {"uncover_max_q": "workflow", "grasp_first_uncover_ma
 """The rule a learned baseline trains with in place of MPGNet's move-versus-push rules."""
 
 
-def _learned_baseline(stages: Sequence[TrainingStage], keep: Sequence[tuple[str, ...]], **last: Any) -> tuple[TrainingStage, ...]:
+def _learned_baseline(
+    stages: Sequence[TrainingStage], keep: Sequence[tuple[str, ...]], **last: Any
+) -> tuple[TrainingStage, ...]:
     """The earlier stages that train only ``keep``'s branch sets, then the last stage changed by
     ``last`` (no branch initialisation, no rival trials, no move-versus-push reward), with the
     whole budget of ``stages``."""

@@ -23,7 +23,8 @@ demonstrations: a simulator's counterfactual, not the paper's pure RL; off by de
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -94,8 +95,14 @@ def run_trials(env: Any, obs: Mapping[str, Any], actions: list[int], store: Stor
 
 
 def try_alternatives(
-    env: Any, policy: MPGAgent, stage: Any, counters: Any, obs: Mapping[str, Any], choice: Any,
-    rng: np.random.Generator, store: Store,
+    env: Any,
+    policy: MPGAgent,
+    stage: Any,
+    counters: Any,
+    obs: Mapping[str, Any],
+    choice: Any,
+    rng: np.random.Generator,
+    store: Store,
 ) -> list[int]:
     """The trials ``stage`` (a :class:`~mpg_agents.learning.training_stages.TrainingStage`) asks for
     around ``choice`` (the step's :class:`~mpg_agents.learning.exploration.Choice` on ``obs``):

@@ -6,7 +6,8 @@ tensors, batched or not. Bad shapes and non-finite depth raise naming the key.
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 import torch
@@ -53,15 +54,14 @@ def batched_inputs(obs: Mapping[str, Any], size: int, device: torch.device) -> t
         planes.append(t)
     depth, mask = planes
     if not color.shape[0] == depth.shape[0] == mask.shape[0]:
-        raise ValueError(
-            f"batch sizes differ: color {color.shape[0]}, depth {depth.shape[0]}, mask {mask.shape[0]}"
-        )
+        raise ValueError(f"batch sizes differ: color {color.shape[0]}, depth {depth.shape[0]}, mask {mask.shape[0]}")
     occluded = None
     if "occluded" in obs:
         occ = obs["occluded"]
         occ = torch.as_tensor(np.asarray(occ) if not isinstance(occ, Tensor) else occ)
         occluded = occ.reshape(color.shape[0], -1)[:, 0].to(device) > 0.5
     return color.to(device), depth.to(device), mask.to(device), occluded
+
 
 def normalize_inputs(
     obs: Mapping[str, Any], cfg: MPGNetConfig, color_mean: Tensor, color_std: Tensor

@@ -12,9 +12,10 @@ is fully convolutional and never uses the classifier.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, cast
+from typing import cast
 
 import torch
 from safetensors.torch import load_file

@@ -27,9 +27,10 @@ input ``2 j``), which the sampling grid accounts for.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence, cast
+from typing import Any, cast
 
 import torch
 from torch import Tensor, nn
@@ -390,5 +391,3 @@ def _sample_of(enc: EncodedObs, subset: Tensor | None) -> Tensor:
     per = n // enc.batch_size
     idx = torch.arange(n, device=enc.rotations.device) // per
     return idx if subset is None else idx[subset]
-
-

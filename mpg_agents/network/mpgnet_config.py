@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, fields
 from numbers import Integral
-from typing import Any, Mapping
+from typing import Any
 
 from mpg_agents.network.mobilenet import DEFAULT_BN_MOMENTUM, full_depth
 from mpg_agents.network.rotations import padded_side
@@ -173,9 +174,14 @@ class MPGNetConfig:
         if self.move_region not in MOVE_REGIONS:
             raise ValueError(f"move_region must be one of {MOVE_REGIONS}, got {self.move_region!r}")
         low, high = self.target_margin_range
-        if isinstance(self.target_margin_px, bool) or not isinstance(self.target_margin_px, Integral) or not low <= self.target_margin_px <= high:
+        if (
+            isinstance(self.target_margin_px, bool)
+            or not isinstance(self.target_margin_px, Integral)
+            or not low <= self.target_margin_px <= high
+        ):
             raise ValueError(
-                f"target_margin_px must be an integer in [{low}, {high}] " f"pixels, got {self.target_margin_px!r} (shrinking "
+                f"target_margin_px must be an integer in [{low}, {high}] "
+                f"pixels, got {self.target_margin_px!r} (shrinking "
                 f"by more than half the heightmap keeps each part's deepest pixels, as {low} does; growing by {high} "
                 f"already covers the whole heightmap)"
             )
@@ -203,18 +209,18 @@ class MPGNetConfig:
         return -(self.heightmap_size // 2), self.heightmap_size - 1
 
     @classmethod
-    def small(cls, **overrides: Any) -> "MPGNetConfig":
+    def small(cls, **overrides: Any) -> MPGNetConfig:
         """The CPU-friendly variant: MobileNetV3-small trunks (depth :data:`SMALL_TRUNK_DEPTH`)."""
         overrides.setdefault("trunk_depth", SMALL_TRUNK_DEPTH)
         return cls(variant="small", **overrides)
 
     @classmethod
-    def large(cls, **overrides: Any) -> "MPGNetConfig":
+    def large(cls, **overrides: Any) -> MPGNetConfig:
         """The paper's variant: full MobileNetV3-large trunks."""
         return cls(variant="large", **overrides)
 
     @classmethod
-    def for_variant(cls, variant: str, **overrides: Any) -> "MPGNetConfig":
+    def for_variant(cls, variant: str, **overrides: Any) -> MPGNetConfig:
         """:meth:`small` or :meth:`large` by name."""
         if variant == "small":
             return cls.small(**overrides)
@@ -239,7 +245,7 @@ class MPGNetConfig:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
     @classmethod
-    def from_checkpoint(cls, data: Mapping[str, Any], **overrides: Any) -> "MPGNetConfig":
+    def from_checkpoint(cls, data: Mapping[str, Any], **overrides: Any) -> MPGNetConfig:
         """A checkpoint's architecture (its header's ``config``) with this variant's execution
         settings (:data:`EXECUTION_FIELDS`), then ``overrides``."""
         if "variant" not in data:
@@ -248,7 +254,7 @@ class MPGNetConfig:
         return cls.from_dict({**cls.for_variant(data["variant"]).to_dict(), **architecture, **overrides})
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "MPGNetConfig":
+    def from_dict(cls, data: Mapping[str, Any]) -> MPGNetConfig:
         """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)

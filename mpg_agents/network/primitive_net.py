@@ -62,7 +62,9 @@ class PrimitiveNet(nn.Module):
     def __init__(self, config: MPGNetConfig, mask_channels: int) -> None:
         super().__init__()
         self.config = config
-        self.color_trunk = MobileNetV3Features(config.variant, 3, config.trunk_depth, config.bn_momentum) if config.color_input else None
+        self.color_trunk = (
+            MobileNetV3Features(config.variant, 3, config.trunk_depth, config.bn_momentum) if config.color_input else None
+        )
         # Depth and mask are single-channel: a 1-channel stem is equivalent to replicating them to
         # 3 channels (an ImageNet stem is loaded by summing its RGB kernels) and 3x cheaper.
         self.depth_trunk = MobileNetV3Features(config.variant, 1, config.trunk_depth, config.bn_momentum)

@@ -149,7 +149,9 @@ def least_blocked(blocked: Tensor, region: Tensor, tolerance: float) -> Tensor:
     if not tolerance >= 0:
         raise ValueError(f"tolerance must be >= 0 metres, got {tolerance}")
     if blocked.dim() != 4 or region.shape != (blocked.shape[0], *blocked.shape[2:]):
-        raise ValueError(f"blocked must be (B, R, H, W) and region (B, H, W), got {tuple(blocked.shape)} and {tuple(region.shape)}")
+        raise ValueError(
+            f"blocked must be (B, R, H, W) and region (B, H, W), got {tuple(blocked.shape)} and {tuple(region.shape)}"
+        )
     inside = blocked.masked_fill(~region[:, None], float("inf")).flatten(1).amin(dim=1)
     least = inside.clamp(min=0.0) + tolerance
     return blocked <= least[:, None, None, None]
@@ -161,4 +163,3 @@ def region_max(q: Tensor, region: Tensor) -> Tensor:
     allowed = region[:, None] if region.dim() == 3 else region
     masked = q.masked_fill(~allowed, float("-inf"))
     return masked.flatten(1).amax(dim=1)
-

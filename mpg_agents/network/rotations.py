@@ -56,4 +56,3 @@ def rotation_grids(num_rotations: int, size: int, padded: int, kind: str, stride
     norm = lambda v: 2.0 * v / (n_src - 1) - 1.0  # noqa: E731
     grid = np.stack([norm(src_x), norm(src_y)], axis=-1)
     return torch.from_numpy(grid.astype(np.float32))
-

@@ -13,7 +13,8 @@ mode and samples uniformly.
 
 from __future__ import annotations
 
-from typing import Any, Sequence, cast
+from collections.abc import Sequence
+from typing import Any, cast
 
 import numpy as np
 from stable_baselines3.dqn.dqn import DQN
@@ -22,10 +23,10 @@ from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
-from mpg_agents.sb3.replay import SB3HeightmapReplayBuffer
-from mpg_agents.sb3.policy import MPGNetPolicy
 from mpg_agents.learning.td_step import TDStepConfig, td_step
 from mpg_agents.learning.train_config import TrainConfig
+from mpg_agents.sb3.policy import MPGNetPolicy
+from mpg_agents.sb3.replay import SB3HeightmapReplayBuffer
 
 LEARNING_STARTS = 100
 """Transitions SB3 collects before its first gradient step (the learner has no such wait)."""
@@ -44,8 +45,10 @@ def sb3_settings(config: TrainConfig) -> dict[str, Any]:
             run instead: pass ``exploration_fraction``).
     """
     if config.epsilon_decay_steps is not None:
-        raise ValueError("SB3 anneals epsilon over a fraction of learn()'s steps: pass exploration_fraction "
-                         f"instead of epsilon_decay_steps={config.epsilon_decay_steps}")
+        raise ValueError(
+            "SB3 anneals epsilon over a fraction of learn()'s steps: pass exploration_fraction "
+            f"instead of epsilon_decay_steps={config.epsilon_decay_steps}"
+        )
     return {
         "learning_rate": config.learning_rate,
         "buffer_size": config.replay_capacity,
@@ -61,7 +64,9 @@ def sb3_settings(config: TrainConfig) -> dict[str, Any]:
         "max_grad_norm": config.max_grad_norm,
         "device": config.device,
         "policy_kwargs": {
-            "variant": config.variant, "net_config": dict(config.net_config), "optimizer_kwargs": config.optimizer_kwargs(),
+            "variant": config.variant,
+            "net_config": dict(config.net_config),
+            "optimizer_kwargs": config.optimizer_kwargs(),
         },
     }
 
@@ -104,8 +109,10 @@ class MPGDQN(DQN):
         if not (isinstance(buffer_class, type) and issubclass(buffer_class, PrioritizedHeightmapReplayBuffer)):
             settings.pop("replay_buffer_kwargs")  # the priority exponent is the prioritised buffer's alone
         self.step_config = TDStepConfig(
-            gamma=settings["gamma"], grasp_symmetry=settings.pop("grasp_symmetry"),
-            max_grad_norm=settings["max_grad_norm"], target_bounds=settings.pop("target_bounds"),
+            gamma=settings["gamma"],
+            grasp_symmetry=settings.pop("grasp_symmetry"),
+            max_grad_norm=settings["max_grad_norm"],
+            target_bounds=settings.pop("target_bounds"),
         )
         self.trainable = tuple(trainable) if trainable is not None else None
         super().__init__(policy, env, **settings)  # max_grad_norm: only td_step reads it
@@ -117,7 +124,13 @@ class MPGDQN(DQN):
         for _ in range(gradient_steps):
             data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
             result = td_step(
-                cast(MPGQFunction, self.q_net), cast(MPGQFunction, self.q_net_target), self.policy.optimizer, data, self.step_config, self.trainable, self.replay_buffer
+                cast(MPGQFunction, self.q_net),
+                cast(MPGQFunction, self.q_net_target),
+                self.policy.optimizer,
+                data,
+                self.step_config,
+                self.trainable,
+                self.replay_buffer,
             )
             if result.trained:
                 losses.append(result.loss)

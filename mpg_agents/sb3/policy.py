@@ -8,8 +8,9 @@ network, coordination and Q*_g); the target network is SB3's.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence, cast
+from typing import Any, cast
 
 import torch
 from gymnasium import spaces
@@ -21,11 +22,11 @@ from torch import Tensor, nn
 from mpg_agents.acting.agent import AgentMethods
 from mpg_agents.acting.agent_settings import AgentSettings
 from mpg_agents.acting.grasp_threshold import GraspThreshold
-from mpg_agents.network.finger_geometry import FingerGeometry
-from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.acting.q_function import MPGQFunction, check_action_space
 from mpg_agents.acting.spaces import check_observation_space
 from mpg_agents.learning.train_config import TrainConfig
+from mpg_agents.network.finger_geometry import FingerGeometry
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_envs.grid.actions import check_primitives
 
 DEFAULTS = TrainConfig()
@@ -49,8 +50,12 @@ class MPGQNetwork(MPGQFunction, QNetwork):  # type: ignore[misc]  # forward: MPG
     """
 
     def __init__(
-        self, observation_space: spaces.Dict, action_space: spaces.Discrete, net_config: MPGNetConfig,
-        action_primitives: Sequence[str], geometry: FingerGeometry | None = None,
+        self,
+        observation_space: spaces.Dict,
+        action_space: spaces.Discrete,
+        net_config: MPGNetConfig,
+        action_primitives: Sequence[str],
+        geometry: FingerGeometry | None = None,
     ) -> None:
         BasePolicy.__init__(self, observation_space, action_space, features_extractor=None, normalize_images=False)
         check_observation_space(observation_space, net_config.heightmap_size)
@@ -161,10 +166,17 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
         for key in ("features_extractor_class", "features_extractor_kwargs"):
             data.pop(key, None)
         # The settings as built (weights come from the saved state, not ImageNet again).
-        data.update(self.settings.replace(
-            primitives=self.action_primitives, branches=self.branches, coordination=self.coordination, q_star=self.q_star,
-            net_config=self.net_config, imagenet_weights=None, geometry=self.geometry,
-        ).to_dict())
+        data.update(
+            self.settings.replace(
+                primitives=self.action_primitives,
+                branches=self.branches,
+                coordination=self.coordination,
+                q_star=self.q_star,
+                net_config=self.net_config,
+                imagenet_weights=None,
+                geometry=self.geometry,
+            ).to_dict()
+        )
         return data
 
     # ----------------------------------------------------- safetensors
@@ -180,7 +192,7 @@ class MPGNetPolicy(AgentMethods, DQNPolicy):
         return header
 
     @classmethod
-    def build(cls, observation_space: spaces.Dict, action_space: spaces.Discrete, **settings: Any) -> "MPGNetPolicy":
+    def build(cls, observation_space: spaces.Dict, action_space: spaces.Discrete, **settings: Any) -> MPGNetPolicy:
         """A policy for an env's spaces with ``mpg-train``'s learning rate (``settings``: the
         constructor's)."""
         return cls(observation_space, action_space, lambda _: DEFAULTS.learning_rate, **settings)

@@ -23,7 +23,7 @@ class PrioritizedDictReplayBufferSamples(DictReplayBufferSamples):
 
     indices: np.ndarray
 
-    def __new__(cls, *args: Any, indices: np.ndarray, **kwargs: Any) -> "PrioritizedDictReplayBufferSamples":
+    def __new__(cls, *args: Any, indices: np.ndarray, **kwargs: Any) -> PrioritizedDictReplayBufferSamples:
         self = super().__new__(cls, *args, **kwargs)
         self.indices = indices
         return self
@@ -39,8 +39,14 @@ class SB3HeightmapReplayBuffer(PrioritizedHeightmapReplayBuffer, DictReplayBuffe
     """
 
     def batch(  # type: ignore[override]
-        self, obs: dict[str, np.ndarray], actions: np.ndarray, next_obs: dict[str, np.ndarray], dones: np.ndarray,
-        rewards: np.ndarray, indices: np.ndarray, env: VecNormalize | None = None,
+        self,
+        obs: dict[str, np.ndarray],
+        actions: np.ndarray,
+        next_obs: dict[str, np.ndarray],
+        dones: np.ndarray,
+        rewards: np.ndarray,
+        indices: np.ndarray,
+        env: VecNormalize | None = None,
     ) -> PrioritizedDictReplayBufferSamples:
         """SB3's sample type, with ``env``'s observation and reward normalisation applied."""
         obs_ = self._normalize_obs(obs, env)

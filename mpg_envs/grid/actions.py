@@ -8,7 +8,8 @@ indexes the env's allowed primitives in the fixed order ``move, push, grasp``
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -107,10 +108,8 @@ class PixelActionSpace(spaces.Discrete):
         return f"PixelActionSpace(primitives={self.primitives}, n={int(self.n)})"
 
     def __eq__(self, other: object) -> bool:
-        return (
-            isinstance(other, PixelActionSpace)
-            and other.primitives == self.primitives
-            and other.size == self.size
-        ) or (type(other) is spaces.Discrete and super().__eq__(other))
+        return (isinstance(other, PixelActionSpace) and other.primitives == self.primitives and other.size == self.size) or (
+            type(other) is spaces.Discrete and super().__eq__(other)
+        )
 
     __hash__ = None  # type: ignore[assignment]  # mutable seedable space, like gymnasium's

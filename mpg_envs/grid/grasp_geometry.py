@@ -91,7 +91,14 @@ def finger_region(centre: np.ndarray, theta: float, side: int, inner: float, out
     d = side * np.array([math.cos(theta), math.sin(theta)])
     n = np.array([-d[1], d[0]])
     c = np.asarray(centre, dtype=float)
-    return np.array([c + d * inner + n * half_width, c + d * outer + n * half_width, c + d * outer - n * half_width, c + d * inner - n * half_width])
+    return np.array(
+        [
+            c + d * inner + n * half_width,
+            c + d * outer + n * half_width,
+            c + d * outer - n * half_width,
+            c + d * inner - n * half_width,
+        ]
+    )
 
 
 def polygon_mask(workspace: Workspace, corners_xy: np.ndarray) -> np.ndarray:
@@ -142,7 +149,9 @@ def finger_landing_kernel(theta: float, resolution: float, jaw: JawGeometry = Ja
     s = dc * math.cos(theta) + dr * math.sin(theta)  # along the closing direction
     t = -dc * math.sin(theta) + dr * math.cos(theta)  # across the jaw
     eps = 1e-9  # pixel centres exactly on a strip's edge count as inside, whatever the float error
-    inside = (np.abs(t) <= jaw.finger_half_width + eps) & (np.abs(s) >= jaw.finger_open_inner - eps) & (np.abs(s) <= outer + eps)
+    inside = (
+        (np.abs(t) <= jaw.finger_half_width + eps) & (np.abs(s) >= jaw.finger_open_inner - eps) & (np.abs(s) <= outer + eps)
+    )
     return inside.astype(np.uint8)
 
 

@@ -23,7 +23,8 @@ so the paper's metrics are computed the same way on wrapped and raw envs.
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import cv2
 import gymnasium as gym
@@ -115,13 +116,17 @@ class ImageObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
         channels_last: bool = False,
     ):
         # Recorded so env.spec (and gymnasium's checker) can rebuild the wrapped env.
-        gym.utils.RecordConstructorArgs.__init__(self, size=size, occlusion_channel=occlusion_channel, channels_last=channels_last)
+        gym.utils.RecordConstructorArgs.__init__(
+            self, size=size, occlusion_channel=occlusion_channel, channels_last=channels_last
+        )
         gym.ObservationWrapper.__init__(self, env)
         source = env.observation_space
         if not isinstance(source, spaces.Dict) or not {"color", "depth", "mask", "occluded"} <= set(source.spaces):
             exemplar = isinstance(source, spaces.Dict) and "query_color" in source.spaces
             why = "; an env naming its target by an exemplar (target_spec='exemplar') has no mask" if exemplar else ""
-            raise ValueError(f"ImageObservation needs the MPG Dict observation (color, depth, mask, occluded), got {source}{why}")
+            raise ValueError(
+                f"ImageObservation needs the MPG Dict observation (color, depth, mask, occluded), got {source}{why}"
+            )
         if not _is_int(size) or not 8 <= size <= 1024:
             raise ValueError(f"size must be an integer in 8..1024, got {size!r}")
         self.size = int(size)
@@ -141,7 +146,9 @@ class ImageObservation(gym.ObservationWrapper, gym.utils.RecordConstructorArgs):
 def _check_grid(size: int, cell: int, rotations: int) -> None:
     if not _is_int(cell) or cell < 1 or size % cell:
         divisors = [d for d in range(1, size + 1) if size % d == 0]
-        raise ValueError("cell must be a whole number of pixels dividing the " f"{size}-pixel heightmap, one of {divisors}; got {cell!r}")
+        raise ValueError(
+            f"cell must be a whole number of pixels dividing the {size}-pixel heightmap, one of {divisors}; got {cell!r}"
+        )
     if not _is_int(rotations) or rotations < 1 or NUM_ROTATIONS % rotations:
         divisors = [d for d in range(1, NUM_ROTATIONS + 1) if NUM_ROTATIONS % d == 0]
         raise ValueError(f"rotations must divide the env's {NUM_ROTATIONS} rotations, one of {divisors}; got {rotations!r}")
@@ -161,9 +168,7 @@ def grid_rotation(primitive: str, r: int, rotations: int) -> int:
     return r * (NUM_ROTATIONS // rotations)
 
 
-def grid_to_pixel_action(
-    index: int, primitives: tuple[str, ...], cell: int, rotations: int, size: int
-) -> PixelAction:
+def grid_to_pixel_action(index: int, primitives: tuple[str, ...], cell: int, rotations: int, size: int) -> PixelAction:
     """Decode a :class:`GridAction` index (C order over primitive, rotation, cell row,
     cell column) to the env's ``(primitive, rotation, row, col)``: the pixel at the cell's
     centre, ``cell_row * cell + cell // 2``."""
@@ -172,12 +177,17 @@ def grid_to_pixel_action(
     if isinstance(index, np.ndarray) and index.size == 1:
         index = index.reshape(())[()]
     if not _is_int(index) or not 0 <= int(index) < n:
-        raise ValueError(f"action must be an integer in 0..{n - 1} (primitives {primitives}, " f"{rotations} rotations, {cells}x{cells} cells), got {index!r}")
+        raise ValueError(
+            f"action must be an integer in 0..{n - 1} (primitives {primitives}, "
+            f"{rotations} rotations, {cells}x{cells} cells), got {index!r}"
+        )
     p, rest = divmod(int(index), rotations * cells * cells)
     r, rest = divmod(rest, cells * cells)
     cell_row, cell_col = divmod(rest, cells)
     primitive = primitives[p]
-    return PixelAction(primitive, grid_rotation(primitive, r, rotations), cell_row * cell + cell // 2, cell_col * cell + cell // 2)
+    return PixelAction(
+        primitive, grid_rotation(primitive, r, rotations), cell_row * cell + cell // 2, cell_col * cell + cell // 2
+    )
 
 
 class GridAction(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
@@ -225,7 +235,9 @@ def continuous_to_pixel_action(action: np.ndarray, primitives: tuple[str, ...], 
     a = np.asarray(action, dtype=np.float64)
     expected = (3 + len(primitives),)
     if a.shape != expected:
-        raise ValueError(f"action must have shape {expected} (x, y, angle, one score per primitive of {primitives}), got {a.shape}")
+        raise ValueError(
+            f"action must have shape {expected} (x, y, angle, one score per primitive of {primitives}), got {a.shape}"
+        )
     if not np.isfinite(a).all() or np.abs(a).max() > 1.0 + 1e-6:
         raise ValueError(f"action values must be finite and in [-1, 1], got {a.tolist()}")
     x, y, angle = np.clip(a[:3], -1.0, 1.0)  # float error only: checked above

@@ -27,13 +27,13 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from mpg_envs.grid.workspace import Workspace
 from mpg_envs.perception.appearance import Lighting, light_scene, paint_scene, perturbed_pose, place_camera
 from mpg_envs.perception.depth_noise import corrupt_depth
-from mpg_envs.perception.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
 from mpg_envs.perception.frames import SceneFrames
+from mpg_envs.perception.heightmap import VISIBLE_GEOM_GROUPS, Heightmaps, geomgroup_mask
 from mpg_envs.perception.rgbd import fuse_heightmaps, heightmap_from_rgbd
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, randomized_geom_colors
-from mpg_envs.grid.workspace import Workspace
 
 # OpenCV camera axes (x right, y down, z forward) expressed in MuJoCo's camera frame
 # (x right, y up, looking along -z): flip y and z.
@@ -230,9 +230,7 @@ class CameraHeightmapper:
             this process (the message says how to fix it).
     """
 
-    def __init__(
-        self, model: mujoco.MjModel, config: CameraConfig | None = None, workspace: Workspace | None = None
-    ) -> None:
+    def __init__(self, model: mujoco.MjModel, config: CameraConfig | None = None, workspace: Workspace | None = None) -> None:
         self.model = model
         self.config = config if config is not None else CameraConfig()
         self.workspace = workspace if workspace is not None else Workspace()
@@ -242,17 +240,13 @@ class CameraHeightmapper:
         for cam in self.config.cameras:
             cam_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, cam.name)
             if cam_id < 0:
-                raise ValueError(
-                    f"model has no camera {cam.name!r}: call add_cameras(spec, config) before compiling"
-                )
+                raise ValueError(f"model has no camera {cam.name!r}: call add_cameras(spec, config) before compiling")
             if int(model.cam_projection[cam_id]) != int(mujoco.mjtProjection.mjPROJ_PERSPECTIVE) or np.any(
                 model.cam_sensorsize[cam_id] > 0
             ):
                 raise ValueError(f"camera {cam.name!r} must be a perspective camera defined by fovy")
             self._camera_ids.append(cam_id)
-            self._intrinsics.append(
-                camera_intrinsics(float(model.cam_fovy[cam_id]), self.config.width, self.config.height)
-            )
+            self._intrinsics.append(camera_intrinsics(float(model.cam_fovy[cam_id]), self.config.width, self.config.height))
 
         self._option = mujoco.MjvOption()
         self._option.geomgroup[:] = geomgroup_mask(VISIBLE_GEOM_GROUPS)
@@ -267,7 +261,9 @@ class CameraHeightmapper:
 
         # One record of GL failure per process, shared with env.render(): a retry can abort.
         self._renderer = SceneFrames(
-            model, self.config.height, self.config.width,
+            model,
+            self.config.height,
+            self.config.width,
             purpose="Camera observations (the default ray-cast observations need none)",
         )
         # Mirror images of the objects in a reflective table would paint wrong colours.
@@ -302,25 +298,29 @@ class CameraHeightmapper:
         std = self.config.depth_noise_std
         noisy = std > 0 or (visuals is not None and visuals.depth_noise is not None)
         if noisy and rng is None:
-            raise ValueError(
-                "depth noise needs a numpy.random.Generator: pass rng=np.random.default_rng(seed)"
-            )
+            raise ValueError("depth noise needs a numpy.random.Generator: pass rng=np.random.default_rng(seed)")
         if visuals is not None and len(visuals.camera_offsets) < len(self._camera_ids):
             raise ValueError(
-                f"visuals hold calibration errors of {len(visuals.camera_offsets)} " f"cameras, this mode has {len(self._camera_ids)}"
+                f"visuals hold calibration errors of {len(visuals.camera_offsets)} "
+                f"cameras, this mode has {len(self._camera_ids)}"
             )
         lighting = self.config.lighting if visuals is None else visuals.lighting
         colors = self._geom_colors(visuals)
         images = []
-        for k, (cam_id, name, intrinsics) in enumerate(zip(self._camera_ids, self.camera_names, self._intrinsics, strict=True)):
+        for k, (cam_id, name, intrinsics) in enumerate(
+            zip(self._camera_ids, self.camera_names, self._intrinsics, strict=True)
+        ):
             self._renderer.update(data, cam_id, self._option)
             scene = self._renderer.scene
             light_scene(scene, lighting)
             if visuals is not None:
                 paint_scene(scene, colors)
-                place_camera(scene, *perturbed_pose(
-                    data.cam_xpos[cam_id], data.cam_xmat[cam_id], visuals.camera_offsets[k], visuals.camera_rotations[k]
-                ))
+                place_camera(
+                    scene,
+                    *perturbed_pose(
+                        data.cam_xpos[cam_id], data.cam_xmat[cam_id], visuals.camera_offsets[k], visuals.camera_rotations[k]
+                    ),
+                )
             color = self._renderer.color()
             depth, geom_id = self._renderer.depth_and_segmentation()
             depth = depth.astype(np.float64)
@@ -332,7 +332,14 @@ class CameraHeightmapper:
                 depth = corrupt_depth(depth, color, visuals.depth_noise, rng)  # type: ignore[arg-type]
             pose = opencv_camera_pose(data.cam_xpos[cam_id], data.cam_xmat[cam_id])
             images.append(
-                CameraImage(name=name, color=color, depth=depth.astype(np.float32), intrinsics=intrinsics.copy(), pose=pose, geom_id=geom_id)
+                CameraImage(
+                    name=name,
+                    color=color,
+                    depth=depth.astype(np.float32),
+                    intrinsics=intrinsics.copy(),
+                    pose=pose,
+                    geom_id=geom_id,
+                )
             )
         return images
 

@@ -188,9 +188,7 @@ def query_model(
     return colour, object_extents(pixels, float(np.percentile(up[pixels], 98)), resolution)
 
 
-def split_blobs(
-    matched: np.ndarray, up: np.ndarray, step: float, min_pixels: int
-) -> list[np.ndarray]:
+def split_blobs(matched: np.ndarray, up: np.ndarray, step: float, min_pixels: int) -> list[np.ndarray]:
     """The blobs of ``matched`` (bool image) split at the steps of height of ``up``
     (:func:`height_steps`): the components off the steps, each grown back over the matched step
     pixels beside it no more than ``step`` from its heights, then the components of the matched

@@ -69,17 +69,13 @@ class Heightmaps:
 
     def __post_init__(self) -> None:
         if self.depth.ndim != 2 or self.depth.dtype != np.float32:
-            raise ValueError(
-                f"depth must be a (H, W) float32 array, got {self.depth.shape} {self.depth.dtype}"
-            )
+            raise ValueError(f"depth must be a (H, W) float32 array, got {self.depth.shape} {self.depth.dtype}")
         if self.color.shape != self.depth.shape + (3,) or self.color.dtype != np.uint8:
             raise ValueError(
                 f"color must be a {self.depth.shape + (3,)} uint8 array matching depth, "
                 f"got {self.color.shape} {self.color.dtype}"
             )
-        if self.geom_id is not None and (
-            self.geom_id.shape != self.depth.shape or self.geom_id.dtype != np.int32
-        ):
+        if self.geom_id is not None and (self.geom_id.shape != self.depth.shape or self.geom_id.dtype != np.int32):
             raise ValueError(
                 f"geom_id must be a {self.depth.shape} int32 array matching depth, "
                 f"got {self.geom_id.shape} {self.geom_id.dtype}"
@@ -287,10 +283,28 @@ class RaycastHeightmapper:
         """Every ray against the static geoms alone, kept per process for their layout (ids,
         types, groups, sizes, meshes and height fields, poses, colours' alpha) and the rays."""
         m, g = self.model, self._static_geoms
-        shapes = [m.mesh_vert[m.mesh_vertadr[k] : m.mesh_vertadr[k] + m.mesh_vertnum[k]] for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]]
-        shapes += [m.mesh_face[m.mesh_faceadr[k] : m.mesh_faceadr[k] + m.mesh_facenum[k]] for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]]
-        shapes += [m.hfield_data[m.hfield_adr[k] : m.hfield_adr[k] + m.hfield_nrow[k] * m.hfield_ncol[k]] for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_HFIELD]]
-        ray_setup = np.array([self.source_height, *self.workspace.shape, self.workspace.resolution, self.workspace.x_min, self.workspace.y_min, self.workspace.z_min])
+        shapes = [
+            m.mesh_vert[m.mesh_vertadr[k] : m.mesh_vertadr[k] + m.mesh_vertnum[k]]
+            for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]
+        ]
+        shapes += [
+            m.mesh_face[m.mesh_faceadr[k] : m.mesh_faceadr[k] + m.mesh_facenum[k]]
+            for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]
+        ]
+        shapes += [
+            m.hfield_data[m.hfield_adr[k] : m.hfield_adr[k] + m.hfield_nrow[k] * m.hfield_ncol[k]]
+            for k in m.geom_dataid[g][m.geom_type[g] == mujoco.mjtGeom.mjGEOM_HFIELD]
+        ]
+        ray_setup = np.array(
+            [
+                self.source_height,
+                *self.workspace.shape,
+                self.workspace.resolution,
+                self.workspace.x_min,
+                self.workspace.y_min,
+                self.workspace.z_min,
+            ]
+        )
         key = b"".join(
             np.ascontiguousarray(a).tobytes()
             for a in (g, m.geom_type[g], m.geom_group[g], m.geom_size[g], m.geom_aabb[g], m.geom_rgba[g, 3],
@@ -328,7 +342,9 @@ class RaycastHeightmapper:
             vec = self._dirs[ids[part]].reshape(-1).copy()  # contiguous: passed to C without a copy
             part_geom = np.empty(part.size, dtype=np.int32)
             part_dist = np.empty(part.size, dtype=np.float64)
-            mujoco.mj_multiRay(self.model, d, self._origin, vec, self.geomgroup, 1, -1, part_geom, part_dist, None, part.size, cutoff)
+            mujoco.mj_multiRay(
+                self.model, d, self._origin, vec, self.geomgroup, 1, -1, part_geom, part_dist, None, part.size, cutoff
+            )
             geom_id[part] = part_geom
             dist[part] = part_dist
 
@@ -377,4 +393,3 @@ class RaycastHeightmapper:
         pool = getattr(self, "_pool", None)
         if pool is not None:
             pool.shutdown(wait=False)
-

@@ -29,7 +29,8 @@ def _check_poses(centres: np.ndarray, offsets: np.ndarray, rotvecs: np.ndarray) 
             raise ValueError(f"{name} must be a finite (K, 3) array, got shape {value.shape}")
     if not (len(centres) == len(offsets) == len(rotvecs) >= 1):
         raise ValueError(
-            "centres, offsets and rotvecs need one row per camera (at least " f"one), got {len(centres)}, {len(offsets)}, {len(rotvecs)}"
+            "centres, offsets and rotvecs need one row per camera (at least "
+            f"one), got {len(centres)}, {len(offsets)}, {len(rotvecs)}"
         )
 
 

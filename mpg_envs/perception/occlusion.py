@@ -41,7 +41,9 @@ class ChangeConfig:
     target_dilation_pixels: int = 10
 
 
-def is_occluded(depth: np.ndarray, target_mask: np.ndarray, target_top: float, config: OcclusionConfig = OcclusionConfig()) -> bool:
+def is_occluded(
+    depth: np.ndarray, target_mask: np.ndarray, target_top: float, config: OcclusionConfig = OcclusionConfig()
+) -> bool:
     """Whether anything inside the target's footprint rises above the target's top.
 
     ``depth`` is the depth heightmap, ``target_mask`` the target's footprint (nonzero

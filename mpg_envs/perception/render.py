@@ -20,7 +20,8 @@ from __future__ import annotations
 import ctypes
 import os
 import sys
-from typing import TYPE_CHECKING, Callable, Mapping, TypeVar
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
@@ -50,9 +51,7 @@ class RenderUnavailableError(RuntimeError):
     """
 
 
-def default_gl_backend(
-    environ: Mapping[str, str], platform: str, library_loads: Callable[[str], bool]
-) -> str | None:
+def default_gl_backend(environ: Mapping[str, str], platform: str, library_loads: Callable[[str], bool]) -> str | None:
     """The ``MUJOCO_GL`` value to set, or ``None`` to leave MuJoCo's choice alone.
 
     ``None`` when the user set ``MUJOCO_GL``, off Linux (MuJoCo's defaults work there) and on

@@ -13,8 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from mpg_envs.perception.heightmap import Heightmaps
 from mpg_envs.grid.workspace import Workspace
+from mpg_envs.perception.heightmap import Heightmaps
 
 
 def _check_rgbd(color: np.ndarray, depth: np.ndarray, intrinsics: np.ndarray, cam_pose: np.ndarray) -> None:
@@ -26,26 +26,19 @@ def _check_rgbd(color: np.ndarray, depth: np.ndarray, intrinsics: np.ndarray, ca
             "sensor units first (e.g. uint16 millimetres: depth.astype(np.float32) * depth_scale)"
         )
     if not isinstance(color, np.ndarray) or color.shape != depth.shape + (3,):
-        raise ValueError(
-            f"color must be a (H, W, 3) array matching depth {depth.shape}, got shape {np.shape(color)}"
-        )
+        raise ValueError(f"color must be a (H, W, 3) array matching depth {depth.shape}, got shape {np.shape(color)}")
     if color.dtype != np.uint8:
         raise TypeError(f"color must be uint8 RGB, got dtype {color.dtype}")
     if intrinsics.shape != (3, 3) or not np.all(np.isfinite(intrinsics)):
         raise ValueError(f"intrinsics must be a finite 3x3 pinhole matrix K, got shape {intrinsics.shape}")
     if intrinsics[0, 0] <= 0 or intrinsics[1, 1] <= 0 or not np.allclose(intrinsics[2], [0.0, 0.0, 1.0]):
         raise ValueError(
-            "intrinsics must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
-            f"got {intrinsics.tolist()}"
+            f"intrinsics must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {intrinsics.tolist()}"
         )
     if cam_pose.shape != (4, 4) or not np.all(np.isfinite(cam_pose)):
-        raise ValueError(
-            f"cam_pose must be a finite 4x4 camera-to-world transform, got shape {cam_pose.shape}"
-        )
+        raise ValueError(f"cam_pose must be a finite 4x4 camera-to-world transform, got shape {cam_pose.shape}")
     rot = cam_pose[:3, :3]
-    if not np.allclose(cam_pose[3], [0.0, 0.0, 0.0, 1.0]) or not np.allclose(
-        rot @ rot.T, np.eye(3), atol=1e-4
-    ):
+    if not np.allclose(cam_pose[3], [0.0, 0.0, 0.0, 1.0]) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-4):
         raise ValueError("cam_pose must be a rigid transform: orthonormal rotation and last row [0, 0, 0, 1]")
 
 
@@ -100,8 +93,12 @@ def heightmap_from_rgbd(
     intrinsics = np.asarray(intrinsics, dtype=np.float64)
     cam_pose = np.asarray(cam_pose, dtype=np.float64)
     _check_rgbd(color, depth, intrinsics, cam_pose)
-    if segmentation is not None and (np.shape(segmentation) != depth.shape or not np.issubdtype(np.asarray(segmentation).dtype, np.integer)):
-        raise ValueError(f"segmentation must be an integer (H, W) array matching depth {depth.shape}, got {np.shape(segmentation)}")
+    if segmentation is not None and (
+        np.shape(segmentation) != depth.shape or not np.issubdtype(np.asarray(segmentation).dtype, np.integer)
+    ):
+        raise ValueError(
+            f"segmentation must be an integer (H, W) array matching depth {depth.shape}, got {np.shape(segmentation)}"
+        )
     background = np.asarray(background_color)
     if background.shape != (3,) or np.any(background < 0) or np.any(background > 255):
         raise ValueError(f"background_color must be 3 values in 0..255, got {background_color!r}")
@@ -157,9 +154,7 @@ def fuse_heightmaps(maps: Sequence[Heightmaps]) -> Heightmaps:
     shape = maps[0].shape
     for i, hm in enumerate(maps):
         if hm.shape != shape:
-            raise ValueError(
-                f"all heightmaps must have the same shape; map 0 is {shape}, map {i} is {hm.shape}"
-            )
+            raise ValueError(f"all heightmaps must have the same shape; map 0 is {shape}, map {i} is {hm.shape}")
     depths = np.stack([hm.depth for hm in maps])
     best = np.argmax(depths, axis=0)
     r, c = np.indices(shape)

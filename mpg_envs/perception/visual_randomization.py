@@ -21,8 +21,9 @@ The maths are pure functions: :func:`jitter_colors` here, the pose error in
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -48,7 +49,9 @@ _STREAM = 0x56495355  # spawn key of the visual stream: independent of the scene
 
 def _check_range(name: str, value: Any, low: float, high: float) -> None:
     if not (isinstance(value, (tuple, list)) and len(value) == 2 and low <= value[0] <= value[1] <= high):
-        raise ValueError(f"VisualRandomization.{name} must be a (low, high) pair with {low} <= low <= high <= {high}, got {value!r}")
+        raise ValueError(
+            f"VisualRandomization.{name} must be a (low, high) pair with {low} <= low <= high <= {high}, got {value!r}"
+        )
 
 
 @dataclass(frozen=True)
@@ -101,11 +104,17 @@ class VisualRandomization:
             if not 0.0 <= getattr(self, name) < 1.0:
                 raise ValueError(f"VisualRandomization.{name} must be in [0, 1), got {getattr(self, name)!r}")
         if not 0.0 <= self.camera_position_error <= 0.1:
-            raise ValueError(f"VisualRandomization.camera_position_error must be in [0, 0.1] m, got {self.camera_position_error!r}")
+            raise ValueError(
+                f"VisualRandomization.camera_position_error must be in [0, 0.1] m, got {self.camera_position_error!r}"
+            )
         if not 0.0 <= self.camera_rotation_error <= 10.0:
-            raise ValueError("VisualRandomization.camera_rotation_error must be in " f"[0, 10] degrees, got {self.camera_rotation_error!r}")
+            raise ValueError(
+                f"VisualRandomization.camera_rotation_error must be in [0, 10] degrees, got {self.camera_rotation_error!r}"
+            )
         if not isinstance(self.raycast_misregistration, bool):
-            raise ValueError("VisualRandomization.raycast_misregistration must be " f"True or False, got {self.raycast_misregistration!r}")
+            raise ValueError(
+                f"VisualRandomization.raycast_misregistration must be True or False, got {self.raycast_misregistration!r}"
+            )
         if self.depth_noise is not None and not isinstance(self.depth_noise, DepthNoise):
             raise ValueError(f"VisualRandomization.depth_noise must be a DepthNoise or None, got {self.depth_noise!r}")
 
@@ -130,7 +139,8 @@ class VisualRandomization:
                     data[key] = tuple(data[key])
             return cls(**data)
         raise ValueError(
-            "visual_randomization must be None, False, True, a dict of " f"VisualRandomization fields or a VisualRandomization, got {value!r}"
+            "visual_randomization must be None, False, True, a dict of "
+            f"VisualRandomization fields or a VisualRandomization, got {value!r}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -175,7 +185,9 @@ class EpisodeVisuals:
         """JSON-ready values, rounded; object gains of the first ``num_objects`` objects."""
         n = MAX_OBJECT_SLOTS if num_objects is None else int(num_objects)
         r = lambda a: np.round(np.asarray(a, float), 5).tolist()  # noqa: E731
-        extra = {"raycast_misregistration": True} if self.raycast_misregistration else {}  # records without it stay as they were
+        extra = (
+            {"raycast_misregistration": True} if self.raycast_misregistration else {}
+        )  # records without it stay as they were
         return {
             "seed": int(self.seed),
             "lighting": self.lighting.to_dict(),
@@ -219,7 +231,9 @@ def draw_visuals(config: VisualRandomization, seed: int) -> EpisodeVisuals:
         scale = rng.uniform(*config.depth_noise_scale)
         base = config.depth_noise
         noise = DepthNoise(**{**base.to_dict(), "base_std": base.base_std * scale, "quadratic": base.quadratic * scale})
-    return EpisodeVisuals(int(seed), lighting, table_gain, object_gains, offsets, rotations, noise, bool(config.raycast_misregistration))
+    return EpisodeVisuals(
+        int(seed), lighting, table_gain, object_gains, offsets, rotations, noise, bool(config.raycast_misregistration)
+    )
 
 
 def episode_visuals(config: VisualRandomization | None, seed: int | None, rng: np.random.Generator) -> EpisodeVisuals | None:
@@ -285,9 +299,13 @@ def randomized_raycast(
     ws = raycaster.workspace
     if visuals.raycast_misregistration:
         if camera_centres is None or not 1 <= len(camera_centres) <= CAMERA_SLOTS:
-            raise ValueError("raycast_misregistration needs the calibrated centres " f"of 1 to {CAMERA_SLOTS} cameras, got {camera_centres!r}")
+            raise ValueError(
+                f"raycast_misregistration needs the calibrated centres of 1 to {CAMERA_SLOTS} cameras, got {camera_centres!r}"
+            )
         k = len(camera_centres)
-        maps = misregistered_heightmaps(maps, ws, camera_centres, visuals.camera_offsets[:k], visuals.camera_rotations[:k], background_color)
+        maps = misregistered_heightmaps(
+            maps, ws, camera_centres, visuals.camera_offsets[:k], visuals.camera_rotations[:k], background_color
+        )
     if visuals.depth_noise is None:
         return maps
     depth, lost = corrupt_heights(

@@ -90,8 +90,10 @@ class ActionMemory:
             if float(np.abs(depth[window] - before[window]).max(initial=0.0)) > c.repeat_height_change:
                 continue  # the scene changed there: trying again is a new action
             rotations = [k for k in range(num_rotations) if self._angle(primitive, k) == angle]
-            near = (slice(max(0, r - c.repeat_pixels), r + c.repeat_pixels + 1),
-                    slice(max(0, col - c.repeat_pixels), col + c.repeat_pixels + 1))
+            near = (
+                slice(max(0, r - c.repeat_pixels), r + c.repeat_pixels + 1),
+                slice(max(0, col - c.repeat_pixels), col + c.repeat_pixels + 1),
+            )
             out[(rotations, *near)] = True
         return out
 

@@ -109,15 +109,12 @@ class ExemplarMatcher:
         unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
         if not {"query_color", "query_depth"} <= set(getattr(env.observation_space, "spaces", {})):
             raise ValueError(
-                "the matching heuristic needs an exemplar (query_color, query_depth): "
-                "make the env with target_spec='exemplar'"
+                "the matching heuristic needs an exemplar (query_color, query_depth): make the env with target_spec='exemplar'"
             )
         self.config = config
         self.primitives = tuple(unwrapped.primitives)
         if "grasp" not in self.primitives:
-            raise ValueError(
-                f"the matching heuristic grasps; this env allows only {self.primitives}"
-            )
+            raise ValueError(f"the matching heuristic grasps; this env allows only {self.primitives}")
         self.resolution = float(unwrapped.config.workspace.resolution)
         self.grasp_depth = float(unwrapped.config.primitives.grasp_depth)
         self.grasp_min_height = float(unwrapped.config.primitives.grasp_min_height)
@@ -170,13 +167,9 @@ class ExemplarMatcher:
         clearing = bool({"move", "push"} & set(self.primitives))
         uncovered = [b for b in blobs if not b.covered]
         best = uncovered[0] if uncovered else None
-        threshold = (
-            c.grasp_score if self._searches < c.patience else min(c.grasp_score, c.accept_score)
-        )
+        threshold = c.grasp_score if self._searches < c.patience else min(c.grasp_score, c.accept_score)
         if best is not None and best.score >= threshold:
-            blocked = fingers_blocked(
-                np.asarray(obs["depth"]), self.resolution, self.grasp_depth, self.grasp_min_height
-            )
+            blocked = fingers_blocked(np.asarray(obs["depth"]), self.resolution, self.grasp_depth, self.grasp_min_height)
             rotation, row, col, height = free_grasp(best.pixels, blocked, avoid=self._grasp_angles)
             plan = {
                 "kind": "grasp_match",
@@ -189,9 +182,7 @@ class ExemplarMatcher:
             plan = {"kind": "uncover", "score": round(blob.score, 3)}
             grown = blob.pixels.astype(np.uint8)
             rim = (cv2.dilate(grown, np.ones((3, 3), np.uint8), iterations=3) > 0) & ~blob.pixels
-            around = (
-                cv2.dilate(grown, np.ones((3, 3), np.uint8), iterations=c.neighbourhood) > 0
-            ) & ~blob.pixels
+            around = (cv2.dilate(grown, np.ones((3, 3), np.uint8), iterations=c.neighbourhood) > 0) & ~blob.pixels
             # What lies on it first (its rim's pixels above its top), then its tallest neighbours.
             for where in (rim & (up > blob.top + c.cover_height), around & (up > c.min_height)):
                 for region in self._regions(lab, up, where):
@@ -199,9 +190,7 @@ class ExemplarMatcher:
         where = (up > c.min_height) & clearing
         if best is not None:
             where &= ~best.pixels
-        for region in self._regions(
-            lab, up, where
-        ):  # no partial match: what lies highest goes first
+        for region in self._regions(lab, up, where):  # no partial match: what lies highest goes first
             yield self._clear(region, None, {"kind": "dig"})
         for blob in blobs:
             yield (
@@ -212,9 +201,7 @@ class ExemplarMatcher:
         top_row, top_col = np.unravel_index(int(np.argmax(up)), up.shape)
         yield ("grasp", 0, int(top_row), int(top_col), {"kind": "grasp_tallest"})
 
-    def _regions(
-        self, lab: np.ndarray, up: np.ndarray, where: np.ndarray, limit: int = 6
-    ) -> Iterator[np.ndarray]:
+    def _regions(self, lab: np.ndarray, up: np.ndarray, where: np.ndarray, limit: int = 6) -> Iterator[np.ndarray]:
         """Up to ``limit`` objects seen at ``where``, tallest first: each the pixels of one colour
         and a continuous height connected to a seed pixel (the highest one left)."""
         c = self.config
@@ -233,9 +220,7 @@ class ExemplarMatcher:
             if region.sum() >= c.min_pixels:
                 yield region
 
-    def _clear(
-        self, region: np.ndarray, away_from: np.ndarray | None, plan: dict[str, Any]
-    ) -> Option:
+    def _clear(self, region: np.ndarray, away_from: np.ndarray | None, plan: dict[str, Any]) -> Option:
         """A move of ``region``'s object (a push away from ``away_from``, or from the
         workspace centre, where the env has no move)."""
         rotation, row, col = _grip(region)

@@ -34,7 +34,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
 from mpg_envs.grid.grasp_geometry import (
     GRASP_ROTATIONS,
     JawGeometry,
@@ -44,8 +43,9 @@ from mpg_envs.grid.grasp_geometry import (
     footprint_rect,
     jaw_strip_heights,
 )
-from mpg_envs.policies.policy import Policy
 from mpg_envs.grid.workspace import NUM_ROTATIONS, world_to_pixel
+from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
+from mpg_envs.policies.policy import Policy
 
 __all__ = ["ActionMemory", "GraspPlan", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect"]
 
@@ -62,7 +62,9 @@ class OracleConfig:
     offset_step: float = 0.004  # the jaw slides along the closing direction in steps of this
     finger_margin: float = 0.004  # the swept strip starts this far off the object's side
     pad_below_tcp: float = JawGeometry.pad_below_tcp  # the pads' lower edge lies this far below the TCP
-    finger_clearance: float = JawGeometry.finger_clearance  # a strip is free if nothing in it rises above the pads' lower edge + this
+    finger_clearance: float = (
+        JawGeometry.finger_clearance
+    )  # a strip is free if nothing in it rises above the pads' lower edge + this
     # A grasp this little blocked is tried before any push (the pads push small things aside).
     grasp_tolerance: float = 0.02
     push_start_gap: float = 0.012  # a push starts this far outside the target's edge
@@ -152,14 +154,19 @@ class OraclePolicy:
         if not verify:
             occluded = bool(self._obs["occluded"][0])
             if "move" in allowed and (occluded or "grasp" not in allowed):
-                moves = list(self._moves(env, target, depth, ids, plans, blockers=False))[: max(1, self.config.verify_preparations)]
+                moves = list(self._moves(env, target, depth, ids, plans, blockers=False))[
+                    : max(1, self.config.verify_preparations)
+                ]
                 step = self._tried_move(env, target, depth, ids, moves)
                 if step:
                     return step
             good = [p for p in plans if p.blocked <= self.config.grasp_tolerance]
             step = self._first_new("grasp", good, depth)
             if step:
-                return (*step, {"kind": "grasp_free" if good[0].free else "grasp_tolerated", "blocked": round(good[0].blocked, 4)})
+                return (
+                    *step,
+                    {"kind": "grasp_free" if good[0].free else "grasp_tolerated", "blocked": round(good[0].blocked, 4)},
+                )
             step = next(self._pushes(env, target, depth, plans), None)
             if step:
                 return step
@@ -332,7 +339,9 @@ class OraclePolicy:
             edge = width / 2 + c.finger_margin
             in_low = (sb <= -edge) & (sb >= offset - reach) & (hb > limit)
             in_high = (sb >= edge) & (sb <= offset + reach) & (hb > limit)
-            blockers = [(side, int(j)) for side, sel in ((-1, in_low), (1, in_high)) for j in np.unique(ib[sel]) if j >= 0 and j != i]
+            blockers = [
+                (side, int(j)) for side, sel in ((-1, in_low), (1, in_high)) for j in np.unique(ib[sel]) if j >= 0 and j != i
+            ]
             plans.append(GraspPlan(i, k, row, col, blocked, tuple(blockers), angle_gap(theta, short_dir)))
         # Free first, nearest the short axis; then the least blocked.
         return sorted(plans, key=lambda p: (not p.free, p.angle_off if p.free else p.blocked, p.angle_off))

@@ -33,9 +33,19 @@ from mpg_envs.simulation.blocks import blocks_object_set
 GAP = 0.0005
 """A stacked block is placed this far (m) above what it rests on, then settles."""
 
-ARRANGEMENT_KINDS: tuple[str, ...] = ("boxed-in", "wall", "ring", "twin", "edge", "corner", "crowd", "tower", "cover", "bridge")
+ARRANGEMENT_KINDS: tuple[str, ...] = (
+    "boxed-in",
+    "wall",
+    "ring",
+    "twin",
+    "edge",
+    "corner",
+    "crowd",
+    "tower",
+    "cover",
+    "bridge",
+)
 """The kinds :func:`mpg_envs.scenes.arrangement_draw.draw_arrangement` draws, each with probability 1/10."""
-
 
 
 @dataclass(frozen=True)
@@ -119,7 +129,9 @@ def arrangement_scene(arrangement: Arrangement, workspace: Workspace = Workspace
     objects = []
     for k, block in enumerate(arrangement.blocks):
         if block.shape not in assets:
-            raise ValueError(f"arrangement {arrangement.name!r} block {k}: unknown shape {block.shape!r}; valid: {sorted(assets)}")
+            raise ValueError(
+                f"arrangement {arrangement.name!r} block {k}: unknown shape {block.shape!r}; valid: {sorted(assets)}"
+            )
         asset = assets[block.shape]
         quat = block_quat(block)
         xy = np.array([workspace.center[0] + block.x / 1000, workspace.center[1] + block.y / 1000])
@@ -148,10 +160,15 @@ def check_settled(world, scene: SceneFile, arrangement: Arrangement, visible: fl
     distance, angle = pose_errors(world, scene)
     if np.nanmax(distance) > LOAD_TOLERANCE_M or np.nanmax(angle) > LOAD_TOLERANCE_DEG:
         k = int(np.nanargmax(distance / LOAD_TOLERANCE_M + angle / LOAD_TOLERANCE_DEG))
-        raise ArrangementError(f"{arrangement.name}: {scene.objects[k].label} moved " f"{1000 * distance[k]:.1f} mm, {angle[k]:.1f} deg while settling")
+        raise ArrangementError(
+            f"{arrangement.name}: {scene.objects[k].label} moved "
+            f"{1000 * distance[k]:.1f} mm, {angle[k]:.1f} deg while settling"
+        )
     low, high = arrangement.visible
     if not low <= visible <= high:
-        raise ArrangementError(f"{arrangement.name}: the target is {visible:.2f} visible, outside the band [{low:g}, {high:g}]")
+        raise ArrangementError(
+            f"{arrangement.name}: the target is {visible:.2f} visible, outside the band [{low:g}, {high:g}]"
+        )
 
 
 def settle_arrangement(env, arrangement: Arrangement) -> tuple[SceneFile, float]:

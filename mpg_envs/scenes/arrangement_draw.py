@@ -48,7 +48,10 @@ class _Layout:
 
     def clear(self, shape: str, x: float, y: float, yaw: float, gap: float = 1.0) -> bool:
         hx, hy = _turned_extents(shape, yaw)
-        return all(abs(x - cx) >= hx + ax + gap or abs(y - cy) >= hy + ay + gap for cx, cy, ax, ay in map(self.rect, range(len(self.blocks))))
+        return all(
+            abs(x - cx) >= hx + ax + gap or abs(y - cy) >= hy + ay + gap
+            for cx, cy, ax, ay in map(self.rect, range(len(self.blocks)))
+        )
 
     def put_beside(self, shape: str, direction: tuple[float, float], gap: float, yaw: float, along: float = 0.0) -> bool:
         """Put ``shape`` ``gap`` mm beyond the target's side or corner in ``direction`` (unit
@@ -111,7 +114,11 @@ def _ring(rng: np.random.Generator) -> _Layout:
 
 def _twin(rng: np.random.Generator) -> _Layout:
     shape = _pick(rng, _COMPACT)
-    lay = _Layout([(shape, 0.0, 0.0, 0.0)], "beside an identical block (same shape and colour): only the mask tells them apart", (0.9, 1.0))
+    lay = _Layout(
+        [(shape, 0.0, 0.0, 0.0)],
+        "beside an identical block (same shape and colour): only the mask tells them apart",
+        (0.9, 1.0),
+    )
     lay.put_beside(shape, (0, 1), _gap(rng), 0.0)
     for d in [(1, 0), (-1, 0), (0, -1)][: int(rng.integers(1, 4))]:
         lay.put_beside(_pick(rng, _POSTS), d, _gap(rng), 0.0)
@@ -119,7 +126,12 @@ def _twin(rng: np.random.Generator) -> _Layout:
 
 
 def _edge(rng: np.random.Generator) -> _Layout:
-    lay = _Layout([(_pick(rng, _COMPACT), 0.0, 0.0, 0.0)], "at the workspace's edge behind blocks: a push outward loses it", (0.9, 1.0), "edge")
+    lay = _Layout(
+        [(_pick(rng, _COMPACT), 0.0, 0.0, 0.0)],
+        "at the workspace's edge behind blocks: a push outward loses it",
+        (0.9, 1.0),
+        "edge",
+    )
     for d in [(-1, 0), (0, 1), (0, -1)]:
         lay.put_beside(_pick(rng, _POSTS), d, _gap(rng), 0.0)
     return lay
@@ -133,17 +145,28 @@ def _corner(rng: np.random.Generator) -> _Layout:
 
 
 def _crowd(rng: np.random.Generator) -> _Layout:
-    lay = _Layout([(_pick(rng, _COMPACT + ("long_box", "flat_box")), 0.0, 0.0, 0.0)], "in a tight crowd of blocks", (0.85, 1.0))
+    lay = _Layout(
+        [(_pick(rng, _COMPACT + ("long_box", "flat_box")), 0.0, 0.0, 0.0)], "in a tight crowd of blocks", (0.85, 1.0)
+    )
     for _ in range(int(rng.integers(6, 10))):
         d = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (-1, 1), (1, -1), (-1, -1)][int(rng.integers(8))]
-        lay.put_beside(_pick(rng, tuple(block_assets())), d, _gap(rng), 90.0 * int(rng.integers(2)), along=float(rng.uniform(-30, 30)))
+        lay.put_beside(
+            _pick(rng, tuple(block_assets())), d, _gap(rng), 90.0 * int(rng.integers(2)), along=float(rng.uniform(-30, 30))
+        )
     return lay
 
 
 def _tower(rng: np.random.Generator) -> _Layout:
     blocks = [(_pick(rng, ("cube", "disc", "flat_box", "long_box")), 0.0, 0.0, 0.0)]
     for _ in range(int(rng.integers(1, 3))):
-        blocks.append((_pick(rng, ("cube", "flat_box", "disc")), float(rng.uniform(-5, 5)), float(rng.uniform(-5, 5)), 90.0 * int(rng.integers(2))))
+        blocks.append(
+            (
+                _pick(rng, ("cube", "flat_box", "disc")),
+                float(rng.uniform(-5, 5)),
+                float(rng.uniform(-5, 5)),
+                90.0 * int(rng.integers(2)),
+            )
+        )
     return _Layout(blocks, "under a tower of blocks: take it down first", (0.0, 0.35))
 
 
@@ -155,7 +178,11 @@ def _cover(rng: np.random.Generator) -> _Layout:
 
 
 def _bridge(rng: np.random.Generator) -> _Layout:
-    lay = _Layout([(_pick(rng, ("disc", "cube", "flat_box")), 0.0, 0.0, 0.0)], "under a bridge: two posts and a span stop the gripper coming down", (0.1, 0.95))
+    lay = _Layout(
+        [(_pick(rng, ("disc", "cube", "flat_box")), 0.0, 0.0, 0.0)],
+        "under a bridge: two posts and a span stop the gripper coming down",
+        (0.1, 0.95),
+    )
     gap = float(rng.uniform(3.0, 8.0))
     lay.put_beside("tall_box", (0, 1), gap, 0.0)
     lay.put_beside("tall_box", (0, -1), gap, 0.0)
@@ -167,7 +194,9 @@ _DRAW = {"boxed-in": _boxed_in, "wall": _wall, "ring": _ring, "twin": _twin, "ed
          "crowd": _crowd, "tower": _tower, "cover": _cover, "bridge": _bridge}  # fmt: skip
 
 
-def draw_arrangement(seed: int, workspace: Workspace = Workspace(), kind: str | None = None, loose: tuple[int, int] = (0, 5)) -> Arrangement:
+def draw_arrangement(
+    seed: int, workspace: Workspace = Workspace(), kind: str | None = None, loose: tuple[int, int] = (0, 5)
+) -> Arrangement:
     """The arrangement of ``seed``: a kind (``kind``, or one of :data:`ARRANGEMENT_KINDS`
     drawn), laid out, turned and placed in ``workspace`` (the edge and corner kinds against
     its edge, 4-12 mm in), and ``loose`` (inclusive range) loose blocks elsewhere, at least

@@ -30,16 +30,17 @@ import dataclasses
 import json
 import math
 import zlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import mujoco
 import numpy as np
 
-from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, kept_target, objects_outside, read_scene
 from mpg_envs.grid.workspace import Workspace
+from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, kept_target, objects_outside, read_scene
 
 CASE_SETS = ("challenge", "epg", "gti")
 """The named case sets."""
@@ -104,7 +105,9 @@ class Case:
         scene = self.scene if isinstance(self.scene, SceneFile) else read_scene(self.scene, self.mesh_dir, object_set_seed)
         if self.target is not None:
             if not 0 <= self.target < len(scene.objects):
-                raise SceneFileError(f"case {self.name!r}: target {self.target} is not an object index 0..{len(scene.objects) - 1}")
+                raise SceneFileError(
+                    f"case {self.name!r}: target {self.target} is not an object index 0..{len(scene.objects) - 1}"
+                )
             scene = dataclasses.replace(scene, target=self.target, target_is_first_kept=False)
         outside = objects_outside(scene, workspace)
         target = kept_target(scene, set(outside)) if outside else scene.target
@@ -146,14 +149,18 @@ def load_cases(name_or_path: str | Path, peers_dir: str | Path | None = None) ->
         return challenge_set()
     if name in ("epg", "gti"):
         if peers_dir is None:
-            raise ValueError(f"case set {name!r} is read from the peers' files: name " "the folder holding them (peers_dir, mpg-eval --peers)")
+            raise ValueError(
+                f"case set {name!r} is read from the peers' files: name the folder holding them (peers_dir, mpg-eval --peers)"
+            )
         return epg_set(Path(peers_dir)) if name == "epg" else gti_set(Path(peers_dir))
     path = Path(name_or_path).expanduser()
     if name.strip() and path.is_file():
         return CaseSet(path.stem, (Case(path.stem, path),))
     if name.strip() and path.is_dir():
         return folder_set(path)
-    raise ValueError(f"unknown case set {name!r}: valid are {', '.join(CASE_SETS)}, or the path of a scene file or a folder of them")
+    raise ValueError(
+        f"unknown case set {name!r}: valid are {', '.join(CASE_SETS)}, or the path of a scene file or a folder of them"
+    )
 
 
 # ------------------------------------------------------------------------------ named sets
@@ -178,7 +185,9 @@ def folder_set(folder: Path) -> CaseSet:
     index = folder / INDEX_FILE
     if index.is_file():
         entries = _index_entries(index)
-        return CaseSet(folder.name, tuple(Case(e["name"], _scene_path(folder, e["name"]), note=e.get("note", "")) for e in entries))
+        return CaseSet(
+            folder.name, tuple(Case(e["name"], _scene_path(folder, e["name"]), note=e.get("note", "")) for e in entries)
+        )
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".json", ".txt"))
     if not files:
         raise ValueError(f"case folder {str(folder)!r} holds no .json or .txt scene files")
@@ -194,7 +203,9 @@ def _index_entries(index: Path) -> list[dict[str, Any]]:
     except (ValueError, UnicodeDecodeError) as exc:  # JSONDecodeError is a ValueError
         raise ValueError(f"{index}: not valid JSON ({exc}); {valid}") from None
     if not isinstance(entries, list):
-        raise ValueError(f"{index} holds a JSON {type(entries).__name__ if not isinstance(entries, dict) else 'object'}; {valid}")
+        raise ValueError(
+            f"{index} holds a JSON {type(entries).__name__ if not isinstance(entries, dict) else 'object'}; {valid}"
+        )
     for k, entry in enumerate(entries):
         if not isinstance(entry, dict) or not isinstance(entry.get("name"), str) or not isinstance(entry.get("note", ""), str):
             raise ValueError(f"{index}: entry {k} is {entry!r}; {valid}")

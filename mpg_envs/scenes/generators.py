@@ -64,7 +64,11 @@ class GeneratorConfig:
     drop_timestep: float | None = None  # the physics' timestep while objects drop (None: PhysicsConfig.timestep)
 
     def __post_init__(self) -> None:
-        if isinstance(self.buried_candidates, bool) or not isinstance(self.buried_candidates, int) or self.buried_candidates < 1:
+        if (
+            isinstance(self.buried_candidates, bool)
+            or not isinstance(self.buried_candidates, int)
+            or self.buried_candidates < 1
+        ):
             raise ValueError(f"GeneratorConfig.buried_candidates must be an integer >= 1, got {self.buried_candidates!r}")
         steps = self.drop_settle_steps
         if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or steps < 1):
@@ -127,7 +131,9 @@ def isolated_target(world: World, rng: np.random.Generator, cfg: GeneratorConfig
     target = int(rng.integers(n))
     points = _points_apart(world, rng, n, cfg.apart_distance, cfg)
     # Give the target the drop point farthest from all the others.
-    best = max(range(n), key=lambda k: min((np.linalg.norm(points[k] - q) for j, q in enumerate(points) if j != k), default=1.0))
+    best = max(
+        range(n), key=lambda k: min((np.linalg.norm(points[k] - q) for j, q in enumerate(points) if j != k), default=1.0)
+    )
     points[target], points[best] = points[best], points[target]
     for i, p in enumerate(points):
         _drop(world, cfg, i, p, random_quat(rng))

@@ -74,9 +74,7 @@ def exemplar_colours(
     return tuple(colours)
 
 
-def shared_looks(
-    shapes: Sequence[Hashable], colours: Sequence[int], target: int, other: int
-) -> tuple[str, ...]:
+def shared_looks(shapes: Sequence[Hashable], colours: Sequence[int], target: int, other: int) -> tuple[str, ...]:
     """What object ``other`` shares with the target (``"colour"``, ``"shape"``, in
     :data:`LOOKS` order; empty when nothing: not a look-alike)."""
     shared = []

@@ -38,11 +38,11 @@ from typing import cast
 
 import numpy as np
 
+from mpg_envs.grid.workspace import Workspace
 from mpg_envs.simulation.families import family_asset
 from mpg_envs.simulation.family_shapes import FAMILY_NAMES
 from mpg_envs.simulation.objects import ObjectAsset, blocks_object_set, load_mesh_folder, load_object_set
 from mpg_envs.simulation.random_urdfs import PACKED_SOURCE_PREFIX, TEST_SET_NAME
-from mpg_envs.grid.workspace import Workspace
 
 SCENE_FORMAT = "mpg-scene"
 SCENE_VERSION = 1
@@ -122,11 +122,15 @@ def check_scene(scene: SceneFile) -> None:
         name = obj.label or f"object {i}"
         pos, quat = np.asarray(obj.position, float), np.asarray(obj.quat, float)
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
-            raise SceneFileError(f"scene {scene.source!r}: {name} has position {pos.tolist()}; valid: three finite numbers [x, y, z] (m)")
+            raise SceneFileError(
+                f"scene {scene.source!r}: {name} has position {pos.tolist()}; valid: three finite numbers [x, y, z] (m)"
+            )
         norm = float(np.linalg.norm(quat)) if quat.shape == (4,) else math.nan
         if not abs(norm - 1.0) <= QUAT_TOLERANCE:
-            raise SceneFileError(f"scene {scene.source!r}: {name} has orientation {quat.tolist()} (norm {norm:.6g}); valid: "
-                                 f"a unit quaternion [w, x, y, z], norm within {QUAT_TOLERANCE:g} of 1")
+            raise SceneFileError(
+                f"scene {scene.source!r}: {name} has orientation {quat.tolist()} (norm {norm:.6g}); valid: "
+                f"a unit quaternion [w, x, y, z], norm within {QUAT_TOLERANCE:g} of 1"
+            )
 
 
 def objects_outside(scene: SceneFile, workspace: Workspace) -> list[int]:
@@ -137,7 +141,11 @@ def objects_outside(scene: SceneFile, workspace: Workspace) -> list[int]:
         pos = np.asarray(obj.position, float)
         if not obj.active:
             continue
-        if not np.all(np.isfinite(pos)) or not workspace.contains_xy(pos[0], pos[1]) or not BELOW_TABLE <= pos[2] <= workspace.z_max:
+        if (
+            not np.all(np.isfinite(pos))
+            or not workspace.contains_xy(pos[0], pos[1])
+            or not BELOW_TABLE <= pos[2] <= workspace.z_max
+        ):
             out.append(i)
     return out
 
@@ -167,10 +175,13 @@ def resolve_outside(
     ws = workspace
     what = (
         f"{len(outside)} object(s) outside the workspace (x in [{ws.x_min}, {ws.x_max}], y in [{ws.y_min}, "
-        f"{ws.y_max}], z in [{BELOW_TABLE}, {ws.z_max}]: on the table) " f"{when}: {describe_objects(scene, outside, positions)}"
+        f"{ws.y_max}], z in [{BELOW_TABLE}, {ws.z_max}]: on the table) "
+        f"{when}: {describe_objects(scene, outside, positions)}"
     )
     if not drop_outside:
-        raise SceneFileError(f"scene {scene.source!r}: {what}. Pass reset(options={{'drop_outside': True}}) to leave them out.")
+        raise SceneFileError(
+            f"scene {scene.source!r}: {what}. Pass reset(options={{'drop_outside': True}}) to leave them out."
+        )
     warnings.warn(f"scene {scene.source!r}: leaving out {what}", stacklevel=3)
 
 
@@ -229,7 +240,10 @@ def save_scene(scene: SceneFile | object, path: str | Path) -> Path:
 
 # ------------------------------------------------------------------------------ reading
 def read_scene(
-    path: str | Path, mesh_dir: str | Path | None = None, object_set_seed: int = 0, allow_changed_meshes: bool = False,
+    path: str | Path,
+    mesh_dir: str | Path | None = None,
+    object_set_seed: int = 0,
+    allow_changed_meshes: bool = False,
 ) -> SceneFile:
     """Read a scene file: ours (``.json``), or a VPG test case or Grasping the Invisible
     preset (``.txt``, see :mod:`mpg_envs.scenes.vpg_scenes`); ``object_set_seed`` is used for the
@@ -247,7 +261,9 @@ def read_scene(
         return read_vpg_text(path, mesh_dir, object_set_seed)
     if path.suffix.lower() == ".json":
         return _read_json_scene(path, mesh_dir, allow_changed_meshes)
-    raise SceneFileError(f"scene file {str(path)!r}: expected a .json scene, or a VPG test case or Grasping the Invisible preset (.txt)")
+    raise SceneFileError(
+        f"scene file {str(path)!r}: expected a .json scene, or a VPG test case or Grasping the Invisible preset (.txt)"
+    )
 
 
 def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_meshes: bool = False) -> SceneFile:
@@ -258,7 +274,9 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise SceneFileError(f"scene file {str(path)!r}: object_set_seed is {json.dumps(seed)}; valid: a non-negative integer")
     if not isinstance(doc.get("stage"), (str, type(None))):
-        raise SceneFileError(f"scene file {str(path)!r}: stage is {json.dumps(doc['stage'])}; valid: a stage name (a string) or null")
+        raise SceneFileError(
+            f"scene file {str(path)!r}: stage is {json.dumps(doc['stage'])}; valid: a stage name (a string) or null"
+        )
     blocks = packed = None
     folders: dict[str, dict[str, ObjectAsset]] = {}
     objects = []
@@ -280,8 +298,10 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
             if not isinstance(active, bool):
                 raise ValueError(f"active is {active!r}; valid: true or false")
         except (KeyError, TypeError, ValueError) as exc:
-            raise SceneFileError(f"scene file {str(path)!r}: object {k} ({obj.get('name') if isinstance(obj, dict) else obj!r}) "
-                                 f"is malformed: {exc if isinstance(exc, ValueError) else repr(exc)}") from exc
+            raise SceneFileError(
+                f"scene file {str(path)!r}: object {k} ({obj.get('name') if isinstance(obj, dict) else obj!r}) "
+                f"is malformed: {exc if isinstance(exc, ValueError) else repr(exc)}"
+            ) from exc
         if source == "blocks":
             blocks = blocks or {a.name: a for a in blocks_object_set(seed=seed)}
             asset = blocks.get(name)
@@ -302,10 +322,14 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
             raise SceneFileError(f"scene file {str(path)!r}: object {k} has an unknown asset {name!r} (from {source!r})")
         label = f"object {k} ({name!r})"
         if "sha256" in obj and Path(asset.source).is_file() and _digest(asset.source, digests) != obj["sha256"]:
-            changed = (f"scene file {str(path)!r}: {label}'s mesh {asset.source!r} changed since the scene was saved "
-                       f"(sha256 {digests[asset.source][:12]}..., recorded {str(obj['sha256'])[:12]}...)")
+            changed = (
+                f"scene file {str(path)!r}: {label}'s mesh {asset.source!r} changed since the scene was saved "
+                f"(sha256 {digests[asset.source][:12]}..., recorded {str(obj['sha256'])[:12]}...)"
+            )
             if not allow_changed_meshes:
-                raise SceneFileError(f"{changed}; restore the mesh, or read_scene(..., " "allow_changed_meshes=True) to load it as it is now")
+                raise SceneFileError(
+                    f"{changed}; restore the mesh, or read_scene(..., allow_changed_meshes=True) to load it as it is now"
+                )
             warnings.warn(f"{changed}; loading the mesh as it is now", stacklevel=3)
         objects.append(SceneObject(dataclasses.replace(asset, rgba=rgba), position, quat, active, label))
     if not objects:
@@ -313,10 +337,14 @@ def _read_json_scene(path: Path, mesh_dir: str | Path | None, allow_changed_mesh
     target = doc.get("target")
     if target is not None:
         if isinstance(target, bool) or not isinstance(target, int) or not 0 <= target < len(objects):
-            raise SceneFileError(f"scene file {str(path)!r}: target is {json.dumps(target)}; valid: an object index "
-                                 f"0..{len(objects) - 1} (an integer), or null for no target")
+            raise SceneFileError(
+                f"scene file {str(path)!r}: target is {json.dumps(target)}; valid: an object index "
+                f"0..{len(objects) - 1} (an integer), or null for no target"
+            )
         if not objects[target].active:
-            raise SceneFileError(f"scene file {str(path)!r}: the target {objects[target].label} is not in the scene (inactive)")
+            raise SceneFileError(
+                f"scene file {str(path)!r}: the target {objects[target].label} is not in the scene (inactive)"
+            )
     return SceneFile(tuple(objects), target, str(path), doc.get("stage"), seed)
 
 
@@ -342,9 +370,17 @@ def json_document(path: Path) -> object:
 
 def _numbers(value: object, count: int, key: str, valid: str, bounds: tuple[float, float] | None = None) -> np.ndarray:
     """``value`` as ``count`` finite floats (within ``bounds``), else a ``ValueError`` naming ``key``."""
-    ok = isinstance(value, list) and len(value) == count and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    ok = (
+        isinstance(value, list)
+        and len(value) == count
+        and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    )
     array = np.asarray(value, float) if ok else np.zeros(0)
-    if not ok or not np.all(np.isfinite(array)) or (bounds is not None and not np.all((array >= bounds[0]) & (array <= bounds[1]))):
+    if (
+        not ok
+        or not np.all(np.isfinite(array))
+        or (bounds is not None and not np.all((array >= bounds[0]) & (array <= bounds[1])))
+    ):
         raise ValueError(f"{key} is {value!r}; valid: {valid}")
     return array
 

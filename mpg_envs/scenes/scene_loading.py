@@ -22,17 +22,24 @@ settling): what checking a scene before running it needs.
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
 
-from mpg_envs.simulation.assets import ObjectAsset
+from mpg_envs.grid.workspace import Workspace
 from mpg_envs.scenes.scene_io import (
-    BELOW_TABLE, PENETRATION_TOLERANCE_M, SceneFile, SceneFileError, SceneObject, check_scene, kept_target, objects_outside,
+    BELOW_TABLE,
+    PENETRATION_TOLERANCE_M,
+    SceneFile,
+    SceneFileError,
+    SceneObject,
+    check_scene,
+    kept_target,
+    objects_outside,
     resolve_outside,
 )
-from mpg_envs.grid.workspace import Workspace
+from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.world import World
 
 LOAD_TOLERANCE_M = 0.006
@@ -103,12 +110,16 @@ def place_scene(
     deep = interpenetrations(world, PENETRATION_TOLERANCE_M)
     if deep:
         names = [f"{_label(scene, a)} and {_label(scene, b)} by {1000 * d:.1f} mm" for a, b, d in deep]
-        raise SceneFileError(f"scene {scene.source!r}: objects interpenetrate: {'; '.join(names[:5])}"
-                             f"{f' (and {len(names) - 5} more pairs)' if len(names) > 5 else ''}; {valid}")
+        raise SceneFileError(
+            f"scene {scene.source!r}: objects interpenetrate: {'; '.join(names[:5])}"
+            f"{f' (and {len(names) - 5} more pairs)' if len(names) > 5 else ''}; {valid}"
+        )
     sunk = sunk_into_table(world, PENETRATION_TOLERANCE_M)
     if sunk:
         names = [f"{_label(scene, i)} by {1000 * d:.1f} mm" for i, d in sunk]
-        raise SceneFileError(f"scene {scene.source!r}: objects sunk into the table (its top is z = 0): {'; '.join(names)}; {valid}")
+        raise SceneFileError(
+            f"scene {scene.source!r}: objects sunk into the table (its top is z = 0): {'; '.join(names)}; {valid}"
+        )
     return world, dropped
 
 

@@ -24,19 +24,19 @@ import functools
 import json
 import zipfile
 import zlib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
+from mpg_envs.grid.workspace import Workspace
 from mpg_envs.scenes.generators import GeneratorConfig
-from mpg_envs.simulation.mujoco_version import MUJOCO_KEY, mujoco_major, recorded_mujoco, running_mujoco
+from mpg_envs.scenes.scene_io import SceneFile, SceneObject
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.families import FAMILY_SEED_RANGES
-from mpg_envs.scenes.scene_io import SceneFile, SceneObject
-from mpg_envs.grid.workspace import Workspace
+from mpg_envs.simulation.mujoco_version import MUJOCO_KEY, mujoco_major, recorded_mujoco, running_mujoco
 
 GENERATOR_VERSION = 1
 """Version of scene generation the shipped sets were made with."""
@@ -133,7 +133,9 @@ class TestSet:
         shapes = {"assets": (s, n), "positions": (s, n, 3), "quats": (s, n, 4), "targets": (s,), "visible_fraction": (s,)}
         for field, shape in shapes.items():
             if np.shape(getattr(self, field)) != shape:
-                raise ValueError(f"test set {self.name!r}: {field} has shape {np.shape(getattr(self, field))}, expected {shape}")
+                raise ValueError(
+                    f"test set {self.name!r}: {field} has shape {np.shape(getattr(self, field))}, expected {shape}"
+                )
         object.__setattr__(self, "_index", {int(seed): k for k, seed in enumerate(self.seeds)})
 
     def __len__(self) -> int:
@@ -146,7 +148,9 @@ class TestSet:
     def scene(self, seed: int, object_set: Sequence[ObjectAsset]) -> SceneFile:
         """The scene of ``seed`` with its assets taken from ``object_set`` (by name)."""
         if not self.has_seed(seed):
-            raise KeyError(f"seed {seed} is not in test set {self.name!r} ({len(self)} " f"scenes, seeds {self.seeds[0]}..{self.seeds[-1]})")
+            raise KeyError(
+                f"seed {seed} is not in test set {self.name!r} ({len(self)} scenes, seeds {self.seeds[0]}..{self.seeds[-1]})"
+            )
         k = self._index[int(seed)]  # type: ignore[attr-defined]
         by_name = {asset.name: asset for asset in object_set}
         objects = []
@@ -204,7 +208,8 @@ class TestSet:
             f"{tolerance:g}); restore the file {self.name}_{self.num_objects}.npz (reinstall the "
             f"package, or `git checkout -- mpg_envs/test_scenes/{self.name}_{self.num_objects}.npz`) or regenerate it "
             f"with `python benchmarks/make_test_sets.py --envs {self.meta.get('env_id', '<its env id>')} --objects "
-            f"{self.num_objects}` (the set was made with MuJoCo " f"{self.made_with_mujoco}, this is MuJoCo {running_mujoco()})"
+            f"{self.num_objects}` (the set was made with MuJoCo "
+            f"{self.made_with_mujoco}, this is MuJoCo {running_mujoco()})"
         )
 
     def save(self, path: str | Path) -> Path:
@@ -248,7 +253,9 @@ def load_test_set(path: str | Path) -> TestSet:
     except FileNotFoundError:
         raise
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:
-        raise ValueError(f"{path}: not a readable {FORMAT} file (truncated or " f"damaged: {exc}); reinstall the package or regenerate it") from exc
+        raise ValueError(
+            f"{path}: not a readable {FORMAT} file (truncated or damaged: {exc}); reinstall the package or regenerate it"
+        ) from exc
     except ValueError as exc:  # numpy's: a file that is no .npz (it would read it as a pickle), object arrays
         raise ValueError(f"{path}: not an {FORMAT} file ({exc})") from exc
     missing = [key for key in _ARRAYS if key not in arrays]

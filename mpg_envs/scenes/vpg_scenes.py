@@ -38,9 +38,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from mpg_envs.scenes.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject, scene_text
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.objects import blocks_object_set, load_mesh_folder
-from mpg_envs.scenes.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject, scene_text
 
 GTI_COLOURS: dict[str, tuple[float, float, float]] = {
     name: (r / 255.0, g / 255.0, b / 255.0)
@@ -76,7 +76,9 @@ def _rot_z(a: float) -> np.ndarray:
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
-_SWAP_XZ = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])  # also Efficient Push-Grasping's fix for these meshes
+_SWAP_XZ = np.array(
+    [[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]
+)  # also Efficient Push-Grasping's fix for these meshes
 
 VPG_SHAPE_FRAMES: dict[str, np.ndarray] = {
     "0": _SWAP_XZ,  # triangular prism
@@ -121,7 +123,9 @@ def read_vpg_text(path: Path, mesh_dir: str | Path | None, seed: int) -> SceneFi
         where = f"{path}:{lineno}"
         if gti:
             if len(fields) != 8:
-                raise SceneFileError(f"{where}: expected Grasping the Invisible's 'name mesh x y z rx ry rz', got {len(fields)} fields")
+                raise SceneFileError(
+                    f"{where}: expected Grasping the Invisible's 'name mesh x y z rx ry rz', got {len(fields)} fields"
+                )
             name, mesh, numbers = fields[0], fields[1], fields[2:]
             if name not in GTI_COLOURS:
                 raise SceneFileError(f"{where}: unknown name {name!r}; valid: {', '.join(GTI_COLOURS)}")
@@ -134,11 +138,17 @@ def read_vpg_text(path: Path, mesh_dir: str | Path | None, seed: int) -> SceneFi
             mesh, numbers = fields[0], fields[4:]
             r, g, b = _numbers(where, fields[1:4])
             rgb = (r, g, b)
-        label = f"object {len(objects)} ({mesh}, line {lineno})" if not gti else f"object {len(objects)} ({name} {mesh}, line {lineno})"
+        label = (
+            f"object {len(objects)} ({mesh}, line {lineno})"
+            if not gti
+            else f"object {len(objects)} ({name} {mesh}, line {lineno})"
+        )
         objects.append(_vpg_object(shapes, mesh, rgb, _numbers(where, numbers), where, label))
     if gti and len(targets) != 1:
         colours = ", ".join(c for c in GTI_COLOURS if c != "block")
-        found = "no line names" if not targets else f"{len(targets)} lines ({', '.join(objects[t].label for t in targets)}) name"
+        found = (
+            "no line names" if not targets else f"{len(targets)} lines ({', '.join(objects[t].label for t in targets)}) name"
+        )
         raise SceneFileError(f"preset {str(path)!r}: {found} a target colour ({colours}); exactly one must")
     objects = _onto_table(objects, path)
     if gti:
@@ -154,7 +164,9 @@ def _shapes(path: Path, mesh_dir: str | Path | None, seed: int) -> _Shapes:
     """The assets a file's mesh names refer to, each one's shape frame, and where they come from."""
     if mesh_dir is not None and not Path(mesh_dir).is_dir():
         raise FileNotFoundError(f"mesh_dir {str(mesh_dir)!r} does not exist")
-    candidates = [Path(mesh_dir)] if mesh_dir is not None else [path.parent.parent / "blocks", path.parent.parent / "vpg" / "blocks"]
+    candidates = (
+        [Path(mesh_dir)] if mesh_dir is not None else [path.parent.parent / "blocks", path.parent.parent / "vpg" / "blocks"]
+    )
     folder = next((c for c in candidates if c.is_dir()), None)
     if folder is not None:
         assets = {a.name: a for a in load_mesh_folder(folder, seed=seed)}
@@ -175,7 +187,9 @@ def _numbers(where: str, fields: list[str]) -> list[float]:
     return values
 
 
-def _vpg_object(shapes: _Shapes, mesh: str, rgb: tuple[float, float, float], numbers: list[float], where: str, label: str) -> SceneObject:
+def _vpg_object(
+    shapes: _Shapes, mesh: str, rgb: tuple[float, float, float], numbers: list[float], where: str, label: str
+) -> SceneObject:
     """One object at its VPG pose: the shape frame's Euler angles, the bounding-box centre."""
     assets, frames, source = shapes
     stem = Path(mesh).stem

@@ -139,7 +139,6 @@ class ObjectAsset:
         return float(self.part_volumes.sum())
 
 
-
 def check_seed(seed: int) -> int:
     """The seed as a plain int; ValueError unless a non-negative integer (numpy's RNG rule)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -218,5 +217,3 @@ def make_asset(
         name=name, parts=tuple(parts), rgba=rgba, mass=mass, friction=friction, source=source,
         mesh_offset=offset, scale=float(scale), licence=licence,
     )  # fmt: skip
-
-

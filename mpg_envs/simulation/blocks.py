@@ -16,7 +16,16 @@ import os
 import numpy as np
 import trimesh
 
-from mpg_envs.simulation.assets import DEFAULT_FRICTION, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part, check_seed, convex_part, make_asset
+from mpg_envs.simulation.assets import (
+    DEFAULT_FRICTION,
+    TABLEAU_10,
+    WOOD_DENSITY,
+    ObjectAsset,
+    Part,
+    check_seed,
+    convex_part,
+    make_asset,
+)
 from mpg_envs.simulation.geometry_cache import cached_parts, resolve_cache_dir
 from mpg_envs.simulation.meshes import CoacdParams, decompose
 
@@ -84,12 +93,9 @@ def blocks_object_set(
         key_data = {"kind": kind, "dims": dims, "seed": seed, "coacd": dataclasses.asdict(params)}
         if kind == "arch":
             key_data["tunnel_ratio"] = ARCH_TUNNEL_RATIO
-        parts, com = cached_parts(
-            folder, f"blocks-{name}", key_data, functools.partial(_make_block, kind, dims, seed, params)
-        )
+        parts, com = cached_parts(folder, f"blocks-{name}", key_data, functools.partial(_make_block, kind, dims, seed, params))
         assets.append(make_asset(name, parts, TABLEAU_10[index % len(TABLEAU_10)], density, None, friction, "blocks", com))
     return assets
-
 
 
 def _jitter_dims(nominal: tuple[tuple[str, float], ...], seed: int, index: int) -> dict[str, float]:
@@ -126,5 +132,3 @@ def _make_block(kind: str, dims: dict[str, float], seed: int, params: CoacdParam
         arch = box.difference(tunnel, engine="manifold")
         return decompose(arch, seed, params, preprocess=False)
     raise ValueError(f"unknown block kind {kind!r}")
-
-

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import hashlib
-from typing import Sequence
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -117,5 +117,3 @@ def add_object_body(
             mass=float(part_mass),
         )
     return body
-
-

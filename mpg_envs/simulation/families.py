@@ -56,7 +56,10 @@ def seed_split(seed: int) -> str:
     for split, seeds in FAMILY_SEED_RANGES.items():
         if seed in seeds:
             return split
-    raise ValueError(f"object-set seed {seed} lies in no split; valid: " f"{', '.join(f'{k} {v.start}-{v.stop - 1}' for k, v in FAMILY_SEED_RANGES.items())}")
+    raise ValueError(
+        f"object-set seed {seed} lies in no split; valid: "
+        f"{', '.join(f'{k} {v.start}-{v.stop - 1}' for k, v in FAMILY_SEED_RANGES.items())}"
+    )
 
 
 def family_object_set(
@@ -90,7 +93,11 @@ def family_object_set(
         raise ValueError(f"unknown procedural object set {name!r}; valid: {list(PROCEDURAL_SETS)}")
     if isinstance(size, bool) or not isinstance(size, int) or size < 1:
         raise ValueError(f"size must be a positive integer, got {size!r}")
-    members = [(FAMILY_NAMES[i % len(FAMILY_NAMES)], i // len(FAMILY_NAMES)) for i in range(size)] if name == PROCEDURAL else [(name, i) for i in range(size)]
+    members = (
+        [(FAMILY_NAMES[i % len(FAMILY_NAMES)], i // len(FAMILY_NAMES)) for i in range(size)]
+        if name == PROCEDURAL
+        else [(name, i) for i in range(size)]
+    )
     folder = resolve_cache_dir(cache_dir)
     return [
         _shape_asset(family, seed, index, TABLEAU_10[i % len(TABLEAU_10)], folder, density, friction)

@@ -20,15 +20,16 @@ the two smallest at most 6 cm), which leaves a shape drawn inside the range as i
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from mpg_envs.simulation.assets import Part, convex_part
 from mpg_envs.simulation.solids import (
+    axis_fit_factors,
     box_part,
     extrude_pieces,
-    axis_fit_factors,
     parts_extents,
     regular_polygon,
     ring_pieces,
@@ -123,7 +124,11 @@ def _build_compound(p: dict[str, Any]) -> list[Part]:
         # Part k lies between the planes x = cuts[k] and cuts[k + 1]; its faces there are the
         # interface polygons it shares with its neighbours, so the parts meet face to face.
         mid = cuts[k] + at * (cuts[k + 1] - cuts[k])
-        points = [_section_points(p["interfaces"][k], cuts[k]), _section_points(bulge, mid), _section_points(p["interfaces"][k + 1], cuts[k + 1])]
+        points = [
+            _section_points(p["interfaces"][k], cuts[k]),
+            _section_points(bulge, mid),
+            _section_points(p["interfaces"][k + 1], cuts[k + 1]),
+        ]
         parts.append(convex_part(np.concatenate(points)))
     return parts
 
@@ -195,7 +200,12 @@ def _draw_hollow(rng: np.random.Generator) -> dict[str, Any]:
     if kind == "frame":  # a flat rectangular ring: the fingers take one side
         return {"kind": kind, "wall": _cm(rng, 0.9, 1.5), "size": [_cm(rng, 6.5, 9.5), _cm(rng, 4.5, 6.0), _cm(rng, 2.6, 4.0)]}
     if kind == "square_cup":
-        return {"kind": kind, "wall": wall, "bottom": _cm(rng, 0.6, 1.0), "size": [_cm(rng, 4.0, 6.0), _cm(rng, 3.5, 6.0), _cm(rng, 3.5, 8.0)]}
+        return {
+            "kind": kind,
+            "wall": wall,
+            "bottom": _cm(rng, 0.6, 1.0),
+            "size": [_cm(rng, 4.0, 6.0), _cm(rng, 3.5, 6.0), _cm(rng, 3.5, 8.0)],
+        }
     return {
         "kind": kind,
         "wall": wall,

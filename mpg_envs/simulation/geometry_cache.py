@@ -19,9 +19,10 @@ import re
 import tempfile
 import warnings
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -121,8 +122,7 @@ def _read_cache(path: Path) -> _Entry | None:
     except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         return None
     ok = count > 0 and all(
-        v.dtype == np.float64 and v.ndim == 2 and v.shape[1] == 3 and f.dtype == np.int32 and f.ndim == 2
-        for v, f in parts
+        v.dtype == np.float64 and v.ndim == 2 and v.shape[1] == 3 and f.dtype == np.int32 and f.ndim == 2 for v, f in parts
     )
     return _Entry(parts, com, volume, note) if ok and com.shape == (3,) else None
 

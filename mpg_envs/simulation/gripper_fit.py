@@ -9,8 +9,8 @@ scale nearest 1 that brings an object's extents into such a range. Pure maths, n
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -29,9 +29,7 @@ class ExtentRange:
         if not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in values):
             raise ValueError(f"extent range bounds must be positive numbers, got {values}")
         if not self.min_extent <= self.max_two_smallest <= self.max_extent:
-            raise ValueError(
-                f"extent range needs min_extent <= max_two_smallest <= max_extent, got {values}"
-            )
+            raise ValueError(f"extent range needs min_extent <= max_two_smallest <= max_extent, got {values}")
 
     def contains(self, extents: Sequence[float], tolerance: float = 1e-9) -> bool:
         """Whether ``extents`` (3 values, m) lie in the range (up to ``tolerance``)."""

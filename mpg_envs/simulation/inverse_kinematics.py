@@ -37,9 +37,7 @@ class IKResult:
 def _checked_vector(name: str, value: np.ndarray, size: int) -> np.ndarray:
     array = np.asarray(value, dtype=np.float64)
     if array.shape != (size,) or not np.all(np.isfinite(array)):
-        raise ValueError(
-            f"{name} must be {size} finite numbers, got {np.asarray(value).tolist()!r}"
-        )
+        raise ValueError(f"{name} must be {size} finite numbers, got {np.asarray(value).tolist()!r}")
     return array
 
 
@@ -84,18 +82,12 @@ def solve_site_pose(
     ``target_quat`` is a unit quaternion (w, x, y, z) in world coordinates.
     """
     if not 0 <= site_id < model.nsite:
-        raise ValueError(
-            f"site_id must be a site of the model (0 to {model.nsite - 1}), got {site_id}"
-        )
+        raise ValueError(f"site_id must be a site of the model (0 to {model.nsite - 1}), got {site_id}")
     dofs = [int(i) for i in dof_indices]
     if not dofs or any(not 0 <= i < model.nv for i in dofs):
-        raise ValueError(
-            f"dof_indices must be degrees of freedom of the model (0 to {model.nv - 1}), got {dofs}"
-        )
+        raise ValueError(f"dof_indices must be degrees of freedom of the model (0 to {model.nv - 1}), got {dofs}")
     if max_steps < 1 or tol <= 0:
-        raise ValueError(
-            f"max_steps must be at least 1 and tol positive, got {max_steps} and {tol}"
-        )
+        raise ValueError(f"max_steps must be at least 1 and tol positive, got {max_steps} and {tol}")
     target_pos = _checked_vector("target_pos", target_pos, 3)
     target_quat = _checked_vector("target_quat", target_quat, 4)
 

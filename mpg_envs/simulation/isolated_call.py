@@ -203,7 +203,12 @@ class WorkerPool:
     """
 
     def __init__(
-        self, size: int, env: Mapping[str, str] | None = None, *, first: IsolatedWorker | None = None, grow_after_s: float = 0.0
+        self,
+        size: int,
+        env: Mapping[str, str] | None = None,
+        *,
+        first: IsolatedWorker | None = None,
+        grow_after_s: float = 0.0,
     ) -> None:
         if isinstance(size, bool) or not isinstance(size, int) or size < 1:
             raise ValueError(f"size must be a positive integer (worker processes), got {size!r}")

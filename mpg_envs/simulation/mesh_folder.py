@@ -111,8 +111,16 @@ def load_mesh_folder(
         try:
             jobs.append(
                 MeshJob.prepare(
-                    path, seed, cache_dir, scale, mass, fit=fit, density=density, friction=friction,
-                    coacd_params=coacd_params, time_limit_s=time_limit_s,
+                    path,
+                    seed,
+                    cache_dir,
+                    scale,
+                    mass,
+                    fit=fit,
+                    density=density,
+                    friction=friction,
+                    coacd_params=coacd_params,
+                    time_limit_s=time_limit_s,
                 )  # fmt: skip
             )
         except MeshLoadError as exc:
@@ -138,9 +146,7 @@ def load_mesh_folder(
     return MeshFolderObjects(objects, tuple(skipped))
 
 
-def _solids(
-    jobs: list[MeshJob | MeshLoadError], workers: int | None
-) -> list[CachedSolid | MeshLoadError]:
+def _solids(jobs: list[MeshJob | MeshLoadError], workers: int | None) -> list[CachedSolid | MeshLoadError]:
     """Each job's solid (or its error), in the jobs' order: in parallel when more than one worker."""
 
     def solid(job: MeshJob | MeshLoadError, worker: WorkerPool | None) -> CachedSolid | MeshLoadError:

@@ -31,12 +31,25 @@ from typing import Any, Literal
 import numpy as np
 import trimesh
 
-from mpg_envs.simulation.assets import DEFAULT_FRICTION, TABLEAU_10, WOOD_DENSITY, ObjectAsset, check_seed, make_asset, mesh_volume
+from mpg_envs.simulation.assets import (
+    DEFAULT_FRICTION,
+    TABLEAU_10,
+    WOOD_DENSITY,
+    ObjectAsset,
+    check_seed,
+    make_asset,
+    mesh_volume,
+)
 from mpg_envs.simulation.decomposition import CONVEX_VOLUME_RATIO, HULL_FALLBACK_RATIO, CoacdParams, Solid, decompose
 from mpg_envs.simulation.geometry_cache import CachedSolid, cached_solid, read_cached_solid, resolve_cache_dir
 from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange, FitError, fit_scale
 from mpg_envs.simulation.isolated_call import (
-    IsolatedCallError, IsolatedWorker, WorkerCallError, WorkerPool, WorkerTimeoutError, shared_worker,
+    IsolatedCallError,
+    IsolatedWorker,
+    WorkerCallError,
+    WorkerPool,
+    WorkerTimeoutError,
+    shared_worker,
 )  # fmt: skip
 
 __all__ = [
@@ -231,7 +244,9 @@ class MeshJob:
         parts, volume, note, timed_out = _isolated_solid(
             self.path, self.scale * self.first_fit, self.seed, self.params, self.time_limit_s, worker
         )
-        return cached_solid(self.cache_dir, label, timed_out_key if timed_out else self.key_data, lambda: (parts, volume, note))
+        return cached_solid(
+            self.cache_dir, label, timed_out_key if timed_out else self.key_data, lambda: (parts, volume, note)
+        )
 
     def asset(
         self, solid: CachedSolid, *, name: str | None = None, rgba: tuple[float, float, float, float] = TABLEAU_10[0]
@@ -296,7 +311,8 @@ def _isolated_solid(
     if solid.method == "hull-fallback":
         hull_volume = sum(mesh_volume(v, f) for v, f in solid.parts)
         note = (
-            f"convex decomposition {failure}; using its convex hull " f"instead ({hull_volume / solid.volume:.3f} x its volume, "
+            f"convex decomposition {failure}; using its convex hull "
+            f"instead ({hull_volume / solid.volume:.3f} x its volume, "
             f"within the {HULL_FALLBACK_RATIO:g} allowed)"
         )
     else:
@@ -322,7 +338,9 @@ def _as_load_error(path: Path, exc: WorkerCallError) -> MeshLoadError:
 def _vertex_extents(path: Path, data: bytes) -> np.ndarray:
     """Bounding-box size of the file's finite vertices (trimesh's parser: Python, no native code)."""
     try:
-        mesh: Any = trimesh.load(trimesh.util.wrap_as_stream(data), file_type=path.suffix.lower()[1:], force="mesh", process=False)
+        mesh: Any = trimesh.load(
+            trimesh.util.wrap_as_stream(data), file_type=path.suffix.lower()[1:], force="mesh", process=False
+        )
         vertices = np.asarray(mesh.vertices, dtype=np.float64)
     except Exception as exc:  # trimesh raises many types for bad files; report them uniformly
         raise MeshLoadError(f"mesh file {str(path)!r}: cannot load it ({type(exc).__name__}: {exc})") from exc

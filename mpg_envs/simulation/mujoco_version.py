@@ -50,9 +50,7 @@ def mujoco_major(version: str) -> int:
     """The major version of ``"3.17.0"``, ``"4.0.0"`` or ``"3.x"``; ``ValueError`` otherwise."""
     head = str(version).split(".", 1)[0]
     if not head.isdigit():
-        raise ValueError(
-            f"a MuJoCo version starts with its major number (3.17.0, 4.0.0, 3.x), got {version!r}"
-        )
+        raise ValueError(f"a MuJoCo version starts with its major number (3.17.0, 4.0.0, 3.x), got {version!r}")
     return int(head)
 
 

@@ -12,8 +12,8 @@ shipped test set on such objects runs where the source package is not installed.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -28,7 +28,9 @@ PACK_VERSION = 1
 """Bump when the file layout changes."""
 
 
-def save_object_pack(path: str | os.PathLike[str], assets: Sequence[ObjectAsset], meta: Mapping[str, str] | None = None) -> Path:
+def save_object_pack(
+    path: str | os.PathLike[str], assets: Sequence[ObjectAsset], meta: Mapping[str, str] | None = None
+) -> Path:
     """Write ``assets`` (and string metadata, e.g. source and licence of the set) to ``path`` (compressed ``.npz``).
 
     Vertices are stored as float32 (sub-micrometre rounding); a loaded pack is the
@@ -102,9 +104,14 @@ def load_object_pack(path: str | os.PathLike[str]) -> list[ObjectAsset]:
             r, g, b, a = (float(c) for c in data["rgba"][i])
             assets.append(
                 ObjectAsset(
-                    name=name, parts=tuple(parts), rgba=(r, g, b, a), mass=float(data["mass"][i]),
-                    friction=float(data["friction"][i]), source=str(data["sources"][i]),
-                    mesh_offset=(ox, oy, oz), scale=float(data["scale"][i]),
+                    name=name,
+                    parts=tuple(parts),
+                    rgba=(r, g, b, a),
+                    mass=float(data["mass"][i]),
+                    friction=float(data["friction"][i]),
+                    source=str(data["sources"][i]),
+                    mesh_offset=(ox, oy, oz),
+                    scale=float(data["scale"][i]),
                     licence=str(data["licences"][i]),
                 )  # fmt: skip
             )

@@ -22,10 +22,18 @@ meshes. The pieces live in modules of their own and are re-exported here:
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
-from mpg_envs.simulation.assets import DEFAULT_FRICTION, MASS_RANGE, MIN_PART_VOLUME, TABLEAU_10, WOOD_DENSITY, ObjectAsset, Part
+from mpg_envs.simulation.assets import (
+    DEFAULT_FRICTION,
+    MASS_RANGE,
+    MIN_PART_VOLUME,
+    TABLEAU_10,
+    WOOD_DENSITY,
+    ObjectAsset,
+    Part,
+)
 from mpg_envs.simulation.blocks import ARCH_TUNNEL_RATIO, BLOCK_SHAPES, BLOCKS_JITTER, CYLINDER_SECTIONS, blocks_object_set
 from mpg_envs.simulation.bodies import OBJECT_CONDIM, OBJECT_GEOM_GROUP, ROLLING_FRICTION, TORSIONAL_FRICTION, add_object_body
 from mpg_envs.simulation.families import FAMILY_SEED_RANGES, PROCEDURAL_SETS, family_object_set
@@ -35,7 +43,12 @@ from mpg_envs.simulation.mesh_folder import MeshFolderObjects, SkippedMesh, load
 from mpg_envs.simulation.meshes import CONVEX_VOLUME_RATIO, MESH_SUFFIXES, CoacdParams, MeshLoadError, load_mesh_file
 from mpg_envs.simulation.object_packs import load_object_pack
 from mpg_envs.simulation.random_urdfs import (
-    RANDOM_URDFS_LICENCE, TEST_SET_NAME, is_test_object, load_random_urdfs, random_urdf_entries, test_pack_path,
+    RANDOM_URDFS_LICENCE,
+    TEST_SET_NAME,
+    is_test_object,
+    load_random_urdfs,
+    random_urdf_entries,
+    test_pack_path,
 )  # fmt: skip
 
 __all__ = [
@@ -148,8 +161,7 @@ def load_object_set(
     if str(name_or_path).strip() and path.is_dir():
         return load_mesh_folder(path, seed=seed, cache_dir=cache_dir)
     raise ValueError(
-        f"unknown object set {str(name_or_path)!r}: valid choices are " f"{', '.join(map(repr, NAMED_SETS))}, one of {list(PROCEDURAL_SETS)} or the path of an "
+        f"unknown object set {str(name_or_path)!r}: valid choices are "
+        f"{', '.join(map(repr, NAMED_SETS))}, one of {list(PROCEDURAL_SETS)} or the path of an "
         f"existing folder of {'/'.join(MESH_SUFFIXES)} meshes"
     )
-
-

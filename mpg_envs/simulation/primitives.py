@@ -19,9 +19,9 @@ import mujoco
 import numpy as np
 
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
 from mpg_envs.perception.footprint import footprint_mask
 from mpg_envs.simulation.robot import ArmIK, UnreachablePoseError, gripper_states
-from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
 from mpg_envs.simulation.world import World, WorldCheckpoint
 
 
@@ -144,8 +144,12 @@ class Primitives:
         """The result of a motion the arm could not reach (the world was put back)."""
         x, y = pixel_to_world(self.world.workspace, row, col)
         return PrimitiveResult(
-            primitive, int(rotation), (int(row), int(col)), (float(x), float(y), 0.0),
-            grasp_failure="unreachable" if primitive in ("grasp", "move") else None, unreachable=True,
+            primitive,
+            int(rotation),
+            (int(row), int(col)),
+            (float(x), float(y), 0.0),
+            grasp_failure="unreachable" if primitive in ("grasp", "move") else None,
+            unreachable=True,
         )
 
     # ----------------------------------------------------------- primitives
@@ -230,11 +234,12 @@ class Primitives:
         world, cfg = self.world, self.config
         if world.robot.driver_angle(world.data) > self.gripper.closed_driver_angle - cfg.closed_margin:
             return None  # the fingers closed fully: nothing between them
-        touching = {int(world.object_of_geom(o)) for _, o in world.contacts_between(world.robot.gripper_geom_ids, np.concatenate(world.object_geom_ids))}
+        touching = {
+            int(world.object_of_geom(o))
+            for _, o in world.contacts_between(world.robot.gripper_geom_ids, np.concatenate(world.object_geom_ids))
+        }
         lifted = [
-            i
-            for i in touching
-            if i >= 0 and world.object_position(i)[2] - heights_before.get(i, np.inf) > cfg.lifted_height
+            i for i in touching if i >= 0 and world.object_position(i)[2] - heights_before.get(i, np.inf) > cfg.lifted_height
         ]
         if not lifted:
             return None
@@ -293,7 +298,9 @@ class Primitives:
         self._actuate_gripper(closed=False)
         self._linear((spot[0], spot[1], z_release), (spot[0], spot[1], z_carry), theta, q, cfg.lift_speed)
 
-    def _carry_pose(self, spot: tuple[float, float], theta: float, z_carry: float, z_release: float) -> tuple[float, np.ndarray]:
+    def _carry_pose(
+        self, spot: tuple[float, float], theta: float, z_carry: float, z_release: float
+    ) -> tuple[float, np.ndarray]:
         """The carry height above ``spot`` and its joint angles: the height the object was lifted
         to, or lower (5 cm at a time, not below 5 cm above the release height) where that is
         out of the arm's reach (a high lift over a far corner of the workspace)."""
@@ -357,7 +364,9 @@ class Primitives:
     def _actuate_gripper(self, closed: bool) -> None:
         cfg, world = self.config, self.world
         robot = world.robot
-        world.data.ctrl[robot.gripper_actuator] = robot.config.gripper_closed_ctrl if closed else robot.config.gripper_open_ctrl
+        world.data.ctrl[robot.gripper_actuator] = (
+            robot.config.gripper_closed_ctrl if closed else robot.config.gripper_open_ctrl
+        )
         cap = cfg.close_max_steps if closed else cfg.open_steps
         used, last = 0, robot.driver_angle(world.data)
         while used < cap:
@@ -381,7 +390,9 @@ class Primitives:
     def _moved(self, i: int, pos: np.ndarray, quat: np.ndarray) -> bool:
         new_pos, new_quat = self.world.object_pose(i)
         angle = 2 * math.acos(min(1.0, abs(float(np.dot(quat, new_quat)))))
-        return bool(np.linalg.norm(new_pos - pos) > self.config.target_moved_distance or angle > self.config.target_moved_angle)
+        return bool(
+            np.linalg.norm(new_pos - pos) > self.config.target_moved_distance or angle > self.config.target_moved_angle
+        )
 
 
 def _disc_offsets(radius: float, resolution: float) -> np.ndarray:

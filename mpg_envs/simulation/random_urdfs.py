@@ -176,9 +176,18 @@ def load_random_urdfs(
     """
     return [
         load_mesh_file(
-            entry.mesh, seed, cache_dir, entry.scale * scale, mass, fit=fit, name=entry.name,
-            rgba=TABLEAU_10[i % len(TABLEAU_10)], density=density, friction=friction,
-            time_limit_s=time_limit_s, licence=RANDOM_URDFS_LICENCE,
+            entry.mesh,
+            seed,
+            cache_dir,
+            entry.scale * scale,
+            mass,
+            fit=fit,
+            name=entry.name,
+            rgba=TABLEAU_10[i % len(TABLEAU_10)],
+            density=density,
+            friction=friction,
+            time_limit_s=time_limit_s,
+            licence=RANDOM_URDFS_LICENCE,
         )  # fmt: skip
         for i, entry in enumerate(random_urdf_entries(folder, split))
     ]

@@ -195,12 +195,17 @@ class Robot:
         self.arm_qpos_adr = model.jnt_qposadr[self.arm_joint_ids]
         self.arm_dof_adr = model.jnt_dofadr[self.arm_joint_ids]
         self.arm_actuators = np.array(
-            [model.actuator(prefix + a).id for a in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")]
+            [
+                model.actuator(prefix + a).id
+                for a in ("shoulder_pan", "shoulder_lift", "elbow", "wrist_1", "wrist_2", "wrist_3")
+            ]
         )
         self.gripper_actuator = model.actuator(prefix + GRIPPER_PREFIX + "fingers_actuator").id
         self.tcp_site = model.site(prefix + TCP_SITE).id
         gripper_joints = [
-            j for j in range(model.njnt) if mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j).startswith(prefix + GRIPPER_PREFIX)
+            j
+            for j in range(model.njnt)
+            if mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j).startswith(prefix + GRIPPER_PREFIX)
         ]
         self.gripper_qpos_adr = model.jnt_qposadr[gripper_joints]
         self.gripper_dof_adr = model.jnt_dofadr[gripper_joints]
@@ -211,7 +216,9 @@ class Robot:
         }
         self.geom_ids = np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] in robot_bodies])
         gripper_bodies = {
-            b for b in robot_bodies if mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b).startswith(prefix + GRIPPER_PREFIX)
+            b
+            for b in robot_bodies
+            if mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b).startswith(prefix + GRIPPER_PREFIX)
         }
         self.gripper_geom_ids = np.array(
             [g for g in self.geom_ids if model.geom_bodyid[g] in gripper_bodies and model.geom_contype[g]]

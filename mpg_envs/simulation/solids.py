@@ -13,14 +13,13 @@ All lengths are metres; shapes are built in their canonical frame, z up.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import trimesh
 
 from mpg_envs.simulation.assets import Part, convex_part
 from mpg_envs.simulation.gripper_fit import BLOCKS_EXTENTS, ExtentRange
-
 
 
 def superquadric_points(

@@ -11,19 +11,19 @@ from __future__ import annotations
 import functools
 import time
 import warnings
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
 
 import mujoco
 import numpy as np
 
-from mpg_envs.simulation.objects import ObjectAsset, add_object_body
-from mpg_envs.simulation.mujoco_version import constraint_jacobian
-from mpg_envs.simulation.robot import Robot, RobotConfig, robot_spec
 from mpg_envs.grid.workspace import Workspace
+from mpg_envs.simulation.mujoco_version import constraint_jacobian
+from mpg_envs.simulation.objects import ObjectAsset, add_object_body
+from mpg_envs.simulation.robot import Robot, RobotConfig, robot_spec
 
 ROBOT_PREFIX = "robot/"
 
@@ -132,7 +132,9 @@ class World:
         self.object_qpos_adr = np.array([m.jnt_qposadr[m.body_jntadr[b]] for b in self.object_body_ids], dtype=int)
         self.object_dof_adr = np.array([m.jnt_dofadr[m.body_jntadr[b]] for b in self.object_body_ids], dtype=int)
         # A body's geoms are contiguous in a compiled model (body_geomadr, body_geomnum).
-        self.object_geom_ids = [np.arange(m.body_geomadr[b], m.body_geomadr[b] + m.body_geomnum[b]) for b in self.object_body_ids]
+        self.object_geom_ids = [
+            np.arange(m.body_geomadr[b], m.body_geomadr[b] + m.body_geomnum[b]) for b in self.object_body_ids
+        ]
         self._geom_owner = np.full(m.ngeom, -1, dtype=int)
         for i, geoms in enumerate(self.object_geom_ids):
             self._geom_owner[geoms] = i

@@ -5,23 +5,24 @@ env's keywords that name settings (``config``, ``object_set``, ``camera_config``
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, fields, is_dataclass, replace
 from numbers import Integral
-from typing import Any, Sequence, cast
+from typing import Any, cast
 
 import numpy as np
 from gymnasium import spaces
 
+from mpg_envs.grid.workspace import Workspace
 from mpg_envs.perception.camera import CameraConfig
 from mpg_envs.perception.occlusion import ChangeConfig, OcclusionConfig
+from mpg_envs.scenes.generators import GeneratorConfig
+from mpg_envs.settings_fields import check_known_fields
 from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 from mpg_envs.simulation.primitives import PrimitiveConfig
-from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.simulation.robot import RobotConfig
-from mpg_envs.scenes.generators import GeneratorConfig
-from mpg_envs.grid.workspace import Workspace
-from mpg_envs.settings_fields import check_known_fields
 from mpg_envs.simulation.world import PhysicsConfig
+from mpg_envs.tasks.rewards import RewardConfig
 
 OBS_MODES = ("raycast", "camera")
 """``raycast``: GL-free heightmaps (default); ``camera``: rendered RGB-D back-projected."""
@@ -118,7 +119,8 @@ def object_assets(object_set: str | os.PathLike[str] | Sequence[ObjectAsset], se
             held = f" (it holds {bad!r} of type {type(bad).__name__})"
         raise ValueError(
             f"object_set must be an object set's name (e.g. 'blocks'), a mesh folder's path or a list of "
-            f"ObjectAsset, got {object_set!r}"[:300] + held
+            f"ObjectAsset, got {object_set!r}"[:300]
+            + held
         )
     if not assets:
         raise ValueError("object_set is empty")

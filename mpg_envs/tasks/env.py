@@ -11,34 +11,50 @@ The world, the primitives executor and the views of the episode are one public h
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence, cast
+from typing import Any, cast
 
 import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.actions import PixelActionSpace
-from mpg_envs.tasks.config import OBS_MODES, EnvConfig, check_camera_config, config_of, object_assets, observation_space
-from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.perception.occlusion import change_detected, check_band
 from mpg_envs.perception.render import OverviewRenderer, render_overview
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
+from mpg_envs.scenes.arranged import ArrangedScenes
+from mpg_envs.scenes.generators import InvalidSceneError
+from mpg_envs.scenes.scene_io import MAX_OBJECTS, SceneFile, SceneFileError, read_scene
+from mpg_envs.scenes.scene_loading import load_scene, scene_of
+from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.simulation.primitives import PrimitiveResult
+from mpg_envs.simulation.world import World
+from mpg_envs.tasks.config import OBS_MODES, EnvConfig, check_camera_config, config_of, object_assets, observation_space
 from mpg_envs.tasks.episode_sim import EpisodeSim
 from mpg_envs.tasks.rewards import StepOutcome
 from mpg_envs.tasks.scene_source import (
-    RESET_OPTIONS, SceneRequest, arranged_start, check_test_scene, checked_reset_options, drop_scene, scene_from_test_set,
+    RESET_OPTIONS,
+    SceneRequest,
+    arranged_start,
+    check_test_scene,
+    checked_reset_options,
+    drop_scene,
+    scene_from_test_set,
 )
+from mpg_envs.tasks.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
 from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
 from mpg_envs.tasks.target_spec import SIMULATOR_KEYS, TargetNaming, target_observation_space
-from mpg_envs.scenes.arranged import ArrangedScenes
-from mpg_envs.scenes.scene_io import MAX_OBJECTS, SceneFile, SceneFileError, read_scene
-from mpg_envs.scenes.scene_loading import load_scene, scene_of
-from mpg_envs.scenes.generators import InvalidSceneError
-from mpg_envs.tasks.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
-from mpg_envs.simulation.world import World
 
-__all__ = ["END_REASONS", "OBS_MODES", "RESET_OPTIONS", "EnvConfig", "InvalidSceneError", "MPGEnv", "StepEvaluation", "observation_space"]
+__all__ = [
+    "END_REASONS",
+    "OBS_MODES",
+    "RESET_OPTIONS",
+    "EnvConfig",
+    "InvalidSceneError",
+    "MPGEnv",
+    "StepEvaluation",
+    "observation_space",
+]
 
 GraspScorer = Callable[[dict[str, np.ndarray]], float]
 
@@ -151,7 +167,11 @@ class MPGEnv(gym.Env):
         # The arm's visual meshes matter only to pictures: leave them out unless something renders.
         visual = render_mode is not None or obs_mode == "camera"
         self.sim = EpisodeSim(
-            config, obs_mode=obs_mode, camera_config=camera_config, robot_visual=visual, mask_all_objects=stage_spec.mask_all_objects
+            config,
+            obs_mode=obs_mode,
+            camera_config=camera_config,
+            robot_visual=visual,
+            mask_all_objects=stage_spec.mask_all_objects,
         )
         self._renderer: OverviewRenderer | None = None
         self.target: int | None = None
@@ -232,13 +252,20 @@ class MPGEnv(gym.Env):
         # The share is drawn only with the option on: without it, episodes are as they were.
         # (sim.random: the episode's generator, drawn by initialize_episode)
         if self.arranged is not None and cast(np.random.Generator, self.sim.random).random() < self.arranged.share:
-            self.target = arranged_start(self.sim, request, self.arranged, lambda s: load_scene(self.sim.build, s, self.config.workspace, False)[1])
+            self.target = arranged_start(
+                self.sim, request, self.arranged, lambda s: load_scene(self.sim.build, s, self.config.workspace, False)[1]
+            )
             if self.target is not None:
                 return
         self.target = drop_scene(self.sim, request)
 
     def evaluate(
-        self, primitive: str, before: dict[str, np.ndarray], result: PrimitiveResult, score_before: float | None, visible_before: float | None = None
+        self,
+        primitive: str,
+        before: dict[str, np.ndarray],
+        result: PrimitiveResult,
+        score_before: float | None,
+        visible_before: float | None = None,
     ) -> StepEvaluation:
         """What the step did, judged on the new state (success, mis-pick, move success,
         occlusion, visibility and its gain over ``visible_before``, change); the reward and
@@ -246,7 +273,9 @@ class MPGEnv(gym.Env):
         obs, world, target = self._obs, self._live_world(), self.target
         assert obs is not None  # the step's new observation
         target_grasped = bool(result.lifted and (self.stage.mask_all_objects or result.grasped_object == target))
-        target_out = target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
+        target_out = (
+            target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
+        )
         occluded_before = bool(before["occluded"][0])
         occluded = bool(obs["occluded"][0])
         changed = change_detected(before["depth"], obs["depth"], before["mask"], result.lifted, self.config.change)
@@ -254,11 +283,22 @@ class MPGEnv(gym.Env):
         move_success = primitive == "move" and cleared
         gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
         wrong = bool(primitive == "grasp" and result.lifted and not target_grasped)
-        is_success = world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
+        is_success = (
+            world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
+        )
         seen = 0.0 if self._visible is None or visible_before is None else self._visible - visible_before
         return StepEvaluation(
-            outcome=StepOutcome(primitive, result.lifted, target_grasped, move_success, changed, gain, seen,
-                                covered_before=occluded_before, cleared=cleared),
+            outcome=StepOutcome(
+                primitive,
+                result.lifted,
+                target_grasped,
+                move_success,
+                changed,
+                gain,
+                seen,
+                covered_before=occluded_before,
+                cleared=cleared,
+            ),
             wrong_grasp=wrong,
             ends_wrong_object=wrong and self.wrong_grasp == "fail",
             is_success=is_success,
@@ -324,7 +364,13 @@ class MPGEnv(gym.Env):
         """What this env's resets ask of a scene (stage, object count and set, visible band,
         settings): what :mod:`mpg_envs.tasks.scene_source` drops or looks up."""
         return SceneRequest(
-            self.stage, self.num_objects, self.object_set, self._object_set_name, self.visible_range, self.config, self.use_test_set
+            self.stage,
+            self.num_objects,
+            self.object_set,
+            self._object_set_name,
+            self.visible_range,
+            self.config,
+            self.use_test_set,
         )
 
     @property
@@ -388,7 +434,9 @@ class MPGEnv(gym.Env):
     def _checked_num_objects(self, n: Any) -> int:
         stage = self.stage
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not stage.min_objects <= n <= MAX_OBJECTS:
-            raise ValueError(f"num_objects must be an integer in {stage.min_objects}..{MAX_OBJECTS} for {stage.env_id}, got {n!r}")
+            raise ValueError(
+                f"num_objects must be an integer in {stage.min_objects}..{MAX_OBJECTS} for {stage.env_id}, got {n!r}"
+            )
         return int(n)
 
     def _reset_info(self, obs: dict[str, np.ndarray]) -> dict[str, Any]:

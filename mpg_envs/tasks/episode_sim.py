@@ -15,8 +15,9 @@ executor and the ray-caster bound to it (ray-cast mode; the camera mode compiles
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -95,7 +96,9 @@ class EpisodeSim:
         self.visuals: EpisodeVisuals | None = None
         self._assets: tuple[ObjectAsset, ...] | None = None
         self._raycaster: RaycastHeightmapper | None = None  # ray-cast mode (made by build)
-        self._occlusion_caster: RaycastHeightmapper | None = None  # camera mode: the clean view the occlusion flag is judged on
+        self._occlusion_caster: RaycastHeightmapper | None = (
+            None  # camera mode: the clean view the occlusion flag is judged on
+        )
         self._camera: CameraHeightmapper | None = None
         self._raycast_threads = config.raycast_threads
         self._painted = False  # paint_objects was called: the ray casts read the model's colours live
@@ -175,8 +178,7 @@ class EpisodeSim:
         colours = np.asarray(rgba, dtype=float)
         if colours.shape != (world.num_objects, 4) or not np.all((colours >= 0.0) & (colours <= 1.0)):
             raise ValueError(
-                f"paint_objects needs one RGBA colour in [0, 1] per object ({world.num_objects}, 4), "
-                f"got shape {colours.shape}"
+                f"paint_objects needs one RGBA colour in [0, 1] per object ({world.num_objects}, 4), got shape {colours.shape}"
             )
         for geoms, colour in zip(world.object_geom_ids, colours):
             world.model.geom_rgba[geoms] = colour
@@ -202,7 +204,9 @@ class EpisodeSim:
                 return self._ray_caster()(self._built().data).depth  # the same reason: a misplaced view
             return maps.depth
         if self._occlusion_caster is None:
-            self._occlusion_caster = RaycastHeightmapper(self._built().model, self.config.workspace, num_threads=self._raycast_threads)
+            self._occlusion_caster = RaycastHeightmapper(
+                self._built().model, self.config.workspace, num_threads=self._raycast_threads
+            )
         caster = self._occlusion_caster
         return caster(self._built().data).depth
 

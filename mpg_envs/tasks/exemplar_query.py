@@ -106,19 +106,13 @@ class ExemplarQuery:
         maps = sim.heightmaps(0)
         return maps.color.copy(), maps.depth.astype(np.float32)
 
-    def _visuals(
-        self, visuals: EpisodeVisuals | None, rng: np.random.Generator
-    ) -> EpisodeVisuals | None:
+    def _visuals(self, visuals: EpisodeVisuals | None, rng: np.random.Generator) -> EpisodeVisuals | None:
         """The episode's visuals with the object's colour jitter (and the depth noise's seed)
         drawn afresh, so the query's colour is no copy of the target's in the scene."""
         if visuals is None:
             return None
         seed = int(rng.integers(2**63))
-        gains = (
-            visuals.object_gains
-            if self.randomization is None
-            else draw_visuals(self.randomization, seed).object_gains
-        )
+        gains = visuals.object_gains if self.randomization is None else draw_visuals(self.randomization, seed).object_gains
         return dataclasses.replace(visuals, seed=seed, object_gains=gains)
 
     def _sim(self, asset: ObjectAsset, ik: ArmIK | None) -> EpisodeSim:
@@ -130,9 +124,7 @@ class ExemplarQuery:
         if kept is not None:  # another asset that had the same id
             kept[1].close()
         # The cameras see only the table and the objects: the arm's visual meshes are left out.
-        sim = EpisodeSim(
-            self.config, obs_mode=self.obs_mode, camera_config=self.camera_config, ik=ik
-        )
+        sim = EpisodeSim(self.config, obs_mode=self.obs_mode, camera_config=self.camera_config, ik=ik)
         self._sims[id(asset)] = (asset, sim)
         # The camera mode compiles every world afresh (EpisodeSim.build): one is enough to keep.
         while len(self._sims) > (KEPT_WORLDS if self.obs_mode == "raycast" else 1):

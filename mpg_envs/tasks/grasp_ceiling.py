@@ -16,15 +16,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mpg_envs.tasks.config import EnvConfig
 from mpg_envs.grid.grasp_geometry import angle_to_rotation, footprint_rect
+from mpg_envs.grid.workspace import world_to_pixel
 from mpg_envs.perception.heightmap import RaycastHeightmapper
+from mpg_envs.scenes.generators import random_quat, yaw_quat
 from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.simulation.primitives import Primitives
 from mpg_envs.simulation.robot import ArmIK
-from mpg_envs.scenes.generators import random_quat, yaw_quat
-from mpg_envs.grid.workspace import world_to_pixel
 from mpg_envs.simulation.world import World
+from mpg_envs.tasks.config import EnvConfig
 
 DROPS = ("yaw", "random")
 """How a trial places its object: on its base with a random yaw, or in a random orientation."""
@@ -71,7 +71,10 @@ class GraspBench:
             raise ValueError(f"drop must be one of {DROPS}, got {drop!r}")
         world, ws = self.world, self.config.workspace
         world.reset()
-        xy = (rng.uniform(ws.x_min + EDGE_MARGIN, ws.x_max - EDGE_MARGIN), rng.uniform(ws.y_min + EDGE_MARGIN, ws.y_max - EDGE_MARGIN))
+        xy = (
+            rng.uniform(ws.x_min + EDGE_MARGIN, ws.x_max - EDGE_MARGIN),
+            rng.uniform(ws.y_min + EDGE_MARGIN, ws.y_max - EDGE_MARGIN),
+        )
         world.drop_object(0, xy, yaw_quat(rng) if drop == "yaw" else random_quat(rng))
         if len(world.objects_outside_workspace()):
             return "rolled_away"

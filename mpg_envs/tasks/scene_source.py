@@ -32,15 +32,15 @@ import hashlib
 import inspect
 import json
 import os
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any, Callable, Sequence, cast
+from typing import Any, cast
 
 import numpy as np
 
-from mpg_envs.scenes import generators
-
 from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.perception.occlusion import in_band, surrounded_sectors
+from mpg_envs.scenes import generators
 from mpg_envs.scenes.arranged import ArrangedScenes, ArrangementError, arrangement_scene, check_settled
 from mpg_envs.scenes.arrangement_draw import draw_arrangement
 from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, keep_inside
@@ -241,7 +241,9 @@ def code_fingerprint(source: str) -> str:
     return ast.unparse(tree)
 
 
-def arranged_start(sim: EpisodeSim, request: SceneRequest, arranged: ArrangedScenes, load: Callable[[SceneFile], int | None]) -> int | None:
+def arranged_start(
+    sim: EpisodeSim, request: SceneRequest, arranged: ArrangedScenes, load: Callable[[SceneFile], int | None]
+) -> int | None:
     """Start the episode in ``sim`` from an arrangement drawn from ``sim.random`` (a kind of
     ``arranged.kinds``, then its seed), built by ``load`` (which builds a scene file's world and
     returns its target), and return its target; ``None`` when none of ``arranged.tries``

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from mpg_envs.tasks.rewards import (
     RewardConfig,
@@ -73,13 +73,53 @@ STAGES: dict[str, StageSpec] = {
     for s in (
         StageSpec("Stage1", ("grasp",), "scattered", 5, 15, reward_grasp_any, mask_all_objects=True),
         StageSpec("Stage2", ("grasp",), "isolated_target", 5, 10, reward_grasp_target),
-        StageSpec("Stage3", ("move",), "occluded_target", 2, 5, reward_move, start_occluded=True, end_on_move_success=True, min_objects=2),
-        StageSpec("Stage4", ("push", "grasp"), "surrounded_target", 7, 6, reward_per_primitive, start_occluded=False, start_surrounded=6, end_after_grasp=True, min_objects=2),
-        StageSpec("Stage5", ("move", "push", "grasp"), "clustered", 10, 10, reward_per_primitive),
-        StageSpec("Occluded", ("move", "push", "grasp"), "test_cluster", 15, 10, reward_per_primitive, start_occluded=True, min_objects=5, test_set="occluded"),
         StageSpec(
-            "OccludedHard", ("move", "push", "grasp"), "test_cluster", 15, 10, reward_per_primitive, start_occluded=True,
-            min_objects=5, wrong_grasp="fail", visible_range=(0.0, 0.3), test_set="occluded_hard",
+            "Stage3",
+            ("move",),
+            "occluded_target",
+            2,
+            5,
+            reward_move,
+            start_occluded=True,
+            end_on_move_success=True,
+            min_objects=2,
+        ),
+        StageSpec(
+            "Stage4",
+            ("push", "grasp"),
+            "surrounded_target",
+            7,
+            6,
+            reward_per_primitive,
+            start_occluded=False,
+            start_surrounded=6,
+            end_after_grasp=True,
+            min_objects=2,
+        ),
+        StageSpec("Stage5", ("move", "push", "grasp"), "clustered", 10, 10, reward_per_primitive),
+        StageSpec(
+            "Occluded",
+            ("move", "push", "grasp"),
+            "test_cluster",
+            15,
+            10,
+            reward_per_primitive,
+            start_occluded=True,
+            min_objects=5,
+            test_set="occluded",
+        ),
+        StageSpec(
+            "OccludedHard",
+            ("move", "push", "grasp"),
+            "test_cluster",
+            15,
+            10,
+            reward_per_primitive,
+            start_occluded=True,
+            min_objects=5,
+            wrong_grasp="fail",
+            visible_range=(0.0, 0.3),
+            test_set="occluded_hard",
         ),
     )
 }

@@ -58,9 +58,7 @@ def check_target_spec(value: Any, stage: StageSpec) -> str:
     if not isinstance(value, str) or value not in TARGET_SPECS:
         raise ValueError(f"target_spec must be one of {TARGET_SPECS}, got {value!r}")
     if value == "exemplar" and stage.mask_all_objects:
-        raise ValueError(
-            f"target_spec='exemplar' needs a target; {stage.env_id} has none (every object is a target)"
-        )
+        raise ValueError(f"target_spec='exemplar' needs a target; {stage.env_id} has none (every object is a target)")
     return value
 
 
@@ -105,20 +103,14 @@ class TargetNaming:
         self.shapes: tuple[Any, ...] | None = None
         self.query: dict[str, np.ndarray] | None = None
         self.target: int | None = None
-        self._query = (
-            ExemplarQuery(config, obs_mode, camera_config, randomization)
-            if self.spec == "exemplar"
-            else None
-        )
+        self._query = ExemplarQuery(config, obs_mode, camera_config, randomization) if self.spec == "exemplar" else None
 
     @property
     def top_mask(self) -> bool:
         """Whether observations need the pixels where the target shows (``visible`` mode)."""
         return self.spec == "visible"
 
-    def start_episode(
-        self, sim: EpisodeSim, target: int | None, seed: int | None, rng: np.random.Generator
-    ) -> None:
+    def start_episode(self, sim: EpisodeSim, target: int | None, seed: int | None, rng: np.random.Generator) -> None:
         """Exemplar mode: paint the scene of ``sim`` by the look-alike rule and take the query,
         from the reset's ``seed`` (``None``: a seed drawn from ``rng``, the env's generator), with
         ``sim.visuals``. Nothing in the other modes."""
@@ -130,15 +122,11 @@ class TargetNaming:
         seed = int(rng.integers(2**63)) if seed is None else int(seed)
         active = [int(i) for i in world.active_objects()]
         shapes = tuple(shape_key(asset) for asset in world.assets)
-        drawn = exemplar_colours(
-            [shapes[i] for i in active], active.index(target), exemplar_rng(seed, 0)
-        )
+        drawn = exemplar_colours([shapes[i] for i in active], active.index(target), exemplar_rng(seed, 0))
         colours = [-1] * world.num_objects
         for i, colour in zip(active, drawn):
             colours[i] = colour
-        sim.paint_objects(
-            [PALETTE[c] if c >= 0 else world.assets[i].rgba for i, c in enumerate(colours)]
-        )
+        sim.paint_objects([PALETTE[c] if c >= 0 else world.assets[i].rgba for i, c in enumerate(colours)])
         self.colours, self.shapes, self.target = tuple(colours), shapes, target
         color, depth = self._query.images(
             world.assets[target],
@@ -173,11 +161,7 @@ class TargetNaming:
         # Drawn with the colours at reset.
         shapes, target = cast(tuple, self.shapes), cast(int, self.target)
         looks = [shared_looks(shapes, self.colours, target, i) for i in others]
-        return {
-            "lookalikes": {
-                look: sum(look in shared for shared in looks) for look in ("colour", "shape")
-            }
-        }
+        return {"lookalikes": {look: sum(look in shared for shared in looks) for look in ("colour", "shape")}}
 
     def step_info(self, wrong_grasp: bool, grasped_object: int | None) -> dict[str, Any]:
         """Exemplar mode: whether the step's mis-pick (``wrong_grasp``, lifting
@@ -185,9 +169,7 @@ class TargetNaming:
         if self.colours is None or self.spec != "exemplar":
             return {}
         shares = (
-            shared_looks(
-                cast(tuple, self.shapes), self.colours, cast(int, self.target), grasped_object
-            )
+            shared_looks(cast(tuple, self.shapes), self.colours, cast(int, self.target), grasped_object)
             if wrong_grasp and grasped_object is not None
             else ()
         )
