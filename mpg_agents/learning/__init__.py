@@ -2,7 +2,8 @@
 
 The training stages as data (:mod:`~mpg_agents.learning.training_stages`) and the algorithm's
 settings (:mod:`~mpg_agents.learning.train_config`), the one gradient step
-(:mod:`~mpg_agents.learning.td_step`), the replay buffer (:mod:`~mpg_agents.learning.replay`),
+(:mod:`~mpg_agents.learning.td_step`), the replay buffer (:mod:`~mpg_agents.learning.replay`,
+:mod:`~mpg_agents.learning.replay_codec`),
 exploration (:mod:`~mpg_agents.learning.exploration`), oracle demonstrations
 (:mod:`~mpg_agents.learning.demonstrations`), the learner of one stage
 (:mod:`~mpg_agents.learning.learner`) and its parallel actors (:mod:`~mpg_agents.learning.actors`,

@@ -1,15 +1,10 @@
 """Compact, surprise-prioritised replay of heightmap transitions (SB3's buffer API, without SB3).
 
-Storage (exact, lossless): each observation is kept once as a :class:`Frame` of compressed
-planes and shared by reference between consecutive transitions (the ``next_obs`` of step t
-is the ``obs`` of step t + 1, and a no-change step reuses its own frame). Per key:
-
-- 0/1 uint8 planes (the mask) are bit-packed, then deflated;
-- other uint8 planes (colour) are deflated;
-- wider dtypes (float32 depth) are byte-shuffled (all first bytes, then all second bytes, ...)
-  and deflated, so the slowly varying exponent bytes compress well; decoding restores the
-  exact bits, so depth round-trips bit for bit (no float16 quantisation);
-- small planes (``occluded``) are stored raw.
+Storage (exact, lossless): each observation is kept once as a compressed
+:class:`~mpg_agents.learning.replay_codec.Frame` (:mod:`mpg_agents.learning.replay_codec`: the mask
+bit-packed, colour deflated, depth byte-shuffled and deflated, bit for bit) and shared by
+reference between consecutive transitions (the ``next_obs`` of step t is the ``obs`` of step
+t + 1, and a no-change step reuses its own frame).
 
 Nothing is preallocated per observation: frames exist only for stored transitions, and a
 frame is freed when the last transition referencing it is overwritten.
@@ -27,8 +22,6 @@ but imports no Stable-Baselines3: ``mpg-train`` runs without it. The SB3 adapter
 
 from __future__ import annotations
 
-import zlib
-from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -36,51 +29,7 @@ import torch
 from gymnasium import spaces
 from torch import Tensor
 
-_RAW_LIMIT = 64  # planes up to this many bytes are cheaper raw than deflated
-
-
-@dataclass(frozen=True)
-class PlaneCodec:
-    """How one observation key is stored: dtype, shape and encoding ("bits", "deflate", "shuffle", "raw")."""
-
-    dtype: np.dtype
-    shape: tuple[int, ...]
-    binary_hint: bool
-
-    def encode(self, value: np.ndarray, level: int) -> tuple[str, bytes]:
-        arr = np.ascontiguousarray(value, dtype=self.dtype).reshape(self.shape)
-        if arr.nbytes <= _RAW_LIMIT:
-            return "raw", arr.tobytes()
-        if self.binary_hint and arr.dtype == np.uint8 and int(arr.max(initial=0)) <= 1:
-            return "bits", zlib.compress(np.packbits(arr.reshape(-1)).tobytes(), level)
-        if arr.dtype.itemsize == 1:
-            return "deflate", zlib.compress(arr.tobytes(), level)
-        shuffled = arr.reshape(-1).view(np.uint8).reshape(-1, arr.dtype.itemsize).T
-        return "shuffle", zlib.compress(np.ascontiguousarray(shuffled).tobytes(), level)
-
-    def decode(self, kind: str, blob: bytes) -> np.ndarray:
-        count = int(np.prod(self.shape))
-        if kind == "raw":
-            return np.frombuffer(blob, dtype=self.dtype).reshape(self.shape).copy()
-        data = zlib.decompress(blob)
-        if kind == "bits":
-            return np.unpackbits(np.frombuffer(data, np.uint8), count=count).astype(self.dtype).reshape(self.shape)
-        if kind == "deflate":
-            return np.frombuffer(data, dtype=self.dtype).reshape(self.shape).copy()
-        if kind == "shuffle":
-            planes = np.frombuffer(data, np.uint8).reshape(self.dtype.itemsize, count)
-            return np.ascontiguousarray(planes.T).view(self.dtype).reshape(self.shape)
-        raise ValueError(f"unknown plane encoding {kind!r}")
-
-
-class Frame:
-    """One stored observation: an encoded blob per key."""
-
-    __slots__ = ("planes", "nbytes")
-
-    def __init__(self, planes: dict[str, tuple[str, bytes]]) -> None:
-        self.planes = planes
-        self.nbytes = sum(len(blob) for _, blob in planes.values())
+from mpg_agents.learning.replay_codec import Frame, PlaneCodec, is_binary_space
 
 
 class ReplaySamples(NamedTuple):
@@ -148,7 +97,7 @@ class PrioritizedHeightmapReplayBuffer:
         self.compression_level = int(compression_level)
         self._rng = np.random.default_rng(seed) if seed is not None else None
         self.codecs = {
-            key: PlaneCodec(np.dtype(sub.dtype), tuple(self.obs_shape[key]), _is_binary(sub))
+            key: PlaneCodec(np.dtype(sub.dtype), tuple(self.obs_shape[key]), is_binary_space(sub))
             for key, sub in observation_space.spaces.items()
         }
         shape = (self.buffer_size, self.n_envs)
@@ -384,18 +333,6 @@ def sb3_dict_buffer_nbytes(buffer: Any) -> int:
         buffer.timeouts,
     )
     return sum(a.nbytes for a in arrays)
-
-
-def _is_binary(space: spaces.Space) -> bool:
-    """A uint8 Box with bounds 0..1 (the mask) or a MultiBinary space."""
-    if isinstance(space, spaces.MultiBinary):
-        return True
-    return (
-        isinstance(space, spaces.Box)
-        and np.dtype(space.dtype) == np.uint8
-        and bool(np.all(space.low == 0))
-        and bool(np.all(space.high == 1))
-    )
 
 
 def _device(device: torch.device | str) -> torch.device:

@@ -25,7 +25,8 @@ from safetensors.torch import load_file, save
 
 from mpg_agents.acting.grasp_threshold import from_header
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
-from mpg_agents.learning.replay import Frame, PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
+from mpg_agents.learning.replay_codec import Frame
 from mpg_agents.network.mpgnet import MPGNet
 from mpg_envs.files import WriteFailed, write_bytes_whole, write_text_whole, written_whole
 

@@ -14,13 +14,12 @@ import math
 import time
 from dataclasses import dataclass
 
-import cv2
 import mujoco
 import numpy as np
 
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
-from mpg_envs.perception.footprint import footprint_mask
+from mpg_envs.simulation.free_space import clutter_height, disc_offsets, free_spot
 from mpg_envs.simulation.robot import ArmIK, UnreachablePoseError, gripper_states
 from mpg_envs.simulation.world import World, WorldCheckpoint
 
@@ -93,7 +92,7 @@ class Primitives:
         self.config = config
         self.ik = ik if ik is not None else ArmIK(world.robot.config)
         self.gripper = gripper_states(world.robot.config)
-        self._footprint_offsets = _disc_offsets(config.footprint_radius, world.workspace.resolution)
+        self._footprint_offsets = disc_offsets(config.footprint_radius, world.workspace.resolution)
         # A position servo (force kp (ctrl - q) - kv qdot) follows a set-point moving at v
         # kv/kp * v behind it; the set-point is led by that much so the arm is where the
         # motion says (velocity feed-forward, as an arm's own controller does).
@@ -170,7 +169,7 @@ class Primitives:
         held = self._pick(x, y, z, z_pre, theta, result)
         if held is not None:
             result.lifted, result.grasped_object = True, held
-            spot = self._free_place(held, target)
+            spot = free_spot(self.world, held, target, self.config.place_margin, self.config.place_clear_of_target)
             if spot is None:
                 # Nowhere free in the workspace: set it aside off the table.
                 self.world.remove_object(held)
@@ -192,7 +191,7 @@ class Primitives:
         # The closed fingers present their broad side to the push.
         theta = direction + math.pi / 2
         result = PrimitiveResult("push", rotation, (row, col), (x, y, z))
-        z_pre = max(self._clutter_height(row, col, depth), z) + cfg.clearance
+        z_pre = max(clutter_height(depth, row, col, self._footprint_offsets), z) + cfg.clearance
         q = self._teleport((x, y, z_pre), theta, closed=True)
         q = self._linear((x, y, z_pre), (x, y, z), theta, q, cfg.approach_speed)
         q = self._linear((x, y, z), (end[0], end[1], z), theta, q, cfg.push_speed)
@@ -205,14 +204,8 @@ class Primitives:
         cfg = self.config
         x, y = pixel_to_world(self.world.workspace, row, col)
         z = max(float(depth[row, col]) - cfg.grasp_depth, cfg.grasp_min_height)
-        z_pre = max(self._clutter_height(row, col, depth), z) + cfg.clearance
+        z_pre = max(clutter_height(depth, row, col, self._footprint_offsets), z) + cfg.clearance
         return x, y, z, z_pre, rotation_angle(rotation)
-
-    def _clutter_height(self, row: int, col: int, depth: np.ndarray) -> float:
-        """Highest point of the scene under the gripper's footprint around a pixel."""
-        rows = np.clip(row + self._footprint_offsets[:, 0], 0, depth.shape[0] - 1)
-        cols = np.clip(col + self._footprint_offsets[:, 1], 0, depth.shape[1] - 1)
-        return float(depth[rows, cols].max())
 
     def _pick(self, x: float, y: float, z: float, z_pre: float, theta: float, result: PrimitiveResult) -> int | None:
         """Descend open, close, lift; the index of the object held afterwards, if any (else
@@ -245,27 +238,6 @@ class Primitives:
             return None
         # Of several lifted objects (one resting on another), the pads hold the lowest.
         return min(lifted, key=lambda i: world.object_position(i)[2])
-
-    def _free_place(self, held: int, target: int | None) -> tuple[float, float] | None:
-        """The most open spot of the workspace clear of the target, or ``None``."""
-        world, cfg, ws = self.world, self.config, self.world.workspace
-        others = [i for i in world.active_objects() if i != held]
-        geoms = np.concatenate([world.object_geom_ids[i] for i in others]) if others else np.array([], dtype=int)
-        occupied = footprint_mask(ws, world.model, world.data, geoms) if geoms.size else np.zeros(ws.shape, np.uint8)
-        verts = world.assets[held].vertices
-        radius = float(np.linalg.norm(verts[:, :2], axis=1).max()) + cfg.place_margin
-        free = (occupied == 0).astype(np.uint8)
-        free[0, :] = free[-1, :] = free[:, 0] = free[:, -1] = 0  # distances to the workspace edge too
-        clearance = cv2.distanceTransform(free, cv2.DIST_L2, 5) * ws.resolution
-        ok = clearance > radius
-        if target is not None and world.active[target] and target != held:
-            tx, ty = world.object_position(target)[:2]
-            gx, gy = ws.pixel_centers()
-            ok &= np.hypot(gx - tx, gy - ty) > cfg.place_clear_of_target + radius
-        if not ok.any():
-            return None
-        row, col = np.unravel_index(np.argmax(np.where(ok, clearance, -1.0)), ok.shape)
-        return pixel_to_world(ws, int(row), int(col))
 
     def _place(self, held: int, spot: tuple[float, float], theta: float) -> None:
         """Carry the held object to above ``spot`` (free space: shortcut), lower it, release."""
@@ -393,10 +365,3 @@ class Primitives:
         return bool(
             np.linalg.norm(new_pos - pos) > self.config.target_moved_distance or angle > self.config.target_moved_angle
         )
-
-
-def _disc_offsets(radius: float, resolution: float) -> np.ndarray:
-    r = int(math.ceil(radius / resolution))
-    dr, dc = np.mgrid[-r : r + 1, -r : r + 1]
-    inside = dr**2 + dc**2 <= r**2
-    return np.stack([dr[inside], dc[inside]], axis=1)
