@@ -134,16 +134,17 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         check_checkpoint(args.init)
         check_checkpoint(args.discriminator)
         if args.pipeline:
+            from mpg_agents.learning import stage_variants  # noqa: PLC0415
             from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline  # noqa: PLC0415
 
             if args.stages:
                 stages = ts.select_stages(stages, args.stages.split(","))
             if args.no_multistage:
-                stages = ts.without_multistage(stages)
+                stages = stage_variants.without_multistage(stages)
             if args.no_alternating:
-                stages = ts.without_alternation(stages)
+                stages = stage_variants.without_alternation(stages)
             if args.baseline:
-                stages = ts.BASELINES[args.baseline](stages)
+                stages = stage_variants.BASELINES[args.baseline](stages)
             summary = run_pipeline(
                 PipelineConfig(base=base, stages=stages), args.out, init=args.init, resume_anyway=args.resume_anyway
             )

@@ -1,6 +1,6 @@
 """The policies ``mpg-eval``, the demo and the benchmarks ask for by name: a checkpoint or a
 built-in baseline (:func:`make_policy`). The learned baselines of Table I are stage tables
-(:data:`mpg_agents.learning.training_stages.BASELINES`); once trained they load here as checkpoints.
+(:data:`mpg_agents.learning.stage_variants.BASELINES`); once trained they load here as checkpoints.
 
 Every policy is a :class:`mpg_envs.policies.policy.Policy`: ``name``, ``reset()`` at each episode's
 start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(path, obs)`` and

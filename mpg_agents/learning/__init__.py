@@ -1,6 +1,7 @@
 """Learning: how MPGNet is trained (paper Sections III-C and III-D).
 
-The training stages as data (:mod:`~mpg_agents.learning.training_stages`) and the algorithm's
+The training stages as data (:mod:`~mpg_agents.learning.training_stages`; the ablations and learned
+baselines as changes of them, :mod:`~mpg_agents.learning.stage_variants`) and the algorithm's
 settings (:mod:`~mpg_agents.learning.train_config`), the one gradient step
 (:mod:`~mpg_agents.learning.td_step`), the replay buffer (:mod:`~mpg_agents.learning.replay`,
 :mod:`~mpg_agents.learning.replay_codec`),

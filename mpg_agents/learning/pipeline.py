@@ -6,8 +6,8 @@ starting from the previous stage's weights, and with them the Q*_g they carry (t
 from its own successful grasps and its weights become the discriminator of the stages that
 ``uses_discriminator``; a stage with ``calibration_episodes`` calibrates Q*_g again in its own
 scenes. ``pipeline.json`` records the final weights and the one Q*_g they carry. Ablations are
-changes of the table (:func:`~mpg_agents.learning.training_stages.without_multistage`,
-:func:`~mpg_agents.learning.training_stages.without_alternation`).
+changes of the table (:func:`~mpg_agents.learning.stage_variants.without_multistage`,
+:func:`~mpg_agents.learning.stage_variants.without_alternation`).
 
 Each stage writes to ``out/<stage name>/`` and resumes there if interrupted; finished stages
 are skipped on a re-run.

@@ -32,7 +32,7 @@ def test_plan_rejects_what_it_cannot_run(runs, seeds, config, match):
 
 
 def test_every_run_is_mpgnet_an_ablation_or_a_learned_baseline():
-    from mpg_agents.learning.training_stages import BASELINES
+    from mpg_agents.learning.stage_variants import BASELINES
 
     for flags in RUNS.values():
         if flags[:1] == ("--baseline",):

@@ -163,7 +163,7 @@ def test_the_finish_trains_only_its_branches(tmp_path, monkeypatch):
 
 def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
     from mpg_agents.evaluation.policy_zoo import make_policy
-    from mpg_agents.learning.training_stages import target_vpg_baseline
+    from mpg_agents.learning.stage_variants import target_vpg_baseline
     from mpg_agents.acting.weights import read_checkpoint_header
 
     stages = with_overrides(TRAINING_STAGES, {s.name: {"iterations": 2} for s in TRAINING_STAGES})

@@ -1,17 +1,17 @@
-"""The training stages as data (mpg_agents.learning.training_stages) and the ablations as table changes."""
+"""The training stages as data (mpg_agents.learning.training_stages) and the ablations and baselines as
+table changes (mpg_agents.learning.stage_variants)."""
 
 from __future__ import annotations
 
 import pytest
 
+from mpg_agents.learning.stage_variants import BASELINES, at_budget, without_alternation, without_multistage
 from mpg_agents.learning.training_stages import (
     TRAINING_STAGES,
     TrainingStage,
     select_stages,
     stage_for_env,
     with_overrides,
-    without_alternation,
-    without_multistage,
 )
 from mpg_envs.tasks.rewards import RewardConfig
 
@@ -65,8 +65,6 @@ def test_branch_init_pairs_are_checked_and_round_trip():
 
 
 def test_learned_baselines_are_table_changes_at_the_same_budget():
-    from mpg_agents.learning.training_stages import BASELINES, at_budget, with_overrides
-
     total = sum(s.iterations for s in TRAINING_STAGES)
     for name, make in BASELINES.items():
         table = make(TRAINING_STAGES)
