@@ -3,6 +3,7 @@
 The :class:`~mpg_envs.policies.policy.Policy` protocol every policy of the suite follows
 (:mod:`~mpg_envs.policies.policy`), the memory of what a policy already did on an unchanged
 scene (:mod:`~mpg_envs.policies.action_memory`) and the scripted oracle that reads the simulator
-(:mod:`~mpg_envs.policies.oracle`). Builds on the grid, perception and simulation layers; a
-policy meets an env only at run time, through its observations and ``env.unwrapped``.
+(:mod:`~mpg_envs.policies.oracle`; its plans by geometry, :mod:`~mpg_envs.policies.grasp_plans`).
+Builds on the grid, perception and simulation layers; a policy meets an env only at run time,
+through its observations and ``env.unwrapped``.
 """

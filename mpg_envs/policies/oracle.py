@@ -15,10 +15,11 @@ and is the upper baseline of evaluations. Each step it re-plans from the current
    direction -- are each tried and followed by grasp trials; the first after which a grasp
    holds is taken, else the one leaving the target least covered and least blocked.
 
-With ``OracleConfig(verify_grasps=0)`` it plans by geometry alone (no trials). It remembers
-every action it took or tried with the heightmap it was on and never repeats one whose
-surroundings did not change (:class:`ActionMemory`), so a failed action is never retried
-unchanged.
+Its plans by geometry (grasps at the 8 angles, finger-gap pushes) are
+:mod:`mpg_envs.policies.grasp_plans`. With ``OracleConfig(verify_grasps=0)`` it plans by geometry
+alone (no trials). It remembers every action it took or tried with the heightmap it was on and
+never repeats one whose surroundings did not change (:class:`ActionMemory`), so a failed action
+is never retried unchanged.
 
 Diagnostics read the oracle's view through its public methods: :meth:`OraclePolicy.view`
 (depth and which object each pixel shows), :meth:`OraclePolicy.occluders` and
@@ -27,24 +28,16 @@ Diagnostics read the oracle's view through its public methods: :meth:`OraclePoli
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
-from mpg_envs.grid.grasp_geometry import (
-    GRASP_ROTATIONS,
-    JawGeometry,
-    angle_gap,
-    angle_to_rotation,
-    extent_along,
-    footprint_rect,
-    jaw_strip_heights,
-)
-from mpg_envs.grid.workspace import NUM_ROTATIONS, world_to_pixel
+from mpg_envs.grid.grasp_geometry import JawGeometry, angle_to_rotation, footprint_rect
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
+from mpg_envs.policies.grasp_plans import GraspPlan, clip_pixel, plan_grasps, push_options
 from mpg_envs.policies.policy import Policy
 
 __all__ = ["ActionMemory", "GraspPlan", "OracleConfig", "OraclePolicy", "Policy", "angle_to_rotation", "footprint_rect"]
@@ -75,23 +68,6 @@ class OracleConfig:
     repeat_height_change: float = RepeatRule.repeat_height_change
     verify_grasps: int = 4  # target grasps tried in a copy of the simulation before acting (0: plan by geometry alone)
     verify_preparations: int = 5  # with trials: moves/pushes tried, each followed by verify_grasps grasp trials
-
-
-@dataclass(frozen=True)
-class GraspPlan:
-    """One grasp of one object: angle index (0..7), pixel, and how badly the fingers collide."""
-
-    obj: int
-    rotation: int
-    row: int
-    col: int
-    blocked: float  # metres the highest thing under the open fingers rises above their lower edge (<= 0: free)
-    blockers: tuple[tuple[int, int], ...]  # (side, object) pairs in the fingers' way
-    angle_off: float  # radians from the object's short axis
-
-    @property
-    def free(self) -> bool:
-        return self.blocked <= 0.0
 
 
 class OraclePolicy:
@@ -221,12 +197,12 @@ class OraclePolicy:
                 yield (*step, {"kind": kinds[j], "object": j})
 
     def _pushes(self, env, target: int, depth: np.ndarray, plans: list[GraspPlan]):
-        """Untried pushes that open a finger gap (see :meth:`_push_options`)."""
+        """Untried pushes that open a finger gap (:func:`~mpg_envs.policies.grasp_plans.push_options`)."""
         if "push" not in env.primitives or not plans:
             return
         seen = set()
-        for _, start, rotation in self._push_options(env, target, plans):
-            r, c = self._clip_pixel(env.world, start)
+        for _, start, rotation in push_options(env.world, target, plans, self.config):
+            r, c = clip_pixel(env.world.workspace, start)
             if (rotation, r, c) not in seen and not self.memory.repeats("push", rotation, r, c, depth):
                 seen.add((rotation, r, c))
                 yield "push", rotation, r, c, {"kind": "push", "no_free_grasp": True}
@@ -290,7 +266,7 @@ class OraclePolicy:
         world = env.world
         i = env.target if env.target is not None and world.active[env.target] else int(world.active_objects()[0])
         centre, _, _ = footprint_rect(world.object_vertices(i)[:, :2])
-        r, c = self._clip_pixel(world, centre)
+        r, c = clip_pixel(world.workspace, centre)
         for k in range(NUM_ROTATIONS):
             if not self.memory.repeats(primitive, k, r, c, depth):
                 return primitive, k, r, c, {"kind": "last_resort", "no_free_grasp": True}
@@ -300,68 +276,10 @@ class OraclePolicy:
     def grasp_plans(self, env, i: int, depth: np.ndarray, ids: np.ndarray, require_fit: bool = True) -> list[GraspPlan]:
         """Grasps of object ``i`` at the 8 angles, best first: free ones nearest the short
         axis, then the least blocked. At each angle the jaw slides along the closing
-        direction (the open fingers span 85 mm) to where both fingers come down on free space."""
-        world, c, pc = env.world, self.config, env.config.primitives
-        ws = world.workspace
-        verts = world.object_vertices(i)[:, :2]
-        centre, _, short_dir = footprint_rect(verts)
-        gx, gy = ws.pixel_centers()
-        reach = c.finger_open_inner + c.finger_thickness
-        plans = []
-        for k in range(GRASP_ROTATIONS):
-            theta = k * math.pi / GRASP_ROTATIONS
-            d = np.array([math.cos(theta), math.sin(theta)])
-            n = np.array([-d[1], d[0]])
-            lo, hi = extent_along(verts, centre, d)
-            width = hi - lo
-            if require_fit and width > c.max_grasp_width:
-                continue
-            nlo, nhi = extent_along(verts, centre, n)
-            mid = centre + d * (lo + hi) / 2 + n * (nlo + nhi) / 2
-            max_offset = max(0.0, c.finger_open_inner - width / 2 - c.finger_margin)
-            rel_x, rel_y = gx - mid[0], gy - mid[1]
-            s, t = rel_x * d[0] + rel_y * d[1], rel_x * n[0] + rel_y * n[1]
-            band = (np.abs(t) <= c.finger_half_width) & (np.abs(s) <= reach + max_offset)
-            sb, hb, ib = s[band], depth[band], ids[band]
-            best = None
-            for offset in sorted(np.arange(-max_offset, max_offset + 1e-9, c.offset_step).tolist() + [0.0], key=abs):
-                row, col = self._clip_pixel(world, mid + offset * d)
-                z = max(float(depth[row, col]) - pc.grasp_depth, pc.grasp_min_height)
-                limit = z - c.pad_below_tcp + c.finger_clearance
-                heights = jaw_strip_heights(sb, hb, width, offset, c.finger_open_inner, c.finger_thickness, c.finger_margin)
-                blocked = max(heights) - limit
-                if best is None or blocked < best[0] - 1e-4:
-                    best = (blocked, offset, row, col, limit)
-                if blocked <= 0:
-                    break
-            assert best is not None  # the offsets tried include 0.0: at least one
-            blocked, offset, row, col, limit = best
-            edge = width / 2 + c.finger_margin
-            in_low = (sb <= -edge) & (sb >= offset - reach) & (hb > limit)
-            in_high = (sb >= edge) & (sb <= offset + reach) & (hb > limit)
-            blockers = [
-                (side, int(j)) for side, sel in ((-1, in_low), (1, in_high)) for j in np.unique(ib[sel]) if j >= 0 and j != i
-            ]
-            plans.append(GraspPlan(i, k, row, col, blocked, tuple(blockers), angle_gap(theta, short_dir)))
-        # Free first, nearest the short axis; then the least blocked.
-        return sorted(plans, key=lambda p: (not p.free, p.angle_off if p.free else p.blocked, p.angle_off))
-
-    def _push_options(self, env, target: int, plans: list[GraspPlan]):
-        """Pushes that open a finger gap: each blocker pushed straight out along the closing
-        direction, from just outside the target's edge; least blocked angles first."""
-        world, c = env.world, self.config
-        verts = world.object_vertices(target)[:, :2]
-        options = []
-        for p in sorted(plans, key=lambda p: p.blocked):
-            theta = p.rotation * math.pi / GRASP_ROTATIONS
-            for side in sorted({s for s, _ in p.blockers}) or (-1, 1):
-                d = side * np.array([math.cos(theta), math.sin(theta)])
-                centre = verts.mean(axis=0)
-                _, reach = extent_along(verts, centre, d)
-                start = centre + d * (reach + c.push_start_gap)
-                rotation = angle_to_rotation(math.atan2(d[1], d[0]) % (2 * math.pi), symmetric=False)
-                options.append((side, start, rotation))
-        return options
+        direction (the open fingers span 85 mm) to where both fingers come down on free space
+        (:func:`~mpg_envs.policies.grasp_plans.plan_grasps`)."""
+        pc = env.config.primitives
+        return plan_grasps(env.world, i, depth, ids, self.config, pc.grasp_depth, pc.grasp_min_height, require_fit)
 
     def occluders(self, world, target: int, depth: np.ndarray, ids: np.ndarray, mask: np.ndarray) -> list[int]:
         """Objects seen over the target's footprint ``mask`` (``depth``, ``ids``: a :meth:`view`)
@@ -396,9 +314,3 @@ class OraclePolicy:
         shows them (judged on the oracle's own clean view of the simulator)."""
         mask, occluded = env.sim.target_view(self.view(env.world)[0], env.target)
         return {**obs, "mask": mask, "occluded": np.array([int(occluded)], dtype=np.int8)}
-
-    @staticmethod
-    def _clip_pixel(world, xy: np.ndarray) -> tuple[int, int]:
-        rows, cols = world.workspace.shape
-        r, c = world_to_pixel(world.workspace, float(xy[0]), float(xy[1]))
-        return int(np.clip(r, 0, rows - 1)), int(np.clip(c, 0, cols - 1))
