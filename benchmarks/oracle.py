@@ -33,7 +33,8 @@ from typing import Any
 import gymnasium as gym
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.evaluation.evaluate import EpisodeRecord, run_episodes, summarise
+from mpg_agents.evaluation.eval_result import EpisodeRecord
+from mpg_agents.evaluation.evaluate import run_episodes, summarise
 from mpg_envs.policies.oracle import OracleConfig, OraclePolicy
 
 ENV_ID = "MPG-Occluded-v0"

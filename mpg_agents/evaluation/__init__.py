@@ -1,7 +1,8 @@
 """Evaluation: policies on episodes, and what their records say.
 
 The policies by name (:mod:`~mpg_agents.evaluation.policy_zoo`), episodes and the paper's
-metrics (:mod:`~mpg_agents.evaluation.evaluate`, with ``--env-option`` parsing in
+metrics (:mod:`~mpg_agents.evaluation.evaluate`, the records and their summary in
+:mod:`~mpg_agents.evaluation.eval_result`, with ``--env-option`` parsing in
 :mod:`~mpg_agents.evaluation.env_options`), evaluation jobs on Ray or a process pool
 (:mod:`~mpg_agents.evaluation.eval_runner`), episodes that raised, kept beside those that finished
 (:mod:`~mpg_agents.evaluation.failures`), intervals (:mod:`~mpg_agents.evaluation.stats`),

@@ -30,7 +30,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from mpg_agents.evaluation.evaluate import EpisodeRecord, env_id_of, run_episode
+from mpg_agents.evaluation.eval_result import EpisodeRecord
+from mpg_agents.evaluation.evaluate import env_id_of, run_episode
 from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, describe_failures, failures_line
 from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_envs._version import __version__

@@ -31,7 +31,8 @@ from pathlib import Path
 from typing import Any
 
 import mpg_envs  # registers the envs in a fresh worker
-from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, env_id_of, registered_options, run_episodes, summarise
+from mpg_agents.evaluation.eval_result import EpisodeRecord, EvalResult
+from mpg_agents.evaluation.evaluate import env_id_of, registered_options, run_episodes, summarise
 from mpg_agents.evaluation.failures import EpisodeFailure
 from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
 from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV

@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Any
 
 from mpg_agents.evaluation.comparison import load_eval_records
+from mpg_agents.evaluation.eval_result import EpisodeRecord, EvalResult
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
-from mpg_agents.evaluation.evaluate import EpisodeRecord, EvalResult, summarise
+from mpg_agents.evaluation.evaluate import summarise
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
 from mpg_envs.simulation.mujoco_version import MUJOCO_KEY

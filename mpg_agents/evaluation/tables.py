@@ -24,7 +24,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from mpg_agents.evaluation.evaluate import EvalResult
+from mpg_agents.evaluation.eval_result import EvalResult
 from mpg_envs.simulation.mujoco_version import check_one_mujoco, recorded_mujoco
 
 ENV_ID = "MPG-Occluded-v0"

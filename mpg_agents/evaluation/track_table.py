@@ -40,8 +40,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mpg_agents.evaluation.eval_result import EvalResult
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
-from mpg_agents.evaluation.evaluate import EvalResult, registered_options
+from mpg_agents.evaluation.evaluate import registered_options
 from mpg_agents.evaluation.policy_zoo import BUILTIN
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
 from mpg_agents.evaluation.tables import TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows

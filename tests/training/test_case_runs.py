@@ -8,7 +8,7 @@ import pytest
 
 from mpg_agents.evaluation.case_runs import CASE_SEED_STRIDE, CaseRow, run_case_set
 from mpg_agents.cli import eval_main
-from mpg_agents.evaluation.evaluate import EpisodeRecord
+from mpg_agents.evaluation.eval_result import EpisodeRecord
 from mpg_envs.scenes.cases import CaseSet, challenge_dir, load_cases
 
 

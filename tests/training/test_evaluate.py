@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from mpg_agents.cli import eval_main
-from mpg_agents.evaluation.evaluate import PRIMITIVES, EpisodeRecord, summarise
+from mpg_agents.evaluation.eval_result import EpisodeRecord
+from mpg_agents.evaluation.evaluate import PRIMITIVES, summarise
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.tasks.env import END_REASONS
 

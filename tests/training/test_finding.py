@@ -9,7 +9,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from mpg_agents.evaluation.evaluate import EpisodeRecord, run_episode, summarise
+from mpg_agents.evaluation.eval_result import EpisodeRecord
+from mpg_agents.evaluation.evaluate import run_episode, summarise
 from mpg_agents.evaluation.finding import FindingTally, finding_line, finding_summary, first_sight
 
 

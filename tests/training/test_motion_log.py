@@ -70,7 +70,8 @@ def test_the_table_has_a_row_per_primitive_and_cover_and_rates_per_episode():
 
 
 def test_motion_records_come_back_from_an_eval_file(tmp_path):
-    from mpg_agents.evaluation.evaluate import EpisodeRecord, summarise
+    from mpg_agents.evaluation.eval_result import EpisodeRecord
+    from mpg_agents.evaluation.evaluate import summarise
     from mpg_agents.evaluation.table_runs import merged_result
 
     steps = (MotionRecord("push", True, 0.2), MotionRecord("grasp", False, 0.9, target_grasped=True))
@@ -99,7 +100,8 @@ def test_uncovering_outcomes_count_covered_moves_and_pushes_by_what_the_next_mot
 
 
 def test_the_script_prints_a_file_table_and_refuses_files_without_motion_records(tmp_path, benchmark_script, capsys):
-    from mpg_agents.evaluation.evaluate import EpisodeRecord, summarise
+    from mpg_agents.evaluation.eval_result import EpisodeRecord
+    from mpg_agents.evaluation.evaluate import summarise
 
     script = benchmark_script("visibility_steps")
     steps = (MotionRecord("push", True, 0.2), MotionRecord("grasp", False, 0.9, target_grasped=True))

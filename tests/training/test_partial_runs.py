@@ -10,7 +10,8 @@ import shutil
 import pytest
 
 from mpg_agents.cli import eval_main
-from mpg_agents.evaluation.evaluate import EpisodeRecord, summarise
+from mpg_agents.evaluation.eval_result import EpisodeRecord
+from mpg_agents.evaluation.evaluate import summarise
 from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, describe_failures, failures_line
 from mpg_envs.scenes.cases import challenge_dir
 from mpg_envs.scenes.generators import InvalidSceneError

@@ -7,7 +7,8 @@ import json
 
 import pytest
 
-from mpg_agents.evaluation.evaluate import EpisodeRecord, summarise
+from mpg_agents.evaluation.eval_result import EpisodeRecord
+from mpg_agents.evaluation.evaluate import summarise
 from mpg_agents.evaluation.eval_runner import EvalJob, chunk_indices, evaluate_jobs, start_ray
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table
 from mpg_agents.evaluation.tables import PAPER_ROWS, format_markdown, format_text, paper_json, rows_json, table_rows
