@@ -49,9 +49,11 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from mpg_agents.evaluation.env_options import parse_env_options  # noqa: E402
 from mpg_agents.evaluation.policy_zoo import BUILTIN  # noqa: E402
+from mpg_agents.evaluation.reused_cells import read_reused  # noqa: E402
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
 from mpg_agents.evaluation.tables import TRACKS  # noqa: E402
-from mpg_agents.evaluation.track_table import CellRequest, cell_file_name, make_track_table, read_reused  # noqa: E402
+from mpg_agents.evaluation.track_cells import CellRequest, cell_file_name  # noqa: E402
+from mpg_agents.evaluation.track_table import make_track_table  # noqa: E402
 
 STRICT_TRACKS = tuple(name for name, track in TRACKS.items() if track.strict_columns)
 

@@ -11,9 +11,11 @@ import pytest
 
 from mpg_agents.evaluation.eval_result import EpisodeRecord
 from mpg_agents.evaluation.evaluate import summarise
+from mpg_agents.evaluation.reused_cells import read_reused
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs
 from mpg_agents.evaluation.tables import TRACKS, cell_json, tracks_rows, tracks_success_rows
-from mpg_agents.evaluation.track_table import CellMismatchError, cell_file_name, make_track_table, read_reused
+from mpg_agents.evaluation.track_cells import CellMismatchError, cell_file_name
+from mpg_agents.evaluation.track_table import make_track_table
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -1,0 +1,132 @@
+"""Track-table cells reused from earlier runs, named in a TOML file of ``[[cell]]`` entries::
+
+    [[cell]]
+    track = "hard"
+    label = "Random"          # a label of the policy file
+    objects = 30
+    evals = "benchmarks/results/hard_track/blocks30/random_*.json"  # mpg-eval --json files, pooled
+    # or: table = "benchmarks/results/hard_track/hard_15.json"      # a tables.py report: this label's row
+
+checked as a cell file is (:class:`~mpg_agents.evaluation.track_cells.CellRequest`): eval files by
+their env, object count, seeds, env options and the name the policy gave itself (a built-in's
+name, or the checkpoint's file name); a report's row by the report's env, seed, episodes, env
+options and the policy entry it ran under the label. Anything else raises
+:class:`~mpg_agents.evaluation.track_cells.CellMismatchError`.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mpg_agents.evaluation.policy_zoo import BUILTIN
+from mpg_agents.evaluation.table_runs import merged_result
+from mpg_agents.evaluation.tables import TRACKS, cell_json
+from mpg_agents.evaluation.track_cells import CellMismatchError, CellRequest
+
+
+def _names_policy(name: str, policy: str) -> bool:
+    """Whether a recorded evaluation's policy name is ``policy``'s: a built-in's keyword
+    (``shipped:<file>`` for the shipped net), else the checkpoint's file name first."""
+    if policy in BUILTIN:
+        return name == policy or name.startswith(f"{policy}:")
+    return name.split(" ")[0] == Path(policy).name
+
+
+@dataclass(frozen=True)
+class ReusedCell:
+    """A cell taken from an earlier run: ``evals`` (a glob of ``mpg-eval --json`` files) or
+    ``table`` (a ``tables.py`` report holding the label's row)."""
+
+    track: str
+    label: str
+    objects: int
+    evals: str | None = None
+    table: str | None = None
+
+    def source(self) -> str:
+        return str(self.evals if self.evals is not None else self.table)
+
+    def load(self, request: CellRequest) -> dict[str, Any]:
+        """The cell's figures (:func:`~mpg_agents.evaluation.tables.cell_json`), checked against ``request``."""
+        if self.evals is not None:
+            files = sorted(glob.glob(self.evals))
+            if not files:
+                raise CellMismatchError(
+                    f"reused cell ({self.track}, {self.label!r}, {self.objects}): no file matches {self.evals!r}"
+                )
+            result = merged_result(files)
+            request.check(result, self.evals)
+            if not _names_policy(result.policy, request.spec.policy):
+                raise CellMismatchError(
+                    f"{self.evals} is policy {result.policy!r}, not {request.spec.policy!r} (label {self.label!r})"
+                )
+            return cell_json(result)
+        return self._row(request)
+
+    def _row(self, request: CellRequest) -> dict[str, Any]:
+        path = str(self.table)
+        report = json.loads(Path(path).read_text())
+        entry = {k: v for k, v in request.policy_entry().items() if k != "label"}
+        asked = {
+            "env": request.env_id,
+            "seed": request.seed,
+            "episodes": request.episodes,
+            "env_options": dict(request.env_options),
+        }
+        found = {
+            "env": report.get("env"),
+            "seed": report.get("seed"),
+            "episodes": report.get("episodes"),
+            "env_options": report.get("env_options"),
+        }
+        if found != json.loads(json.dumps(asked)):
+            raise CellMismatchError(f"{path} ran {found}, the table asks {asked}")
+        if report.get("policies", {}).get(self.label) != entry:
+            raise CellMismatchError(
+                f"{path} ran label {self.label!r} as "
+                f"{report.get('policies', {}).get(self.label)}, the policy file says {entry}"
+            )
+        cell = report.get("rows", {}).get(self.label, {}).get(str(self.objects))
+        if cell is None:
+            raise CellMismatchError(f"{path} has no cell for {self.label!r} at {self.objects} objects")
+        if cell["episodes"] != request.episodes or cell["env_options"] != request.recorded_env_options():
+            raise CellMismatchError(
+                f"{path}: {self.label!r} at {self.objects} objects ran "
+                f"{cell['episodes']} episodes with env options {cell['env_options']}"
+            )
+        return dict(cell)
+
+
+def read_reused(path: str | Path) -> dict[tuple[str, str, int], ReusedCell]:
+    """The ``[[cell]]`` entries of a reuse file (see the module docstring), keyed (track,
+    label, objects). Raises ``ValueError`` naming an entry that is incomplete, names an
+    unknown track, gives both or neither of ``evals`` and ``table``, or repeats a cell."""
+    try:
+        doc = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"reuse file {str(path)!r} is not readable TOML: {exc}") from exc
+    cells: dict[tuple[str, str, int], ReusedCell] = {}
+    for k, entry in enumerate(doc.get("cell", [])):
+        where = f"reuse file {str(path)!r}, cell {k}"
+        if not isinstance(entry, dict) or not {"track", "label", "objects"} <= set(entry):
+            raise ValueError(f"{where}: needs 'track', 'label' and 'objects'")
+        if entry["track"] not in TRACKS:
+            raise ValueError(f"{where}: unknown track {entry['track']!r}; valid: {', '.join(TRACKS)}")
+        if ("evals" in entry) == ("table" in entry):
+            raise ValueError(f"{where}: give one of 'evals' (a glob of mpg-eval JSON files) and 'table' (a tables.py report)")
+        unknown = set(entry) - {"track", "label", "objects", "evals", "table"}
+        if unknown:
+            raise ValueError(f"{where}: unknown keys {sorted(unknown)}")
+        cell = ReusedCell(
+            str(entry["track"]), str(entry["label"]), int(entry["objects"]), entry.get("evals"), entry.get("table")
+        )
+        key = (cell.track, cell.label, cell.objects)
+        if key in cells:
+            raise ValueError(f"{where}: {key} is given twice")
+        cells[key] = cell
+    return cells
