@@ -11,38 +11,40 @@ The world, the primitives executor and the views of the episode are one public h
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.actions import PixelActionSpace
-from mpg_envs.perception.occlusion import change_detected, check_band
 from mpg_envs.perception.render import OverviewRenderer, render_overview
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
 from mpg_envs.scenes.arranged import ArrangedScenes
 from mpg_envs.scenes.generators import InvalidSceneError
-from mpg_envs.scenes.scene_io import MAX_OBJECTS, SceneFile, SceneFileError, read_scene
-from mpg_envs.scenes.scene_loading import load_scene, scene_of
+from mpg_envs.scenes.scene_io import SceneFile
+from mpg_envs.scenes.scene_loading import scene_of
 from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.simulation.world import World
 from mpg_envs.tasks.config import OBS_MODES, EnvConfig, check_camera_config, config_of, object_assets, observation_space
-from mpg_envs.tasks.episode_sim import EpisodeSim
-from mpg_envs.tasks.rewards import StepOutcome
-from mpg_envs.tasks.scene_source import (
-    RESET_OPTIONS,
-    SceneRequest,
-    arranged_start,
-    check_test_scene,
-    checked_reset_options,
-    drop_scene,
-    scene_from_test_set,
+from mpg_envs.tasks.env_keywords import (
+    GraspScorer,
+    check_grasp_scorer,
+    check_max_motions,
+    check_num_objects,
+    check_obs_mode,
+    check_render_mode,
+    check_use_test_set,
+    check_visible_range,
+    check_wrong_grasp,
+    stage_of,
 )
-from mpg_envs.tasks.stages import END_REASONS, STAGES, WRONG_GRASP_RULES, StageSpec, episode_end
-from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info
+from mpg_envs.tasks.episode_sim import EpisodeSim
+from mpg_envs.tasks.scene_source import RESET_OPTIONS, SceneRequest, check_test_scene, checked_reset_options, start_scene
+from mpg_envs.tasks.stages import END_REASONS, StageSpec, episode_end
+from mpg_envs.tasks.step_evaluation import StepEvaluation, action_info, judge_step
 from mpg_envs.tasks.target_spec import SIMULATOR_KEYS, TargetNaming, target_observation_space
 
 __all__ = [
@@ -55,8 +57,6 @@ __all__ = [
     "StepEvaluation",
     "observation_space",
 ]
-
-GraspScorer = Callable[[dict[str, np.ndarray]], float]
 
 
 class MPGEnv(gym.Env):
@@ -122,37 +122,19 @@ class MPGEnv(gym.Env):
         target_spec: str = "mask",
     ):
         config = config_of(config)  # a dict of EnvConfig fields too (a registered track's)
-        spec = STAGES[stage] if isinstance(stage, str) and stage in STAGES else stage
-        if not isinstance(spec, StageSpec):
-            raise ValueError(f"unknown stage {stage!r}; valid: {sorted(STAGES)}")
-        self.stage: StageSpec = spec
+        # Each keyword checked in this order (mpg_envs.tasks.env_keywords): the first wrong one is named.
+        self.stage: StageSpec = stage_of(stage)
         stage_spec = self.stage
-        self.num_objects = self._checked_num_objects(stage_spec.num_objects if num_objects is None else num_objects)
+        self.num_objects = check_num_objects(stage_spec.num_objects if num_objects is None else num_objects, stage_spec)
         self.default_num_objects = self.num_objects
-        self.wrong_grasp = stage_spec.wrong_grasp if wrong_grasp is None else wrong_grasp
-        if self.wrong_grasp not in WRONG_GRASP_RULES:
-            raise ValueError(f"wrong_grasp must be one of {WRONG_GRASP_RULES}, got {wrong_grasp!r}")
-        if self.wrong_grasp == "fail" and stage_spec.mask_all_objects:
-            raise ValueError(f"wrong_grasp='fail' needs a target; {stage_spec.env_id} has none (every object is a target)")
-        self.visible_range = check_band(stage_spec.visible_range if visible_range is None else visible_range)
-        if self.visible_range is not None and stage_spec.mask_all_objects:
-            raise ValueError(f"visible_range needs a target; {stage_spec.env_id} has none (every object is a target)")
-        if not isinstance(use_test_set, (bool, np.bool_)):
-            raise ValueError(f"use_test_set must be True or False, got {use_test_set!r}")
-        self.use_test_set = bool(use_test_set)
-        self.max_motions = stage_spec.max_motions if max_motions is None else max_motions
-        if not isinstance(self.max_motions, (int, np.integer)) or self.max_motions < 1:
-            raise ValueError(f"max_motions must be a positive integer, got {max_motions!r}")
-        if obs_mode not in OBS_MODES:
-            raise ValueError(f"obs_mode must be one of {OBS_MODES}, got {obs_mode!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if grasp_scorer is not None and not callable(grasp_scorer):
-            raise ValueError("grasp_scorer must be a callable obs -> float")
+        self.wrong_grasp = check_wrong_grasp(wrong_grasp, stage_spec)
+        self.visible_range = check_visible_range(visible_range, stage_spec)
+        self.use_test_set = check_use_test_set(use_test_set)
+        self.max_motions = check_max_motions(max_motions, stage_spec)
+        self.obs_mode = check_obs_mode(obs_mode)
+        self.render_mode = check_render_mode(render_mode, self.metadata["render_modes"])
+        self.grasp_scorer = check_grasp_scorer(grasp_scorer)
         self.config = config
-        self.obs_mode = obs_mode
-        self.render_mode = render_mode
-        self.grasp_scorer = grasp_scorer
         self.camera_config = check_camera_config(camera_config)
         self.visual_randomization = VisualRandomization.from_option(visual_randomization)  # None: off
         self.arranged = ArrangedScenes.from_option(arranged)  # None: off
@@ -189,7 +171,7 @@ class MPGEnv(gym.Env):
         self.num_motions = 0
         super().reset(seed=seed)
         options = checked_reset_options(options)
-        self.num_objects = self._checked_num_objects(options.get("num_objects", self.default_num_objects))
+        self.num_objects = check_num_objects(options.get("num_objects", self.default_num_objects), self.stage)
         self.sim.visuals = None  # a drawn scene's start condition is judged unrandomized: the same scenes either way
         self._initialize_episode(seed, options)
         self.sim.visuals = episode_visuals(self.visual_randomization, seed, self.np_random)
@@ -234,30 +216,11 @@ class MPGEnv(gym.Env):
     # ------------------------------------------------------------ task hooks
     def _initialize_episode(self, seed: int | None, options: dict[str, Any]) -> None:
         """Build this episode's world and target in ``sim``: a scene file, else the shipped
-        test set's scene of ``seed``, else objects dropped afresh (:mod:`mpg_envs.tasks.scene_source`)."""
+        test set's scene of ``seed``, else objects dropped afresh (:func:`mpg_envs.tasks.scene_source.start_scene`)."""
         self._test_seed: int | None = None  # the seed of a shipped test scene built here
         self.sim.initialize_episode(self.np_random)
-        scene = options.get("scene")
-        if scene is not None:
-            if not isinstance(scene, SceneFile):
-                scene = read_scene(scene, options.get("mesh_dir"), self.config.object_set_seed)
-            self._load_scene_file(scene, drop_outside=bool(options.get("drop_outside", False)))
-            return
-        request = self.scene_request
-        fixed = scene_from_test_set(request, seed)
-        if fixed is not None:
-            self._load_scene_file(fixed, drop_outside=False)
-            self._test_seed = seed  # reset() checks the scene against its set once it has observed it
-            return
-        # The share is drawn only with the option on: without it, episodes are as they were.
-        # (sim.random: the episode's generator, drawn by initialize_episode)
-        if self.arranged is not None and cast(np.random.Generator, self.sim.random).random() < self.arranged.share:
-            self.target = arranged_start(
-                self.sim, request, self.arranged, lambda s: load_scene(self.sim.build, s, self.config.workspace, False)[1]
-            )
-            if self.target is not None:
-                return
-        self.target = drop_scene(self.sim, request)
+        # reset() checks a test set's scene against its set once it has observed it
+        self.target, self._test_seed = start_scene(self.sim, self.scene_request, seed, options, self.arranged)
 
     def evaluate(
         self,
@@ -269,44 +232,22 @@ class MPGEnv(gym.Env):
     ) -> StepEvaluation:
         """What the step did, judged on the new state (success, mis-pick, move success,
         occlusion, visibility and its gain over ``visible_before``, change); the reward and
-        the episode's end are read off it."""
-        obs, world, target = self._obs, self._live_world(), self.target
+        the episode's end are read off it (:func:`~mpg_envs.tasks.step_evaluation.judge_step`)."""
+        obs = self._obs
         assert obs is not None  # the step's new observation
-        target_grasped = bool(result.lifted and (self.stage.mask_all_objects or result.grasped_object == target))
-        target_out = (
-            target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
-        )
-        occluded_before = bool(before["occluded"][0])
-        occluded = bool(obs["occluded"][0])
-        changed = change_detected(before["depth"], obs["depth"], before["mask"], result.lifted, self.config.change)
-        cleared = occluded_before and not occluded and not target_grasped and not target_out
-        move_success = primitive == "move" and cleared
-        gain = 0.0 if score_before is None else self._grasp_score(obs) - score_before
-        wrong = bool(primitive == "grasp" and result.lifted and not target_grasped)
-        is_success = (
-            world.objects_left() == 0 if self.stage.mask_all_objects else bool(target_grasped and primitive == "grasp")
-        )
-        seen = 0.0 if self._visible is None or visible_before is None else self._visible - visible_before
-        return StepEvaluation(
-            outcome=StepOutcome(
-                primitive,
-                result.lifted,
-                target_grasped,
-                move_success,
-                changed,
-                gain,
-                seen,
-                covered_before=occluded_before,
-                cleared=cleared,
-            ),
-            wrong_grasp=wrong,
-            ends_wrong_object=wrong and self.wrong_grasp == "fail",
-            is_success=is_success,
-            target_out=bool(target_out),
-            occluded_before=occluded_before,
-            occluded=occluded,
-            visible_fraction=self._visible,
-            objects_left=world.objects_left(),
+        return judge_step(
+            primitive,
+            before,
+            obs,
+            result,
+            self._live_world(),
+            self.target,
+            mask_all_objects=self.stage.mask_all_objects,
+            wrong_grasp=self.wrong_grasp,
+            change=self.config.change,
+            grasp_gain=0.0 if score_before is None else self._grasp_score(obs) - score_before,
+            visible_before=visible_before,
+            visible=self._visible,
         )
 
     def step_reward(self, evaluation: StepEvaluation) -> float:
@@ -389,12 +330,6 @@ class MPGEnv(gym.Env):
         the first reset)."""
         return None if self._obs is None else self._copy_obs(self.naming.public(self._obs))
 
-    def _load_scene_file(self, scene: SceneFile, drop_outside: bool) -> None:
-        """Build the world of a scene file in ``sim`` (:func:`mpg_envs.scenes.scene_loading.load_scene`)."""
-        _, self.target = load_scene(self.sim.build, scene, self.config.workspace, drop_outside)
-        if self.target is None and not self.stage.mask_all_objects:
-            raise SceneFileError(f"scene {scene.source!r} has no target; {self.stage.env_id} needs one")
-
     def current_scene(self) -> SceneFile:
         """The current scene (every object's asset, pose and state, the target), as
         :func:`mpg_envs.scenes.scene_io.save_scene` writes it."""
@@ -430,14 +365,6 @@ class MPGEnv(gym.Env):
             gym.logger.warn(f"MuJoCo warnings during step {self.num_motions}: {sim_warnings}")
         world.remove_strays()
         return sim_warnings
-
-    def _checked_num_objects(self, n: Any) -> int:
-        stage = self.stage
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not stage.min_objects <= n <= MAX_OBJECTS:
-            raise ValueError(
-                f"num_objects must be an integer in {stage.min_objects}..{MAX_OBJECTS} for {stage.env_id}, got {n!r}"
-            )
-        return int(n)
 
     def _reset_info(self, obs: dict[str, np.ndarray]) -> dict[str, Any]:
         occluded = bool(obs["occluded"][0])

@@ -21,7 +21,8 @@ its parameters) must be the one the set records, else
 Both work on the episode's simulation (:class:`~mpg_envs.tasks.episode_sim.EpisodeSim`) and a
 :class:`SceneRequest` (what the reset asks for), never on the env itself.
 :func:`checked_reset_options` checks the options a reset is given (:data:`RESET_OPTIONS`), each
-of its type.
+of its type; :func:`start_scene` picks the source of a reset's scene (its ``scene`` option, the
+test set, an arrangement, drops) and builds it.
 """
 
 from __future__ import annotations
@@ -44,7 +45,8 @@ from mpg_envs.scenes import generators
 from mpg_envs.scenes.arranged import ArrangedScenes, ArrangementError, arrangement_scene, check_settled
 from mpg_envs.scenes.arrangement_draw import draw_arrangement
 from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, keep_inside
-from mpg_envs.scenes.scene_io import SceneFile
+from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, read_scene
+from mpg_envs.scenes.scene_loading import load_scene
 from mpg_envs.scenes.test_sets import TEST_SEEDS, TEST_SET_WORKSPACE, TestSet, find_test_set, test_set_name
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.tasks.config import EnvConfig
@@ -285,3 +287,39 @@ def checked_reset_options(options: Any) -> dict[str, Any]:
         if options.get(key) is not None and not isinstance(options[key], types):
             raise ValueError(f"reset option {key!r} is {options[key]!r}; valid: {valid}, or None")
     return options
+
+
+def start_scene(
+    sim: EpisodeSim, request: SceneRequest, seed: int | None, options: dict[str, Any], arranged: ArrangedScenes | None
+) -> tuple[int | None, int | None]:
+    """Build a reset's scene in ``sim`` (its generator drawn: ``sim.initialize_episode``) and return
+    ``(target, test_seed)``: the scene file of the ``scene`` option (``options``: checked by
+    :func:`checked_reset_options`), else the shipped test set's scene of ``seed`` (``test_seed`` is
+    then ``seed``: check it with :func:`check_test_scene` once observed; else ``None``), else, with
+    ``arranged`` and at its share, a drawn arrangement (:func:`arranged_start`), else drops
+    (:func:`drop_scene`)."""
+    scene = options.get("scene")
+    if scene is not None:
+        if not isinstance(scene, SceneFile):
+            scene = read_scene(scene, options.get("mesh_dir"), request.config.object_set_seed)
+        return load_scene_file(sim, request, scene, drop_outside=bool(options.get("drop_outside", False))), None
+    fixed = scene_from_test_set(request, seed)
+    if fixed is not None:
+        return load_scene_file(sim, request, fixed, drop_outside=False), seed
+    # The share is drawn only with the option on: without it, episodes are as they were.
+    # (sim.random: the episode's generator, drawn by initialize_episode)
+    if arranged is not None and cast(np.random.Generator, sim.random).random() < arranged.share:
+        target = arranged_start(sim, request, arranged, lambda s: load_scene(sim.build, s, request.config.workspace, False)[1])
+        if target is not None:
+            return target, None
+    return drop_scene(sim, request), None
+
+
+def load_scene_file(sim: EpisodeSim, request: SceneRequest, scene: SceneFile, drop_outside: bool) -> int | None:
+    """Build the world of a scene file in ``sim`` (:func:`mpg_envs.scenes.scene_loading.load_scene`)
+    and return its target; :class:`~mpg_envs.scenes.scene_io.SceneFileError` for a file without
+    one when the stage needs one."""
+    _, target = load_scene(sim.build, scene, request.config.workspace, drop_outside)
+    if target is None and not request.stage.mask_all_objects:
+        raise SceneFileError(f"scene {scene.source!r} has no target; {request.stage.env_id} needs one")
+    return target

@@ -1,12 +1,16 @@
-"""What one step did, as data: the env's ``evaluate`` hook fills a :class:`StepEvaluation`;
-the reward, the episode's end and the step's ``info`` are read off it."""
+"""What one step did, as data: the env's ``evaluate`` hook fills a :class:`StepEvaluation`
+(:func:`judge_step`); the reward, the episode's end and the step's ``info`` are read off it."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
+from mpg_envs.perception.occlusion import ChangeConfig, change_detected
 from mpg_envs.simulation.primitives import PrimitiveResult
+from mpg_envs.simulation.world import World
 from mpg_envs.tasks.rewards import StepOutcome
 
 
@@ -70,3 +74,58 @@ class StepEvaluation:
             "grasp_q_gain": float(o.grasp_q_gain),
             "visible_gain": float(o.visible_gain),
         }
+
+
+def judge_step(
+    primitive: str,
+    before: dict[str, np.ndarray],
+    obs: dict[str, np.ndarray],
+    result: PrimitiveResult,
+    world: World,
+    target: int | None,
+    *,
+    mask_all_objects: bool,
+    wrong_grasp: str,
+    change: ChangeConfig,
+    grasp_gain: float,
+    visible_before: float | None,
+    visible: float | None,
+) -> StepEvaluation:
+    """What the step did, judged on the new state ``obs`` of ``world`` against the observation
+    ``before`` it: success (the target grasped; with ``mask_all_objects`` the table empty),
+    mis-pick (``wrong_grasp="fail"``: it ends the episode), move success (a move that left the
+    target uncovered), occlusion, the visible fraction ``visible`` and its gain over
+    ``visible_before``, change (``change``'s test); ``grasp_gain``: the grasp scorer's gain."""
+    target_grasped = bool(result.lifted and (mask_all_objects or result.grasped_object == target))
+    target_out = (
+        target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
+    )
+    occluded_before = bool(before["occluded"][0])
+    occluded = bool(obs["occluded"][0])
+    changed = change_detected(before["depth"], obs["depth"], before["mask"], result.lifted, change)
+    cleared = occluded_before and not occluded and not target_grasped and not target_out
+    move_success = primitive == "move" and cleared
+    wrong = bool(primitive == "grasp" and result.lifted and not target_grasped)
+    is_success = world.objects_left() == 0 if mask_all_objects else bool(target_grasped and primitive == "grasp")
+    seen = 0.0 if visible is None or visible_before is None else visible - visible_before
+    return StepEvaluation(
+        outcome=StepOutcome(
+            primitive,
+            result.lifted,
+            target_grasped,
+            move_success,
+            changed,
+            grasp_gain,
+            seen,
+            covered_before=occluded_before,
+            cleared=cleared,
+        ),
+        wrong_grasp=wrong,
+        ends_wrong_object=wrong and wrong_grasp == "fail",
+        is_success=is_success,
+        target_out=bool(target_out),
+        occluded_before=occluded_before,
+        occluded=occluded,
+        visible_fraction=visible,
+        objects_left=world.objects_left(),
+    )
