@@ -7,7 +7,9 @@ settings (:mod:`~mpg_agents.learning.train_config`), the one gradient step
 :mod:`~mpg_agents.learning.replay_codec`),
 exploration (:mod:`~mpg_agents.learning.exploration`), oracle demonstrations
 (:mod:`~mpg_agents.learning.demonstrations`), the learner of one stage
-(:mod:`~mpg_agents.learning.learner`) and its parallel actors (:mod:`~mpg_agents.learning.actors`,
+(:mod:`~mpg_agents.learning.learner`; its own episodes, :mod:`~mpg_agents.learning.learner_episodes`,
+and its Q*_g calibrations, :mod:`~mpg_agents.learning.stage_calibration`) and its parallel actors
+(:mod:`~mpg_agents.learning.actors`,
 :mod:`~mpg_agents.learning.actor_pool`, :mod:`~mpg_agents.learning.actor_feed`), its resumable state and log
 (:mod:`~mpg_agents.learning.run_state`, :mod:`~mpg_agents.learning.train_log`), its run folder's
 lock and resume check (:mod:`~mpg_agents.learning.run_folder`), learning curves

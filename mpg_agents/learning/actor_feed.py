@@ -28,6 +28,7 @@ import numpy as np
 from mpg_agents.acting.seeds import MAX_SKIPPED_SEEDS
 from mpg_agents.learning.actor_pool import open_actor_pool
 from mpg_agents.learning.actors import ActorSpec, ActorStep, ActRequest, Weights, weights_of
+from mpg_agents.learning.stage_calibration import calibrate_if_due
 from mpg_envs.scenes.generators import InvalidSceneError
 
 if TYPE_CHECKING:
@@ -87,7 +88,7 @@ def learn_from_step(learner: Learner, step: ActorStep) -> None:
         choice, step.reward, step.info, loss, step.choose_seconds, step.step_seconds, learning, step.episode, step.done
     )
     if step.done:
-        learner.calibrate_if_due()
+        calibrate_if_due(learner)
 
 
 class ActorLedger:

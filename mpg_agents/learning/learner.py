@@ -1,18 +1,19 @@
 """The DQN learner of MPGNet for one training stage (paper Sections III-C and III-D).
 
-Episodes run through the one episode loop (:func:`mpg_agents.acting.episode_loop.episode_steps`).
-One iteration: decide (:class:`~mpg_agents.acting.agent.MPGAgent`; Stage IV's forced grasp after
-its push budget), explore (:mod:`mpg_agents.learning.exploration`), act, store, and
-``replay_ratio`` gradient steps (:func:`mpg_agents.learning.td_step.td_step`; 1: one per
-iteration) with the stage's frozen branches left out. With ``actors > 1`` parallel actors
-(:mod:`mpg_agents.learning.actors`, :mod:`mpg_agents.learning.actor_pool`) do the deciding and
-acting, each in its own env; an iteration is then one step of any of them.
+Episodes run through the one episode loop (:func:`mpg_agents.acting.episode_loop.episode_steps`;
+:mod:`mpg_agents.learning.learner_episodes`). One iteration: decide
+(:class:`~mpg_agents.acting.agent.MPGAgent`; Stage IV's forced grasp after its push budget),
+explore (:mod:`mpg_agents.learning.exploration`), act, store, and ``replay_ratio`` gradient steps
+(:func:`mpg_agents.learning.td_step.td_step`; 1: one per iteration) with the stage's frozen
+branches left out. With ``actors > 1`` parallel actors (:mod:`mpg_agents.learning.actors`,
+:mod:`mpg_agents.learning.actor_pool`) do the deciding and acting, each in its own env; an
+iteration is then one step of any of them.
 The stage is a :class:`~mpg_agents.learning.training_stages.TrainingStage`, the settings a
 :class:`~mpg_agents.learning.train_config.TrainConfig`.
 
 Q*_g (:mod:`mpg_agents.acting.grasp_threshold`): ``TrainConfig.q_star`` or the starting checkpoint's;
 calibrated in the stage's scenes (``calibration_episodes``) or from its own greedy grasps at its
-end (``calibrates_q_star``). The weights carry it.
+end (``calibrates_q_star``; :mod:`mpg_agents.learning.stage_calibration`). The weights carry it.
 
 The state is saved every ``checkpoint_every`` iterations and on SIGINT/SIGTERM
 (:mod:`mpg_agents.learning.run_state`): a killed run resumes with the same counters, replay,
@@ -44,26 +45,21 @@ from tqdm import tqdm
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.acting.device import resolve_device
-from mpg_agents.acting.episode_loop import Step, episode_steps
-from mpg_agents.acting.grasp_threshold import (
-    calibrate_q_star,
-    estimate_q_star,
-    format_q_star,
-    from_header,
-    starting_q_star,
-    write_calibration,
-)
+from mpg_agents.acting.episode_loop import Step
+from mpg_agents.acting.grasp_threshold import from_header, starting_q_star
 from mpg_agents.acting.q_function import MPGQFunction
-from mpg_agents.acting.seeds import episode_seed, reset_first_valid
+from mpg_agents.acting.seeds import episode_seed
 from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_agents.learning.actor_feed import train_with_actors
 from mpg_agents.learning.actor_pool import check_actor_backend
 from mpg_agents.learning.actors import build_agent, choose_action, make_explorer, make_training_env
 from mpg_agents.learning.demonstrations import collect_demonstrations
 from mpg_agents.learning.exploration import Choice, linear_epsilon
+from mpg_agents.learning.learner_episodes import train_alone
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
 from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
+from mpg_agents.learning.stage_calibration import calibrate_from_own_grasps, calibrate_if_due, calibrate_in_scenes
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
@@ -145,7 +141,7 @@ class Learner:
         self.rng = np.random.default_rng(config.seed)
         self.explorer = make_explorer(self.policy, self.stage, self.primitives, self.rng, config)
         self.counters = Counters()
-        self._calibration_env: gym.Env | None = None
+        self.calibration_env: gym.Env | None = None  # made at the first calibration in the stage's scenes
         self._stop = False
         self._log: TrainingLog | None = None
         self.resumed = False
@@ -199,7 +195,7 @@ class Learner:
     def run(self) -> dict[str, Any]:
         """Train until the configured iterations are done; returns the final summary."""
         if self.stage.calibration_episodes and self.counters.calibrated_at < 0:  # the starting net
-            self.calibrate_in_scenes(self.stage.calibration_episodes)
+            calibrate_in_scenes(self, self.stage.calibration_episodes)
         if self.config.demonstration_episodes and not self.resumed:  # a fresh run: iteration 0, empty replay
             self.add_demonstrations()
         handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -208,22 +204,16 @@ class Learner:
             with TrainingLog(self.out, self.counters.iteration) as self._log:
                 if self.config.actors > 1:
                     train_with_actors(self, bar)
-                while self.counters.iteration < self.steps:  # one actor: this process decides and acts
-                    for step in episode_steps(self.env, self._reset_episode(), self.choose, lambda chosen: chosen[0].action):
-                        self.iteration(step)
-                        bar.update(1)
-                        self.save_or_stop()
-                        if self.counters.iteration >= self.steps:
-                            break
+                train_alone(self, bar)  # one actor: this process decides and acts (nothing left after actors)
         finally:
             self._log = None
             bar.close()
             for s, h in handlers.items():
                 signal.signal(s, h)
         if self.stage.calibrate_every and self.counters.calibrated_at != self.counters.iteration:
-            self.calibrate_in_scenes(self.stage.calibration_episodes)  # the weights ship with it
+            calibrate_in_scenes(self, self.stage.calibration_episodes)  # the weights ship with it
         if self.stage.calibrates_q_star:
-            self.calibrate_from_own_grasps()
+            calibrate_from_own_grasps(self)
         c = self.counters
         summary = {"iteration": c.iteration, "episodes": c.episode}
         for switch, counters in TRIAL_COUNTERS.items():
@@ -238,63 +228,6 @@ class Learner:
             self.save_state()
         if self._stop:
             raise StopRequested()
-
-    def calibrate_in_scenes(self, episodes: int) -> float:
-        """Calibrate Q*_g in this stage's scenes (:func:`~mpg_agents.acting.grasp_threshold.calibrate_q_star`,
-        at the stage's ``calibration_quantile``) and save the state (a resumed run keeps it);
-        ``calibration.json`` in the run folder keeps every value of the stage.
-
-        Raises:
-            RuntimeError: no grasp took the target.
-        """
-        if self._calibration_env is None:  # its own env: a training episode in progress is left as it is
-            unwrapped: Any = self.env.unwrapped
-            self._calibration_env = make_training_env(self.stage, self.config, unwrapped.num_objects, self.device)
-        try:
-            measured = calibrate_q_star(
-                self.policy,
-                self._calibration_env,
-                episodes,
-                self.config.seed,
-                self.stage.calibration_quantile,
-                on_skip=lambda k, error: self.log(
-                    f"{self.stage.name}: calibration episode {k} skipped, no valid scene ({error})"
-                ),
-            )
-        except (ValueError, RuntimeError) as exc:
-            raise type(exc)(f"stage {self.stage.name}: {exc}") from exc
-        before = self.policy.q_star
-        self.policy.set_q_star(measured.q_star)
-        c = self.counters
-        write_calibration(self.out / "calibration.json", measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
-        self.log(
-            f"{self.stage.name}: Q*_g {format_q_star(before)} -> {measured.q_star:.4g} "
-            f"in its scenes at iteration {c.iteration} "
-            f"({len(measured.target_grasp_q)} of {measured.grasps} "
-            f"greedy grasps took the target in {episodes} episodes)"
-        )
-        c.calibrated_at = c.iteration
-        self.save_state()
-        return measured.q_star
-
-    def calibrate_from_own_grasps(self) -> float | None:
-        """A ``calibrates_q_star`` stage at its end: Q*_g estimated from the Q of its recent
-        greedy grasps that took the target (:func:`~mpg_agents.acting.grasp_threshold.estimate_q_star`
-        at the stage's ``calibration_quantile``), and the state saved; unchanged when no greedy
-        grasp took the target. Returns Q*_g (``None``: none yet)."""
-        taken = self.counters.successful_grasp_q
-        if not taken:
-            self.log(f"{self.stage.name}: no greedy grasp took the target; Q*_g stays {format_q_star(self.policy.q_star)}")
-            return self.policy.q_star
-        before = self.policy.q_star
-        self.policy.set_q_star(estimate_q_star(taken, self.stage.calibration_quantile))
-        self.log(
-            f"{self.stage.name}: Q*_g {format_q_star(before)} -> {format_q_star(self.policy.q_star)} "
-            f"from its last {len(taken)} "
-            "greedy grasps that took the target"
-        )
-        self.save_state()
-        return self.policy.q_star
 
     def add_demonstrations(self) -> None:
         """Fill the replay with the oracle's transitions on this stage's env and save the state
@@ -313,16 +246,6 @@ class Learner:
     def _request_stop(self, signum, frame) -> None:
         self._stop = True
 
-    def _reset_episode(self) -> dict[str, np.ndarray]:
-        c = self.counters
-        n = self.objects_now(c.iteration)
-        options = None if n is None else {"num_objects": n}  # the curriculum's count, without rebuilding the env
-        obs, _, c.episode = reset_first_valid(
-            self.env, lambda k: episode_seed(self.config.seed, k), c.episode, options, self.skipped_scene
-        )
-        c.episode_motions = c.failed_grasps_in_a_row = c.pushes_in_episode = 0
-        return obs
-
     def skipped_scene(self, k: int, error: Exception) -> None:
         self.counters.skipped_scenes += 1
         self.log(f"{self.stage.name}: episode {k} skipped, its seed gave no valid scene ({error})")
@@ -336,12 +259,6 @@ class Learner:
         """The branches learning this iteration (an alternating stage trains them in turn, a
         stage with a finish trains its ``finish_trainable`` alone at the end)."""
         return self.stage.branches_at(self.counters.iteration, self.steps, self.trainable)
-
-    def choose(self, obs: Mapping[str, Any]) -> tuple[Choice, list[int]]:
-        """What this step does on ``obs``: the action (:meth:`act`) and the stage's trials of the
-        actions not taken, tried and stored before it (:meth:`try_alternatives`)."""
-        choice = self.act(obs)
-        return choice, self.try_alternatives(obs, choice)
 
     def iteration(self, step: Step[tuple[Choice, list[int]]]) -> None:
         """One iteration after the env stepped: store, learn, count, log (times: deciding with the
@@ -359,7 +276,7 @@ class Learner:
         self.record(choice, step.reward, info, loss, step.choose_seconds, step.step_seconds, learning, c.episode, step.done)
         if step.done:
             c.episode += 1
-            self.calibrate_if_due()
+            calibrate_if_due(self)
 
     def record(
         self,
@@ -404,12 +321,6 @@ class Learner:
         )
         if done:
             self._log.episode_end(c.iteration, info)
-
-    def calibrate_if_due(self) -> None:
-        """At an episode's end: the stage's periodic Q*_g calibration, once every ``calibrate_every`` iterations."""
-        c, every = self.counters, self.stage.calibrate_every
-        if every and c.iteration < self.steps and c.iteration // every > max(c.calibrated_at, 0) // every:
-            self.calibrate_in_scenes(self.stage.calibration_episodes)
 
     def store(self, obs: Mapping[str, Any], next_obs: Mapping[str, Any], action: int, reward: float, terminated: bool) -> None:
         """Add one transition to the replay (batch of one; a truncation is no terminal state)."""

@@ -165,6 +165,7 @@ def test_a_calibrates_q_star_stage_estimates_from_its_own_greedy_grasps_into_its
     """Stage II's Q*_g: the same estimate over its last greedy grasps that took the target,
     stored in its weights header (where the next stage and the pipeline read it)."""
     from mpg_agents.learning.learner import Learner
+    from mpg_agents.learning.stage_calibration import calibrate_from_own_grasps
     from mpg_agents.learning.train_config import TrainConfig
     from mpg_agents.learning.training_stages import TRAINING_STAGES
     from mpg_agents.acting.weights import read_checkpoint_header
@@ -173,8 +174,8 @@ def test_a_calibrates_q_star_stage_estimates_from_its_own_greedy_grasps_into_its
     assert stage.calibrates_q_star
     tiny = dict(steps=1, batch_size=1, replay_capacity=8, net_config={"trunk_depth": 2}, torch_threads=1)
     learner = Learner(TrainConfig(**tiny), stage, tmp_path, log=lambda s: None)
-    assert learner.calibrate_from_own_grasps() is None  # no greedy grasp took the target: still uncalibrated
+    assert calibrate_from_own_grasps(learner) is None  # no greedy grasp took the target: still uncalibrated
     learner.counters.successful_grasp_q = [0.3, 0.9, 0.5]
-    assert learner.calibrate_from_own_grasps() == pytest.approx(estimate_q_star([0.3, 0.9, 0.5], stage.calibration_quantile))
+    assert calibrate_from_own_grasps(learner) == pytest.approx(estimate_q_star([0.3, 0.9, 0.5], stage.calibration_quantile))
     assert read_checkpoint_header(tmp_path / "weights.safetensors")["q_star"] == pytest.approx(0.5)
     learner.env.close()

@@ -6,6 +6,7 @@ import pytest
 
 from mpg_agents.cli import eval_main
 from mpg_agents.learning.learner import Learner
+from mpg_agents.learning.stage_calibration import calibrate_in_scenes
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
@@ -44,7 +45,7 @@ def test_a_stage_calibrates_q_star_in_its_own_scenes_once(tmp_path):
     # Another quantile of the same grasps (same seeds, same starting net): the lowest Q.
     low = with_overrides(stages, {"Stage2": {"calibration_quantile": 0.0}})[1]
     learner = Learner(TrainConfig(steps=1, **{**TINY, "net_config": net}), low, tmp_path / "low", log=lambda s: None)
-    assert learner.calibrate_in_scenes(3) == pytest.approx(min(record["target_grasp_q"]))
+    assert calibrate_in_scenes(learner, 3) == pytest.approx(min(record["target_grasp_q"]))
     learner.env.close()
 
 
@@ -60,7 +61,7 @@ def test_calibration_with_no_target_grasp_is_an_error(tmp_path, monkeypatch):
 
     monkeypatch.setattr(learner.env, "step", missing_step)
     with pytest.raises(RuntimeError, match="no grasp took the target in 1 calibration episodes"):
-        learner.calibrate_in_scenes(1)
+        calibrate_in_scenes(learner, 1)
     learner.env.close()
 
 
