@@ -68,7 +68,10 @@ def test_grasp_trials_store_other_orientations_at_the_grasp_pixel(tmp_path, monk
     steps = []
     real = learner_module.td_step
     monkeypatch.setattr(learner_module, "td_step", lambda *args: steps.append(1) or real(*args))
-    learner = Learner(TrainConfig(steps=2, q_star=-10.0, **TINY), stage, tmp_path, log=lambda s: None)  # every decision a grasp
+    learner = Learner(TrainConfig(steps=2, **TINY), stage, tmp_path, log=lambda s: None)
+    # Every decision a grasp: a Q*_g below any Q this untrained net gives (below what a setting
+    # may say, so it is set on the policy, as a test may).
+    learner.policy.set_q_star(-10.0)
     summary = learner.run()
     env = learner.env.unwrapped
     assert summary["grasp_trials"] == learner.counters.grasp_trials == 4 and len(steps) == 4  # two steps per grasp
