@@ -45,15 +45,17 @@ def moved_target(name: str, shift: tuple[float, float, float], path) -> object:
 def test_a_target_moved_1_cm_in_a_shipped_set_is_refused_at_its_reset(tmp_path, shipped_as, make_env):
     shipped_as("occluded_hard", 15, moved_target("occluded_hard", (-0.01, 0.0, 0.0), tmp_path / "occluded_hard_15.npz"))
     env = make_env("MPG-OccludedHard-v0")
+    tolerance = find_test_set("occluded_hard", 15).visible_fraction_tolerance()  # wider on another MuJoCo major version
     message = (r"test set occluded_hard_15: the scene of seed 500000 is not the one the set was made with \(the "
-               r"target's visible fraction at reset is 0\.143187, the set records 0\.184758, tolerance 0\.0001\); restore "
+               rf"target's visible fraction at reset is 0\.143187, the set records 0\.184758, tolerance {tolerance:g}\); restore "
                r"the file occluded_hard_15\.npz \(reinstall the package, or `git checkout -- "
                r"mpg_envs/test_scenes/occluded_hard_15\.npz`\) or regenerate it with `python benchmarks/make_test_sets\.py "
                r"--envs MPG-OccludedHard-v0 --objects 15` \(the set was made with MuJoCo [0-9.]+, this is MuJoCo [0-9.]+\)$")
     with pytest.raises(ChangedTestSetError, match=message):
         env.reset(seed=500000)
     _, info = env.reset(seed=500001)  # its other scenes are as made
-    assert info["visible_fraction"] == pytest.approx(float(find_test_set("occluded_hard", 15).visible_fraction[1]), abs=1e-6)
+    assert info["visible_fraction"] == pytest.approx(float(find_test_set("occluded_hard", 15).visible_fraction[1]),
+                                                abs=1e-6 if tolerance == test_sets.VISIBLE_FRACTION_TOLERANCE else tolerance)
 
 
 def test_the_unseen_shapes_set_with_a_target_moved_1_cm_is_refused(tmp_path, shipped_as, make_env):
