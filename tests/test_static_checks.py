@@ -35,7 +35,7 @@ def test_ci_runs_the_three_checks_and_stops_on_a_failure():
 def test_the_tools_and_their_settings_are_the_projects():
     project = tomllib.loads(PYPROJECT.read_text())
     dev = project["project"]["optional-dependencies"]["dev"]
-    assert any(d.startswith("ruff>=") for d in dev) and any(d.startswith("mypy>=") for d in dev)
+    assert any(d.startswith("ruff==") for d in dev) and any(d.startswith("mypy==") for d in dev)
     ruff, mypy = project["tool"]["ruff"], project["tool"]["mypy"]
     assert ruff["line-length"] == 127
     assert {"E", "F", "W", "I", "B", "UP", "PLC0415"} <= set(ruff["lint"]["select"])
