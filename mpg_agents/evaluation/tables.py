@@ -39,6 +39,7 @@ class Track:
     paper_rows: bool
     strict_columns: bool  # mis-picks per episode and grasp success rate as columns
     scenes: str = ""  # what the track's scenes and observations are, for a combined table
+    env_options: tuple[tuple[str, Any], ...] = ()  # env keywords of the track beside its env id's own
 
 
 TRACKS: dict[str, Track] = {
@@ -50,9 +51,47 @@ TRACKS: dict[str, Track] = {
     "hard-camera": Track(
         "hard-camera", "MPG-OccludedHardCamera-v0", paper_rows=False, strict_columns=True, scenes="camera images of blocks"
     ),
+    # Finding the target: the same scenes, the target named by its visible pixels or by an exemplar.
+    "hard-visible": Track(
+        "hard-visible", "MPG-OccludedHardVisible-v0", paper_rows=False, strict_columns=True, scenes="blocks, visible mask"
+    ),
+    "hard-novel-visible": Track(
+        "hard-novel-visible",
+        "MPG-OccludedHardNovel-v0",
+        paper_rows=False,
+        strict_columns=True,
+        scenes="unseen shapes, visible mask",
+        env_options=(("target_spec", "visible"),),
+    ),
+    "hard-camera-visible": Track(
+        "hard-camera-visible",
+        "MPG-OccludedHardCamera-v0",
+        paper_rows=False,
+        strict_columns=True,
+        scenes="camera images of blocks, visible mask",
+        env_options=(("target_spec", "visible"),),
+    ),
+    "hard-exemplar": Track(
+        "hard-exemplar", "MPG-OccludedHardExemplar-v0", paper_rows=False, strict_columns=True, scenes="blocks, exemplar"
+    ),
+    "hard-novel-exemplar": Track(
+        "hard-novel-exemplar",
+        "MPG-OccludedHardNovelExemplar-v0",
+        paper_rows=False,
+        strict_columns=True,
+        scenes="unseen shapes, exemplar",
+    ),
+    "hard-camera-exemplar": Track(
+        "hard-camera-exemplar",
+        "MPG-OccludedHardCameraExemplar-v0",
+        paper_rows=False,
+        strict_columns=True,
+        scenes="camera images of blocks, exemplar",
+    ),
 }
 """The tracks by name: the paper's Table I, the strict, hidden-target hard track, and the
-hard track on unseen objects and on camera observations."""
+hard track on unseen objects and on camera observations, and each of those three with the target
+named by its visible pixels (``visible``) or by an exemplar image (``exemplar``)."""
 
 
 @dataclass(frozen=True)

@@ -54,7 +54,12 @@ class CellRequest:
 
     def recorded_env_options(self) -> dict[str, Any]:
         """The env options an evaluation of this cell records: the track's and the extra ones."""
-        return json.loads(json.dumps({**registered_options(self.env_id), **dict(self.env_options)}))
+        return json.loads(json.dumps({**registered_options(self.env_id), **dict(self.all_env_options)}))
+
+    @property
+    def all_env_options(self) -> tuple[tuple[str, Any], ...]:
+        """The track's env keywords, then the extra ones (an extra one wins)."""
+        return tuple({**dict(TRACKS[self.track].env_options), **dict(self.env_options)}.items())
 
     def check(self, result: EvalResult, source: str) -> None:
         """Raise :class:`CellMismatchError` unless ``result`` is this cell's evaluation (env,

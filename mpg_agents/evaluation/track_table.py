@@ -80,7 +80,7 @@ def _run_seeds(
 ) -> tuple[EvalResult, float]:
     """The cell's policy and env on ``episodes`` seeds from ``seed``: the result and its wall seconds."""
     job = EvalJob(
-        request.spec.policy, request.env_id, episodes, seed, request.objects, request.spec.settings, request.env_options
+        request.spec.policy, request.env_id, episodes, seed, request.objects, request.spec.settings, request.all_env_options
     )
     (result,), timing = evaluate_jobs([job], workers, ray_address, on_record=on_record, backend=backend)
     return result, timing.wall_seconds
