@@ -133,6 +133,7 @@ def cell_json(result: EvalResult) -> dict[str, Any]:
         "primitive_counts": dict(result.primitive_counts),
         "env_options": dict(result.env_options),
         "versions": dict(result.versions),
+        "finding": dict(result.finding),
     }
 
 

@@ -27,6 +27,7 @@ from typing import Any
 
 from mpg_agents.evaluation.eval_result import EvalResult
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
+from mpg_agents.evaluation.finding_table import finding_rows
 from mpg_agents.evaluation.reused_cells import ReusedCell
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
 from mpg_agents.evaluation.tables import TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows
@@ -215,6 +216,9 @@ def make_track_table(
             format_markdown(header, body, text_columns=2),
         ]
     )
+    finding_header, finding_body = finding_rows(tracks, labels, objects, cells)
+    if finding_body:
+        markdown += "\n\nFinding the target:\n\n" + format_markdown(finding_header, finding_body, text_columns=3)
     if cells:
         markdown += f"\n\nMeasured on MuJoCo {', '.join(mujoco_versions)}."
     if missing:

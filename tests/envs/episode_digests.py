@@ -2,7 +2,8 @@
 
 ``data/episode_digests.json`` holds the SHA-256 prefix of the reset observation and info of a few
 seeds of each id registered before the target could be named other ways than by its mask
-(``python tests/envs/episode_digests.py OUT`` writes them for the code checked out).
+(``python tests/envs/episode_digests.py OUT`` writes them for the code checked out; ``data/episode_digests.json`` was
+recorded on MuJoCo 3.x, ``data/episode_digests_mujoco4.json`` on 4.0.0).
 """
 
 from __future__ import annotations
