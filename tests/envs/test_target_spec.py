@@ -242,3 +242,15 @@ def test_the_rule_holds_on_every_shipped_test_scene(name, num_objects):
         assert all(colours[i] != colours[target] for i in others if names[i] == names[target])
         shared_colour += any(colours[i] == colours[target] for i in others)
     assert shared_colour >= 0.9 * len(test_set)
+
+
+def test_the_visible_track_is_the_hard_track_step_for_step(make_env):
+    # A policy that reads no observation (random, the oracle) plays the same episode on both.
+    hard, visible = make_env("MPG-OccludedHard-v0"), make_env("MPG-OccludedHardVisible-v0")
+    actions = [int(a) for a in np.random.default_rng(8).integers(hard.action_space.n, size=3)]
+    a, b = rollout(hard, 500002, actions), rollout(visible, 500002, actions)
+    assert len(a) == len(b)
+    for (obs_a, *rest_a), (obs_b, *rest_b) in zip(a, b):
+        assert np.array_equal(obs_a["depth"], obs_b["depth"]) and np.array_equal(obs_a["color"], obs_b["color"])
+        assert not np.any(obs_b["mask"] & ~obs_a["mask"])  # the visible mask is inside the whole one
+        assert same(rest_a, rest_b)
