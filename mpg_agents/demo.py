@@ -30,6 +30,7 @@ from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, fail
 from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
 from mpg_envs.files import WriteFailed, check_folder_writable, write_bytes_whole
+from mpg_envs.grid.primitive_specs import MOVE
 from mpg_envs.perception.render import RenderUnavailableError
 from mpg_envs.threads import set_torch_threads
 
@@ -87,9 +88,9 @@ def step_outcome(info: dict) -> str:
     grasp's lift says which object it took."""
     if info["target_grasped"]:
         return "  grasped the target"
-    if info["primitive"] == "move":
+    if info["primitive"] == MOVE:
         return "  uncovered the target" if info["move_success"] else ""
-    return "  grasped another object" if info["grasp_success"] else ""
+    return "  grasped another object" if info["lifted"] else ""
 
 
 class QMapsOfFirstEpisode:

@@ -36,6 +36,7 @@ import math
 from collections.abc import Callable, Sequence
 
 from mpg_envs.grid.actions import check_primitives
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 
 COORDINATIONS: tuple[str, ...] = ("workflow", "grasp_first", "uncover_max_q", "grasp_first_uncover_max_q", "max_q")
 """Ways to pick the primitive: the paper's workflow, the workflow asking the grasp first, the
@@ -89,19 +90,19 @@ def choose_primitive(
         return available[0]
     if rule == "max_q":
         return _largest(available, best_q)
-    if rule in ("grasp_first", "grasp_first_uncover_max_q") and occluded and "grasp" in available and q_star is not None:
-        if best_q("grasp") >= q_star:
-            return "grasp"
-    if "move" in available and occluded:
-        if rule in ("uncover_max_q", "grasp_first_uncover_max_q") and "push" in available:
-            return _largest(("move", "push"), best_q)
-        return "move"
-    if "grasp" in available and "push" in available:
+    if rule in ("grasp_first", "grasp_first_uncover_max_q") and occluded and GRASP in available and q_star is not None:
+        if best_q(GRASP) >= q_star:
+            return GRASP
+    if MOVE in available and occluded:
+        if rule in ("uncover_max_q", "grasp_first_uncover_max_q") and PUSH in available:
+            return _largest((MOVE, PUSH), best_q)
+        return MOVE
+    if GRASP in available and PUSH in available:
         if q_star is None:
-            return _largest(("grasp", "push"), best_q)
-        return "grasp" if best_q("grasp") >= q_star else "push"
+            return _largest((GRASP, PUSH), best_q)
+        return GRASP if best_q(GRASP) >= q_star else PUSH
     # Not occluded and only one of grasp/push usable besides move (e.g. a move+grasp net).
-    return next(p for p in available if p != "move")
+    return next(p for p in available if p != MOVE)
 
 
 def _largest(candidates: Sequence[str], best_q: Callable[[str], float]) -> str:

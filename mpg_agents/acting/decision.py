@@ -19,6 +19,7 @@ from mpg_agents.acting.q_function import MPGQFunction, mask_outside
 from mpg_agents.network.mpgnet import EncodedObs, MPGNet
 from mpg_agents.network.regions import region_max
 from mpg_envs.grid.actions import encode_action
+from mpg_envs.grid.primitive_specs import GRASP
 
 
 class Decision(NamedTuple):
@@ -102,7 +103,7 @@ def _decide_one(
     value = float(chosen.flatten()[flat])
     rot, rest = divmod(flat, chosen.shape[1] * chosen.shape[2])
     row, col = divmod(rest, chosen.shape[2])
-    grasp_score = float(region_max(maps["grasp"][None], net.grasp_where(enc))[0]) if "grasp" in maps else float("nan")
+    grasp_score = float(region_max(maps[GRASP][None], net.grasp_where(enc))[0]) if GRASP in maps else float("nan")
     action = encode_action(q.action_primitives, primitive, rot, row, col, size=q.net_config.heightmap_size)
     return Decision(action, primitive, rot, row, col, value, grasp_score, maps)
 

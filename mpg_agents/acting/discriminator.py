@@ -15,6 +15,7 @@ import torch
 from mpg_agents.acting.weights import load_mpgnet
 from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.mpgnet import MPGNet
+from mpg_envs.grid.primitive_specs import GRASP
 
 
 class Discriminator:
@@ -24,7 +25,7 @@ class Discriminator:
     """
 
     def __init__(self, net: MPGNet) -> None:
-        if "grasp" not in net.primitives:
+        if GRASP not in net.primitives:
             raise ValueError(f"the discriminator needs a grasp branch; this MPGNet has {net.primitives}")
         self.net = net
 
@@ -34,7 +35,7 @@ class Discriminator:
     ) -> Discriminator:
         """A discriminator from a saved MPGNet (e.g. the Stage II grasp net) on ``device``;
         ``geometry``: the grasp geometry of the envs it scores for (default: the default env's)."""
-        net, _ = load_mpgnet(path, primitives=("grasp",), geometry=geometry)
+        net, _ = load_mpgnet(path, primitives=(GRASP,), geometry=geometry)
         return cls(net.to(device))
 
     def __call__(self, obs: Mapping[str, Any]) -> float:

@@ -44,6 +44,7 @@ from torch import nn
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_envs.files import write_text_whole
+from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.tasks.stages import STAGES
 
@@ -207,7 +208,7 @@ def calibrate_q_star(
         ValueError: the net has no grasp branch, ``episodes`` < 1 or ``quantile`` outside [0, 1].
         RuntimeError: no grasp took the target (there is nothing to take a quantile of).
     """
-    if "grasp" not in agent.usable_primitives:
+    if GRASP not in agent.usable_primitives:
         raise ValueError(f"Q*_g calibration needs a grasp branch; the net has {agent.branches}")
     if episodes < 1:
         raise ValueError(f"calibration needs at least one episode, got {episodes}")
@@ -219,7 +220,7 @@ def calibrate_q_star(
     for n in range(episodes):
         # A seed without a valid scene passes to the next one: the same scenes every calibration.
         obs, _, k = reset_first_valid(env, lambda j: episode_seed(seed, j, calibration=True), k + 1, on_skip=on_skip)
-        for step in episode_steps(env, obs, lambda o: agent.decide(o, "grasp"), lambda decision: decision.action):
+        for step in episode_steps(env, obs, lambda o: agent.decide(o, GRASP), lambda decision: decision.action):
             grasps += 1
             if step.info["target_grasped"] and math.isfinite(step.choice.q_value):
                 taken.append(float(step.choice.q_value))

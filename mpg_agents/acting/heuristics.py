@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from mpg_envs.grid.actions import encode_action
+from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 
@@ -41,4 +42,4 @@ def heuristic_grasp(obs: Mapping[str, np.ndarray]) -> tuple[int, int, int]:
 def heuristic_grasp_action(obs: Mapping[str, np.ndarray], primitives: Sequence[str]) -> int:
     """:func:`heuristic_grasp` as a flat action index for an env allowing ``primitives``."""
     rotation, row, col = heuristic_grasp(obs)
-    return encode_action(primitives, "grasp", rotation, row, col, size=np.asarray(obs["mask"]).shape[0])
+    return encode_action(primitives, GRASP, rotation, row, col, size=np.asarray(obs["mask"]).shape[0])

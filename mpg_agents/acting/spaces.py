@@ -13,6 +13,7 @@ from gymnasium import spaces
 
 from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_envs.grid.actions import PRIMITIVES, check_primitives
+from mpg_envs.grid.primitive_specs import GRASP, PUSH
 
 
 def finger_geometry(env: gym.Env | None = None) -> FingerGeometry:
@@ -63,7 +64,7 @@ def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | N
     if count == 3:
         return PRIMITIVES
     if count == 2:
-        return ("push", "grasp")
+        return (PUSH, GRASP)
     raise ValueError(
         f"cannot tell which primitive a {count}-primitive action space Discrete({n}) uses; "
         f"pass primitives=(...) in policy_kwargs, one of {PRIMITIVES}"

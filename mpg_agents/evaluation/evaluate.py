@@ -31,6 +31,7 @@ from mpg_agents.evaluation.finding import FindingTally, finding_summary
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.stats import bootstrap_mean_interval, wilson_interval
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, visibility_band
 from mpg_envs.simulation.mujoco_version import MUJOCO_KEY, running_mujoco
 
@@ -99,7 +100,7 @@ def run_episode(
         if on_step is not None:
             on_step(index, step.reward, info)
         primitives[info["primitive"]] += 1
-        if info["primitive"] == "grasp":
+        if info["primitive"] == GRASP:
             grasps += 1
             target_grasps += int(info["target_grasped"])
             wrong_grasps += int(info.get("wrong_grasp", False))

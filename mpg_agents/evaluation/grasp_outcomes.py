@@ -34,6 +34,7 @@ from mpg_agents.acting.spaces import finger_geometry
 from mpg_agents.evaluation.evaluate import run_episodes
 from mpg_agents.evaluation.policy_zoo import NetworkPolicy, make_network_policy
 from mpg_envs.grid.grasp_geometry import other_grasp_angles
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 
 
 def roc_auc(scores: Sequence[float] | np.ndarray, labels: Sequence[bool] | np.ndarray) -> float:
@@ -72,14 +73,14 @@ class GraspProbe:
         self.q = float(decision.q_value)
         self.other_angle_takes = None
         self.blocked = float("nan")
-        if decision.primitive == "grasp":
+        if decision.primitive == GRASP:
             geometry = self.net.policy.q_net.mpgnet.geometry or finger_geometry()  # the env's, when the net has it
             blocked = geometry.blocked(np.asarray(obs["depth"])[None], self.net.policy.net_config.num_rotations)[0]
             self.blocked = float(blocked[decision.rotation, decision.row, decision.col])
-        if self.env is not None and decision.primitive == "grasp":
+        if self.env is not None and decision.primitive == GRASP:
             u: Any = self.env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
             self.other_angle_takes = any(
-                u.try_step(u.action_space.encode("grasp", k, decision.row, decision.col))[4]["target_grasped"]
+                u.try_step(u.action_space.encode(GRASP, k, decision.row, decision.col))[4]["target_grasped"]
                 for k in other_grasp_angles(decision.rotation)
             )
         return int(decision.action)
@@ -109,14 +110,14 @@ def grasp_records(
     others: list[dict] = []
 
     def on_step(index: int, reward: float, info: dict) -> None:
-        if info["primitive"] != "grasp":
+        if info["primitive"] != GRASP:
             others.append(
                 {
                     "seed": seed + index,
                     "primitive": info["primitive"],
                     "covered_before": bool(info["occluded_before"]),
                     "covered_after": bool(info["occluded"]),
-                    "held_nothing": info["primitive"] == "move" and not info["grasp_success"],
+                    "held_nothing": info["primitive"] == MOVE and not info["lifted"],
                 }
             )
         else:
@@ -142,7 +143,7 @@ def summarise_motions(others: list[dict]) -> dict:
     """Per primitive (move, push): how many, how many found the target covered, how many of
     those left it uncovered, and how many moves lifted nothing."""
     out = {}
-    for primitive in ("move", "push"):
+    for primitive in (MOVE, PUSH):
         mine = [r for r in others if r["primitive"] == primitive]
         covered = [r for r in mine if r["covered_before"]]
         out[primitive] = {

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.perception.occlusion import VISIBILITY_BAND_LABELS, visibility_band
 
 
@@ -106,7 +107,7 @@ def uncovering_outcomes(episodes: Iterable[Sequence[MotionRecord]]) -> tuple[int
     freed = counted = 0
     for steps in episodes:
         for step, after in zip(steps, steps[1:]):
-            if step.primitive in ("move", "push") and step.covered_before and after.covered_before is not None:
+            if step.primitive in (MOVE, PUSH) and step.covered_before and after.covered_before is not None:
                 counted += 1
                 freed += int(not after.covered_before)
     return freed, counted
@@ -143,7 +144,7 @@ def _cell(primitive: str, count: VisibilityCount | None) -> str:
     """``motions`` (grasps: ``motions (target T, other W)``), ``.`` for none."""
     if count is None or not count.motions:
         return "."
-    if primitive != "grasp":
+    if primitive != GRASP:
         return str(count.motions)
     wrong = f", other {count.wrong_grasps}" if count.wrong_grasps else ""
     return f"{count.motions} (target {count.target_grasps}{wrong})"

@@ -30,6 +30,7 @@ import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.evaluation.evaluate import run_episodes
 from mpg_agents.evaluation.policy_zoo import NetworkPolicy, make_network_policy
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, angle_gap, footprint_rect, other_grasp_angles
+from mpg_envs.grid.primitive_specs import MOVE
 from mpg_envs.policies.oracle import OraclePolicy
 
 ON_WHAT = ("table", "target", "occluder", "other")
@@ -61,13 +62,13 @@ class MoveProbe:
 
     def act(self, obs) -> int:
         decision = self.net.policy.decide(obs)
-        if decision.primitive == "move":
+        if decision.primitive == MOVE:
             self.records.append(self._look(obs, decision.rotation, decision.row, decision.col))
         return int(decision.action)
 
     def _lifts(self, rotation: int, row: int, col: int, depth: np.ndarray, obj: int | None = None) -> bool:
         u: Any = self.env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
-        result = u.sim.try_primitive("move", rotation, row, col, depth, u.target)
+        result = u.sim.try_primitive(MOVE, rotation, row, col, depth, u.target)
         return bool(result.lifted and (obj is None or result.grasped_object == obj))
 
     def _look(self, obs, rotation: int, row: int, col: int) -> dict[str, Any]:

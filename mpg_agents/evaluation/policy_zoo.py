@@ -35,6 +35,7 @@ import numpy as np
 from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.heuristics import heuristic_grasp_action
 from mpg_agents.acting.spaces import finger_geometry
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
 from mpg_envs.policies.exemplar_matcher import ExemplarMatcher
 from mpg_envs.policies.oracle import OraclePolicy
@@ -78,7 +79,7 @@ class GraspOnlyBaseline:
         self.name = "grasp-only"
         unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
         self.primitives = tuple(unwrapped.primitives)
-        if "grasp" not in self.primitives:
+        if GRASP not in self.primitives:
             raise ValueError(f"grasp-only needs an env that allows grasping; this one allows {self.primitives}")
         self._space = env.action_space
 
@@ -164,7 +165,7 @@ class NetworkPolicy:
         if q_star is not None:
             self.policy.set_q_star(check_override(q_star))
         self.primitives: tuple[str, ...] = self.policy.usable_primitives
-        if self.policy.coordination != "max_q" and {"grasp", "push"} <= set(self.primitives) and self.policy.q_star is None:
+        if self.policy.coordination != "max_q" and {GRASP, PUSH} <= set(self.primitives) and self.policy.q_star is None:
             warnings.warn(
                 f"checkpoint {path} carries no Q*_g (null: never calibrated): its {self.policy.coordination!r} "
                 "coordination compares the best grasp and push Q instead; pass --q-star (mpg-calibrate measures one)",
@@ -191,7 +192,7 @@ class NetworkPolicy:
             raise ValueError(
                 f"grasp_retries must be a non-negative integer (0: off) or None (the checkpoint's), got {grasp_retries!r}"
             )
-        fallback = [p for p in ("push", "move") if p in self.primitives]
+        fallback = [p for p in (PUSH, MOVE) if p in self.primitives]
         self.grasp_retries = grasp_retries if grasp_retries and fallback else None  # a grasp-only net has nothing else to do
         self._instead_of_grasp = fallback[0] if fallback else None
         self._grasps_in_a_row = 0
@@ -221,7 +222,7 @@ class NetworkPolicy:
         decision = self.policy.decide(obs, primitive=instead, forbidden=forbidden)
         if self.memory is not None:
             self.memory.record(decision.primitive, decision.rotation, decision.row, decision.col, np.asarray(obs["depth"]))
-        self._grasps_in_a_row = self._grasps_in_a_row + 1 if decision.primitive == "grasp" else 0
+        self._grasps_in_a_row = self._grasps_in_a_row + 1 if decision.primitive == GRASP else 0
         return int(decision.action)
 
     def save_qmaps(self, path: str | Path, obs: Mapping[str, np.ndarray]) -> None:

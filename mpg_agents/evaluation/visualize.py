@@ -15,6 +15,7 @@ import torch
 from mpg_agents.acting.agent import batch_observation
 from mpg_envs.files import write_bytes_whole
 from mpg_envs.grid.actions import PRIMITIVES, PixelAction, decode_action
+from mpg_envs.grid.primitive_specs import GRASP, PUSH
 from mpg_envs.grid.workspace import rotation_angle, rotation_direction
 
 # Drawn lengths in pixels at the 2 mm heightmap resolution: the 10 cm push stroke and the
@@ -196,10 +197,10 @@ def save_policy_qmaps(path: str | Path, policy: Any, obs: Mapping[str, Any]) -> 
     with torch.inference_mode():
         enc = net.encode(obs_tensor)
         maps = {name: q[0] for name, q in net.maps_from(enc, policy.usable_primitives).items()}
-        if "grasp" in maps and enc.grasp_fingers is not None:
+        if GRASP in maps and enc.grasp_fingers is not None:
             # Show only the grasps the finger mask keeps: the ones the policy chooses among.
-            maps["grasp"] = maps["grasp"].masked_fill(~enc.grasp_fingers[0], float("-inf"))
-            notes["grasp"] = "(fingers clear)"
+            maps[GRASP] = maps[GRASP].masked_fill(~enc.grasp_fingers[0], float("-inf"))
+            notes[GRASP] = "(fingers clear)"
     return save_qmap_png(path, obs, maps, decision, primitives=policy.action_primitives, notes=notes)
 
 
@@ -207,7 +208,7 @@ def _draw_action(panel: np.ndarray, action: PixelAction, scale: int) -> None:
     """Draw the action in image coordinates: x = column, y = row (rotation from +x toward +y)."""
     dx, dy = rotation_direction(action.rotation)
     cx, cy = (action.col + 0.5) * scale, (action.row + 0.5) * scale
-    if action.primitive == "push":
+    if action.primitive == PUSH:
         end = (int(round(cx + dx * PUSH_LENGTH_PX * scale)), int(round(cy + dy * PUSH_LENGTH_PX * scale)))
         cv2.arrowedLine(panel, (int(round(cx)), int(round(cy))), end, (255, 255, 255), 2, cv2.LINE_AA, tipLength=0.2)
     else:

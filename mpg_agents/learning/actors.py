@@ -38,6 +38,7 @@ from mpg_agents.learning.training_objects import stage_env_config, training_obje
 from mpg_agents.learning.training_stages import TrainingStage
 from mpg_agents.learning.trials import try_alternatives
 from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.grid.primitive_specs import GRASP, PUSH
 from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.simulation.objects import check_not_held_out
 from mpg_envs.tasks.config import EnvConfig
@@ -113,7 +114,7 @@ def choose_action(
     """The action to take: the policy's decision (a grasp forced after the stage's push budget),
     then exploration and the training aids."""
     budget = stage.push_budget
-    forced = "grasp" if budget is not None and pushes_in_episode >= budget and "grasp" in explorer.primitives else None
+    forced = GRASP if budget is not None and pushes_in_episode >= budget and GRASP in explorer.primitives else None
     return explorer.choose(obs, policy.decide(obs, forced), epsilon, failed_grasps_in_a_row)
 
 
@@ -256,9 +257,9 @@ class Actor:
         chosen = time.perf_counter()
         next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
         stepped = time.perf_counter()
-        if choice.primitive == "grasp":
+        if choice.primitive == GRASP:
             self.failed_grasps_in_a_row = 0 if info["grasp_success"] else self.failed_grasps_in_a_row + 1
-        if choice.primitive == "push":
+        if choice.primitive == PUSH:
             self.pushes_in_episode += 1
         self.obs = None if terminated or truncated else next_obs
         return ActorStep(

@@ -23,6 +23,7 @@ from mpg_agents.acting.decision import Decision
 from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_agents.network.regions import footprint_top, grasp_pixels
 from mpg_envs.grid.actions import encode_action
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 PUSH_REACH_PX = 25
@@ -98,9 +99,9 @@ class Explorer:
         unless :attr:`random_primitive`)."""
         primitive = decision.primitive
         n = self.heuristic_after_failed_grasps
-        if primitive == "grasp" and n and failed_grasps_in_a_row >= n and obs["mask"].any():
+        if primitive == GRASP and n and failed_grasps_in_a_row >= n and obs["mask"].any():
             rot, row, col = heuristic_grasp(obs)
-            return Choice(encode_action(self.primitives, "grasp", rot, row, col), "grasp", "heuristic")
+            return Choice(encode_action(self.primitives, GRASP, rot, row, col), GRASP, "heuristic")
         if self.rng.random() < epsilon:
             if self.random_primitive:
                 primitive = self.usable[int(self.rng.integers(len(self.usable)))]
@@ -120,18 +121,18 @@ class Explorer:
         """
         mask = obs["mask"] > 0
         size = mask.shape[0]
-        if primitive == "grasp" and self.grasp_on_target and mask.any():
+        if primitive == GRASP and self.grasp_on_target and mask.any():
             depth = torch.as_tensor(np.asarray(obs["depth"], dtype=np.float32))[None]
             region = grasp_pixels(torch.from_numpy(mask[None]), depth, self.target_margin_px, self.visible_band_m)[0].numpy()
             on_target = np.argwhere(region)
             row, col = (int(v) for v in on_target[self.rng.integers(len(on_target))])
-        elif primitive == "move" and self.move_band_m is not None and mask.any():
+        elif primitive == MOVE and self.move_band_m is not None and mask.any():
             depth = torch.as_tensor(np.asarray(obs["depth"], dtype=np.float32))[None]
             on_top = np.argwhere(footprint_top(torch.from_numpy(mask[None]), depth, self.move_band_m)[0].numpy())
             row, col = (int(v) for v in on_top[self.rng.integers(len(on_top))])
         elif mask.any():
             rows, cols = np.nonzero(mask)
-            pad = PUSH_REACH_PX if primitive == "push" else 0
+            pad = PUSH_REACH_PX if primitive == PUSH else 0
             r0, r1 = max(rows.min() - pad, 0), min(rows.max() + pad, size - 1)
             c0, c1 = max(cols.min() - pad, 0), min(cols.max() + pad, size - 1)
             row, col = int(self.rng.integers(r0, r1 + 1)), int(self.rng.integers(c0, c1 + 1))

@@ -65,6 +65,7 @@ from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.learning.trials import TRIAL_COUNTERS, try_alternatives
+from mpg_envs.grid.primitive_specs import GRASP, PUSH
 from mpg_envs.simulation.objects import check_not_held_out
 
 
@@ -268,9 +269,9 @@ class Learner:
         (choice, trials), info = step.choice, step.info
         self.store(step.obs, step.next_obs, choice.action, step.reward, step.terminated)
         loss = self.learn_owed(2 if trials else 1)  # the replay grew by 1 + len(trials) transitions
-        if choice.primitive == "grasp":
+        if choice.primitive == GRASP:
             c.failed_grasps_in_a_row = 0 if info["grasp_success"] else c.failed_grasps_in_a_row + 1
-        if choice.primitive == "push":
+        if choice.primitive == PUSH:
             c.pushes_in_episode += 1
         c.episode_motions += 1  # this process's episode (unused with actors: their envs count)
         self.record(choice, step.reward, info, loss, step.choose_seconds, step.step_seconds, learning, c.episode, step.done)
@@ -293,7 +294,7 @@ class Learner:
         """Count and log an iteration of episode ``episode`` (``learning``: when its learning began)."""
         c = self.counters
         c.iteration += 1
-        if choice.primitive == "grasp":
+        if choice.primitive == GRASP:
             c.window_grasps += 1
             c.window_target_grasps += int(info["target_grasped"])
             if info["target_grasped"] and choice.how == "greedy" and math.isfinite(choice.q_value):

@@ -12,6 +12,7 @@ import numpy as np
 
 from mpg_agents.learning.train_log import CSV_COLUMNS
 from mpg_envs.files import written_whole
+from mpg_envs.grid.primitive_specs import GRASP
 
 # Matplotlib is imported where a picture is drawn, not at the top: importing
 # this module (the command lines, reading progress.csv) then neither loads it (start-up time)
@@ -181,7 +182,7 @@ def window_success(data: dict[str, np.ndarray], window: int) -> tuple[np.ndarray
     Each point sits at the last iteration of its window; a last, partial window counts the
     grasps it has (a run shorter than ``window`` gives one point, at its end).
     """
-    grasp = data["primitive"] == "grasp"
+    grasp = data["primitive"] == GRASP
     last = int(np.nanmax(data["iteration"]))
     return _window_means(data["iteration"][grasp], data["target_grasped"][grasp], last, window)
 

@@ -14,6 +14,7 @@ from dataclasses import replace
 from typing import Any
 
 from mpg_agents.learning.training_stages import TrainingStage
+from mpg_envs.grid.primitive_specs import GRASP, PUSH
 
 
 def without_multistage(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
@@ -82,7 +83,7 @@ def _learned_baseline(
 def grasp_only_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
     """Baseline "Grasping-Only": the grasp stages, then grasping alone in the joint stage's clutter
     (no Q*_g calibration there: a net with one primitive never consults Q*_g)."""
-    return _learned_baseline(stages, [("grasp",)], trainable=("grasp",), branches=("grasp",), alternate_every=0)
+    return _learned_baseline(stages, [(GRASP,)], trainable=(GRASP,), branches=(GRASP,), alternate_every=0)
 
 
 def target_vpg_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
@@ -90,14 +91,14 @@ def target_vpg_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage,
     together in the joint stage's clutter, the action by the larger Q (no move, no Q*_g rule,
     so no Q*_g calibration there)."""
     return _learned_baseline(
-        stages, [("grasp",)], trainable=("push", "grasp"), branches=("push", "grasp"), alternate_every=0, coordination="max_q"
+        stages, [(GRASP,)], trainable=(PUSH, GRASP), branches=(PUSH, GRASP), alternate_every=0, coordination="max_q"
     )
 
 
 def push_grasp_baseline(stages: Sequence[TrainingStage]) -> tuple[TrainingStage, ...]:
     """Baseline "Efficient Push-Grasping" style: the grasp stages and Q*_g, the push stage, then
     push and grasp trained in turn in the joint stage's clutter, grasping when grasp Q >= Q*_g (no move)."""
-    return _learned_baseline(stages, [("grasp",), ("push",)], trainable=("push", "grasp"), branches=("push", "grasp"))
+    return _learned_baseline(stages, [(GRASP,), (PUSH,)], trainable=(PUSH, GRASP), branches=(PUSH, GRASP))
 
 
 BASELINES: dict[str, Callable[[Sequence[TrainingStage]], tuple[TrainingStage, ...]]] = {

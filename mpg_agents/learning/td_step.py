@@ -27,6 +27,7 @@ from torch import Tensor
 from torch.nn import functional as F
 
 from mpg_agents.acting.q_function import MPGQFunction
+from mpg_envs.grid.primitive_specs import GRASP
 
 
 @dataclass(frozen=True)
@@ -143,7 +144,7 @@ def td_step(
     sel = torch.tensor(keep, dtype=torch.long, device=actions.device)
     obs = {k: v[sel] for k, v in batch.observations.items()}
     acts, ys = actions[sel], targets[sel]
-    if config.grasp_symmetry and "grasp" in primitives:
+    if config.grasp_symmetry and GRASP in primitives:
         obs, acts, ys = _with_turned_grasps(q_net, obs, acts, ys, prim[sel], rot[sel])
     q_net.set_training_mode(True)
     q = q_net.q_values_at(obs, acts)
@@ -164,7 +165,7 @@ def _with_turned_grasps(
     q_net: MPGQFunction, obs: dict[str, Tensor], acts: Tensor, ys: Tensor, prim: Tensor, rot: Tensor
 ) -> tuple[dict[str, Tensor], Tensor, Tensor]:
     """The batch plus, for every grasp sample, the same grasp at the rotation turned by 180 degrees."""
-    sym = torch.nonzero(prim == q_net.action_primitives.index("grasp")).flatten()
+    sym = torch.nonzero(prim == q_net.action_primitives.index(GRASP)).flatten()
     if not sym.numel():
         return obs, acts, ys
     half = q_net.net_config.num_rotations // 2

@@ -53,7 +53,7 @@ class IterationRecord:
     reward: float
     loss: float  # NaN when no gradient step was taken
     epsilon: float
-    info: Mapping[str, Any]  # the env step's info (grasp_success, target_grasped, is_success, num_motions)
+    info: Mapping[str, Any]  # the env step's info (lifted, target_grasped, is_success, num_motions)
     decide_s: float
     act_s: float
     iteration_s: float
@@ -69,7 +69,7 @@ class IterationRecord:
             f"{self.reward:.3f}",
             f"{self.loss:.5f}",
             f"{self.epsilon:.4f}",
-            int(info["grasp_success"]),
+            int(info["lifted"]),  # the column keeps its former name, grasp_success
             int(info["target_grasped"]),
             int(info["is_success"]),
             info["num_motions"],

@@ -20,6 +20,7 @@ from mpg_agents.acting.coordination import check_coordination
 from mpg_agents.learning.training_objects import OBS_MODES, STAGE_ENV_OPTIONS, object_set_entries, stage_env_config
 from mpg_envs.grid.actions import check_primitives
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.perception.visual_randomization import VisualRandomization
 from mpg_envs.scenes.arranged import ArrangedScenes
 from mpg_envs.settings_fields import check_known_fields
@@ -268,14 +269,14 @@ class TrainingStage:
 
 
 TRAINING_STAGES: tuple[TrainingStage, ...] = (
-    TrainingStage("Stage1", "MPG-Stage1-v0", trainable=("grasp",), iterations=500),
-    TrainingStage("Stage2", "MPG-Stage2-v0", trainable=("grasp",), calibrates_q_star=True, iterations=1000),
-    TrainingStage("Stage3", "MPG-Stage3-v0", trainable=("move",), objects=(2, 4), uses_discriminator=True, iterations=600),
-    TrainingStage("Stage4", "MPG-Stage4-v0", trainable=("push",), uses_discriminator=True, push_budget=5, iterations=600),
+    TrainingStage("Stage1", "MPG-Stage1-v0", trainable=(GRASP,), iterations=500),
+    TrainingStage("Stage2", "MPG-Stage2-v0", trainable=(GRASP,), calibrates_q_star=True, iterations=1000),
+    TrainingStage("Stage3", "MPG-Stage3-v0", trainable=(MOVE,), objects=(2, 4), uses_discriminator=True, iterations=600),
+    TrainingStage("Stage4", "MPG-Stage4-v0", trainable=(PUSH,), uses_discriminator=True, push_budget=5, iterations=600),
     TrainingStage(
         "Stage5",
         "MPG-Stage5-v0",
-        trainable=("move", "push", "grasp"),
+        trainable=(MOVE, PUSH, GRASP),
         alternate_every=50,
         uses_discriminator=True,
         iterations=1500,

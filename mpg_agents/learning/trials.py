@@ -30,6 +30,7 @@ import numpy as np
 
 from mpg_agents.acting.agent import MPGAgent
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS, other_grasp_angles
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 
 MOVE_TRIAL_SPACING_PX = 10.0
 """How far apart (heightmap pixels, 2 mm each) the places of a move's trials are, from each
@@ -59,10 +60,10 @@ def grasp_trial_actions(env: Any, action: int, trials: int, rng: np.random.Gener
 def move_trial_actions(env: Any, policy: MPGAgent, obs: Mapping[str, Any], action: int, trials: int) -> list[int]:
     """Up to ``trials`` moves at the move net's best places away from move ``action``'s."""
     _, _, row, col = env.action_space.decode(action)
-    return policy.alternatives(obs, "move", trials, MOVE_TRIAL_SPACING_PX, taken=(row, col))
+    return policy.alternatives(obs, MOVE, trials, MOVE_TRIAL_SPACING_PX, taken=(row, col))
 
 
-RIVALS = {"move": "push", "push": "move"}
+RIVALS = {MOVE: PUSH, PUSH: MOVE}
 """The primitive each uncovering primitive is weighed against by a rival trial."""
 
 
@@ -78,9 +79,9 @@ def rival_trial_actions(policy: MPGAgent, obs: Mapping[str, Any], primitive: str
 def covered_grasp_trial_actions(policy: MPGAgent, obs: Mapping[str, Any], primitive: str) -> list[int]:
     """The grasp net's best grasp when the target is covered in ``obs``, the step taken uncovers
     (a move or a push) and the policy has a grasp branch; else none."""
-    if primitive not in RIVALS or "grasp" not in policy.usable_primitives or not bool(obs["occluded"][0]):
+    if primitive not in RIVALS or GRASP not in policy.usable_primitives or not bool(obs["occluded"][0]):
         return []
-    return policy.alternatives(obs, "grasp", 1, 0.0)
+    return policy.alternatives(obs, GRASP, 1, 0.0)
 
 
 def run_trials(env: Any, obs: Mapping[str, Any], actions: list[int], store: Store) -> list[dict[str, Any]]:
@@ -110,13 +111,13 @@ def try_alternatives(
     :class:`~mpg_agents.learning.run_state.Counters`); returns their actions."""
     c = counters
     tried: list[int] = []
-    if choice.primitive == "grasp" and stage.grasp_trials:
+    if choice.primitive == GRASP and stage.grasp_trials:
         actions = grasp_trial_actions(env, choice.action, stage.grasp_trials, rng)
         infos = run_trials(env, obs, actions, store)
         c.grasp_trials += len(infos)
         c.grasp_trial_targets += sum(int(i["target_grasped"]) for i in infos)
         tried += actions
-    if choice.primitive == "move" and stage.move_trials:
+    if choice.primitive == MOVE and stage.move_trials:
         actions = move_trial_actions(env, policy, obs, choice.action, stage.move_trials)
         infos = run_trials(env, obs, actions, store)
         c.move_trials += len(infos)

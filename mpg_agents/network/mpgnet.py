@@ -39,10 +39,11 @@ from torch.nn import functional as F
 from mpg_agents.network.finger_geometry import FingerGeometry
 from mpg_agents.network.inputs import normalize_inputs
 from mpg_agents.network.mobilenet import MobileNetV3Features, load_torchvision_features
-from mpg_agents.network.mpgnet_config import ROUGH_MASKED, MPGNetConfig
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 from mpg_agents.network.primitive_net import PLANES, PrimitiveNet, run_in_batches, trunk_chunk
 from mpg_agents.network.regions import footprint_top, grasp_pixels, least_blocked, region_max, target_region
 from mpg_agents.network.rotations import rotation_grids
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, primitive_spec
 
 
 @dataclass
@@ -79,9 +80,9 @@ class EncodedObs:
 
     def region_of(self, primitive: str) -> Tensor:
         """``(B, H, W)`` bool: where ``primitive`` may act (before ``rough_mask`` is consulted)."""
-        if primitive == "grasp" and self.grasp_region is not None:
+        if primitive == GRASP and self.grasp_region is not None:
             return self.grasp_region
-        if primitive == "move" and self.move_region is not None:
+        if primitive == MOVE and self.move_region is not None:
             return self.move_region
         return self.region
 
@@ -279,15 +280,17 @@ class MPGNet(nn.Module):
         if subset is not None:
             planes, feats, rot = planes[subset], feats[subset], rot[subset]
         q = self._unrotate(self.branches[primitive](planes, feats), rot)
-        if self.config.rough_mask and primitive in ROUGH_MASKED:
+        if self.config.rough_mask and primitive_spec(primitive).rough_masked:
             q = q * enc.region_of(primitive)[_sample_of(enc, subset)]
         return q
 
     def actable(self, enc: EncodedObs, primitive: str) -> Tensor | None:
         """``(B, R, H, W)`` or ``(B, 1, H, W)`` bool: where ``primitive`` may act (the rough mask's
         region for move and grasp, and their finger masks); ``None``: everywhere."""
-        allowed = enc.region_of(primitive)[:, None] if self.config.rough_mask and primitive in ROUGH_MASKED else None
-        fingers = {"grasp": enc.grasp_fingers, "move": enc.move_fingers}.get(primitive)
+        allowed = (
+            enc.region_of(primitive)[:, None] if self.config.rough_mask and primitive_spec(primitive).rough_masked else None
+        )
+        fingers = {GRASP: enc.grasp_fingers, MOVE: enc.move_fingers}.get(primitive)
         if fingers is not None:
             allowed = fingers if allowed is None else allowed & fingers
         return allowed
@@ -295,7 +298,7 @@ class MPGNet(nn.Module):
     def grasp_where(self, enc: EncodedObs) -> Tensor:
         """``(B, R, H, W)`` or ``(B, 1, H, W)`` bool: the grasps the grasp score ranges over (the
         grasp region, and the finger mask when there is one)."""
-        where = enc.region_of("grasp")[:, None]
+        where = enc.region_of(GRASP)[:, None]
         return where if enc.grasp_fingers is None else where & enc.grasp_fingers
 
     def forward(self, obs: Mapping[str, Any], primitives: Sequence[str] | None = None) -> dict[str, Tensor]:
@@ -342,7 +345,7 @@ class MPGNet(nn.Module):
     def grasp_score(self, obs: Mapping[str, Any]) -> Tensor:
         """Best grasp Q where a grasp may act, per sample ``(B,)`` (the discriminator's score)."""
         enc = self.encode(obs)
-        q = self.maps_from(enc, ("grasp",))["grasp"]
+        q = self.maps_from(enc, (GRASP,))[GRASP]
         return region_max(q, self.grasp_where(enc))
 
     def load_imagenet(self, path: str | Path) -> None:

@@ -10,13 +10,15 @@ from typing import Any
 from mpg_agents.network.mobilenet import DEFAULT_BN_MOMENTUM, full_depth
 from mpg_agents.network.rotations import padded_side
 from mpg_envs.grid.actions import HEIGHTMAP_SIZE, PRIMITIVES, check_primitives
+from mpg_envs.grid.primitive_specs import primitive_spec
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 IMAGENET_MEAN: tuple[float, float, float] = (0.485, 0.456, 0.406)
 IMAGENET_STD: tuple[float, float, float] = (0.229, 0.224, 0.225)
 
-# Primitives whose Q maps the rough target mask restricts (paper, Training Details).
-ROUGH_MASKED: tuple[str, ...] = ("move", "grasp")
+# The paper's primitives whose Q maps the rough target mask restricts (paper, Training Details:
+# move and grasp; each record's ``rough_masked``).
+ROUGH_MASKED: tuple[str, ...] = tuple(p for p in PRIMITIVES if primitive_spec(p).rough_masked)
 
 # Where a grasp may act: the paper's bounding rectangle, the target's footprint (grown or
 # shrunk), or the part of it where the target itself shows (its lowest surface).

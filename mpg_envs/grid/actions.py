@@ -2,8 +2,8 @@
 ``(primitive, rotation, row, col)``.
 
 The flat index is C order over ``(primitive, rotation, row, col)``, where ``primitive``
-indexes the env's allowed primitives in the fixed order ``move, push, grasp``
-(``env.unwrapped.primitives``).
+indexes the env's allowed primitives in the fixed order ``move, push, grasp`` and then any
+primitive registered later (:mod:`mpg_envs.grid.primitive_specs`; ``env.unwrapped.primitives``).
 """
 
 from __future__ import annotations
@@ -14,10 +14,12 @@ from typing import Any, NamedTuple
 import numpy as np
 from gymnasium import spaces
 
+from mpg_envs.grid.primitive_specs import PAPER_PRIMITIVES, registered_primitives
 from mpg_envs.grid.workspace import NUM_ROTATIONS, _is_int
 
-PRIMITIVES: tuple[str, ...] = ("move", "push", "grasp")
-"""All primitives, in the fixed order every action space uses."""
+PRIMITIVES: tuple[str, ...] = PAPER_PRIMITIVES
+"""The paper's three primitives, in the fixed order every action space uses (a primitive
+registered later comes after them: :func:`~mpg_envs.grid.primitive_specs.registered_primitives`)."""
 
 HEIGHTMAP_SIZE = 224
 """Side of the square heightmap (pixels) of the default workspace."""
@@ -35,12 +37,13 @@ class PixelAction(NamedTuple):
 def check_primitives(primitives: Sequence[str]) -> tuple[str, ...]:
     """Validate an allowed-primitives list; returns it as a tuple in canonical order."""
     primitives = tuple(primitives)
-    unknown = [p for p in primitives if p not in PRIMITIVES]
+    known = registered_primitives()
+    unknown = [p for p in primitives if p not in known]
     if unknown or not primitives:
-        raise ValueError(f"primitives must be a non-empty subset of {PRIMITIVES}, got {primitives}")
-    ordered = tuple(p for p in PRIMITIVES if p in primitives)
+        raise ValueError(f"primitives must be a non-empty subset of {known}, got {primitives}")
+    ordered = tuple(p for p in known if p in primitives)
     if ordered != primitives:
-        raise ValueError(f"primitives must be listed in the order {PRIMITIVES}, got {primitives}")
+        raise ValueError(f"primitives must be listed in the order {known}, got {primitives}")
     return primitives
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from gymnasium import spaces
 
 from mpg_envs.grid.actions import PixelAction, encode_action
+from mpg_envs.grid.primitive_specs import PAPER_PRIMITIVES, half_turn_symmetric
 from mpg_envs.grid.workspace import NUM_ROTATIONS, _is_int
 
 IMAGE_CHANNELS = ("red", "green", "blue", "depth", "mask")
@@ -42,9 +43,10 @@ DEFAULT_IMAGE_SIZE = 84
 parameters; at 84 x 84 (the Atari convention) it holds 1.7M, which keeps
 ``PPO("CnnPolicy", ImageObservation(GridAction(env)))`` on Stage II under 5M."""
 
-SYMMETRIC_PRIMITIVES = ("move", "grasp")
-"""Primitives whose rotation k and k + 8 are the same motion (a parallel-jaw grasp closes
-along a line). Push is directional: its rotations span the full 360 degrees."""
+SYMMETRIC_PRIMITIVES = tuple(p for p in PAPER_PRIMITIVES if half_turn_symmetric(p))
+"""The paper's primitives whose rotation k and k + 8 are the same motion (move and grasp: a
+parallel-jaw grasp closes along a line; each record's ``half_turn_symmetric``). Push is
+directional: its rotations span the full 360 degrees."""
 
 
 # ----------------------------------------------------------------------------- observations
@@ -163,7 +165,7 @@ def grid_rotation(primitive: str, r: int, rotations: int) -> int:
     16 (grasp's k and k + 8 are then the same motion).
     """
     half = NUM_ROTATIONS // 2
-    if primitive in SYMMETRIC_PRIMITIVES and rotations <= half:
+    if half_turn_symmetric(primitive) and rotations <= half:
         return r * (half // rotations)
     return r * (NUM_ROTATIONS // rotations)
 

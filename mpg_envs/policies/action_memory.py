@@ -8,6 +8,7 @@ from typing import Protocol
 import numpy as np
 
 from mpg_envs.grid.grasp_geometry import GRASP_ROTATIONS
+from mpg_envs.grid.primitive_specs import half_turn_symmetric
 
 __all__ = ["ActionMemory", "RepeatConfig", "RepeatRule"]
 
@@ -99,4 +100,4 @@ class ActionMemory:
 
     @staticmethod
     def _angle(primitive: str, rotation: int) -> int:
-        return int(rotation) % GRASP_ROTATIONS if primitive in ("grasp", "move") else int(rotation)
+        return int(rotation) % GRASP_ROTATIONS if half_turn_symmetric(primitive) else int(rotation)

@@ -37,6 +37,7 @@ from mpg_envs.grid.grasp_geometry import (
     fingers_blocked,
     footprint_rect,
 )
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.perception.exemplar_match import Blob, MatchSettings, find_blobs, heights, lab_colours
 from mpg_envs.policies.action_memory import ActionMemory
 
@@ -113,7 +114,7 @@ class ExemplarMatcher:
             )
         self.config = config
         self.primitives = tuple(unwrapped.primitives)
-        if "grasp" not in self.primitives:
+        if GRASP not in self.primitives:
             raise ValueError(f"the matching heuristic grasps; this env allows only {self.primitives}")
         self.resolution = float(unwrapped.config.workspace.resolution)
         self.grasp_depth = float(unwrapped.config.primitives.grasp_depth)
@@ -141,7 +142,7 @@ class ExemplarMatcher:
         assert chosen is not None  # _options always ends with a grasp at the tallest point
         primitive, rotation, row, col, self.last_plan = chosen
         self.memory.record(primitive, rotation, row, col, depth)
-        if primitive == "grasp":  # asked again afterwards: it did not take the target
+        if primitive == GRASP:  # asked again afterwards: it did not take the target
             self._grasp_angles.append(rotation % GRASP_ROTATIONS)
         self._searches += self.last_plan["kind"] == "dig"
         return int(self.action_space.encode(primitive, rotation, row, col))
@@ -164,7 +165,7 @@ class ExemplarMatcher:
         up = heights(obs["depth"], c)
         lab = lab_colours(np.asarray(obs["color"]))
         blobs = self.blobs(obs)
-        clearing = bool({"move", "push"} & set(self.primitives))
+        clearing = bool({MOVE, PUSH} & set(self.primitives))
         uncovered = [b for b in blobs if not b.covered]
         best = uncovered[0] if uncovered else None
         threshold = c.grasp_score if self._searches < c.patience else min(c.grasp_score, c.accept_score)
@@ -176,7 +177,7 @@ class ExemplarMatcher:
                 "score": round(best.score, 3),
                 "blocked": round(height, 4),
             }
-            yield ("grasp", rotation, row, col, plan)
+            yield (GRASP, rotation, row, col, plan)
         partial = [b for b in blobs if b.covered] if clearing else []
         for blob in ([b for b in partial if b.score >= c.partial_score] or partial)[:1]:
             plan = {"kind": "uncover", "score": round(blob.score, 3)}
@@ -194,12 +195,12 @@ class ExemplarMatcher:
             yield self._clear(region, None, {"kind": "dig"})
         for blob in blobs:
             yield (
-                "grasp",
+                GRASP,
                 *_grip(blob.pixels),
                 {"kind": "grasp_last_resort", "score": round(blob.score, 3)},
             )
         top_row, top_col = np.unravel_index(int(np.argmax(up)), up.shape)
-        yield ("grasp", 0, int(top_row), int(top_col), {"kind": "grasp_tallest"})
+        yield (GRASP, 0, int(top_row), int(top_col), {"kind": "grasp_tallest"})
 
     def _regions(self, lab: np.ndarray, up: np.ndarray, where: np.ndarray, limit: int = 6) -> Iterator[np.ndarray]:
         """Up to ``limit`` objects seen at ``where``, tallest first: each the pixels of one colour
@@ -224,8 +225,8 @@ class ExemplarMatcher:
         """A move of ``region``'s object (a push away from ``away_from``, or from the
         workspace centre, where the env has no move)."""
         rotation, row, col = _grip(region)
-        if "move" in self.primitives:
-            return ("move", rotation, row, col, plan)
+        if MOVE in self.primitives:
+            return (MOVE, rotation, row, col, plan)
         rows, cols = np.nonzero(region)
         if away_from is not None and away_from.any():
             from_rows, from_cols = np.nonzero(away_from)
@@ -233,4 +234,4 @@ class ExemplarMatcher:
         else:
             origin = np.array(region.shape[::-1], dtype=float) / 2
         direction = math.atan2(rows.mean() - origin[1], cols.mean() - origin[0])
-        return ("push", angle_to_rotation(direction, symmetric=False), row, col, plan)
+        return (PUSH, angle_to_rotation(direction, symmetric=False), row, col, plan)

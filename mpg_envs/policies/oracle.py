@@ -35,6 +35,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.grasp_geometry import JawGeometry, angle_to_rotation, footprint_rect
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
 from mpg_envs.policies.grasp_plans import GraspPlan, clip_pixel, plan_grasps, push_options
@@ -117,19 +118,19 @@ class OraclePolicy:
         if target is None or env.stage.mask_all_objects or not world.active[target]:
             inside = set(world.active_objects().tolist()) - set(world.objects_outside_workspace().tolist())
             for i in sorted(inside, key=lambda i: -world.object_top(i)):
-                step = self._first_new("grasp", self.grasp_plans(env, i, depth, ids), depth)
+                step = self._first_new(GRASP, self.grasp_plans(env, i, depth, ids), depth)
                 if step:
                     return (*step, {"kind": "grasp_any"})
-            return self._last_resort(env, depth, "grasp")
-        verify = "grasp" in allowed and self.config.verify_grasps > 0
+            return self._last_resort(env, depth, GRASP)
+        verify = GRASP in allowed and self.config.verify_grasps > 0
         if verify:
             step = self._verified_grasp(env, target, depth, ids)
             if step:
                 return (*step, {"kind": "grasp_verified"})
-        plans = self.grasp_plans(env, target, depth, ids) if "grasp" in allowed else []
+        plans = self.grasp_plans(env, target, depth, ids) if GRASP in allowed else []
         if not verify:
             occluded = bool(self._obs["occluded"][0])
-            if "move" in allowed and (occluded or "grasp" not in allowed):
+            if MOVE in allowed and (occluded or GRASP not in allowed):
                 moves = list(self._moves(env, target, depth, ids, plans, blockers=False))[
                     : max(1, self.config.verify_preparations)
                 ]
@@ -137,7 +138,7 @@ class OraclePolicy:
                 if step:
                     return step
             good = [p for p in plans if p.blocked <= self.config.grasp_tolerance]
-            step = self._first_new("grasp", good, depth)
+            step = self._first_new(GRASP, good, depth)
             if step:
                 return (
                     *step,
@@ -150,10 +151,10 @@ class OraclePolicy:
             step = self._look_ahead(env, target, depth, ids, plans)
             if step:
                 return step
-        step = self._first_new("grasp", plans, depth)
+        step = self._first_new(GRASP, plans, depth)
         if step:
             return (*step, {"kind": "grasp_blocked", "no_free_grasp": True})
-        return self._last_resort(env, depth, "grasp" if "grasp" in allowed else allowed[0])
+        return self._last_resort(env, depth, GRASP if GRASP in allowed else allowed[0])
 
     def _tried_move(self, env, target: int, depth: np.ndarray, ids: np.ndarray, moves: list):
         """With trials (Stage III, no grasp to verify), the first move, over the movers' angles
@@ -166,12 +167,12 @@ class OraclePolicy:
             for p in self.grasp_plans(env, j, depth, ids, require_fit=False):
                 if budget <= 0:
                     return moves[0]
-                if self.memory.repeats("move", p.rotation, p.row, p.col, depth):
+                if self.memory.repeats(MOVE, p.rotation, p.row, p.col, depth):
                     continue
                 budget -= 1
-                result = env.sim.try_primitive("move", p.rotation, p.row, p.col, depth, target)
+                result = env.sim.try_primitive(MOVE, p.rotation, p.row, p.col, depth, target)
                 if result.lifted and result.grasped_object == j and not result.target_moved:
-                    return "move", p.rotation, p.row, p.col, move[4]
+                    return MOVE, p.rotation, p.row, p.col, move[4]
         return moves[0] if moves else None
 
     def _moves(self, env, target: int, depth: np.ndarray, ids: np.ndarray, plans: list[GraspPlan], blockers: bool = True):
@@ -179,10 +180,10 @@ class OraclePolicy:
         grasp allowed and none on top, the nearest neighbours; with ``blockers``, then the
         objects in the open fingers' way of the least blocked target grasps."""
         world, allowed = env.world, env.primitives
-        if "move" not in allowed:
+        if MOVE not in allowed:
             return
         movers = self.occluders(world, target, depth, ids, self._obs["mask"])
-        if not movers and "grasp" not in allowed:  # Stage III, nothing on top: clear the nearest
+        if not movers and GRASP not in allowed:  # Stage III, nothing on top: clear the nearest
             movers = self._neighbours(world, target)
         kinds = {j: "move_occluder" for j in movers}
         if blockers:
@@ -192,20 +193,20 @@ class OraclePolicy:
                         movers.append(j)
                         kinds[j] = "move_blocker"
         for j in movers:
-            step = self._first_new("move", self.grasp_plans(env, j, depth, ids, require_fit=False), depth)
+            step = self._first_new(MOVE, self.grasp_plans(env, j, depth, ids, require_fit=False), depth)
             if step:
                 yield (*step, {"kind": kinds[j], "object": j})
 
     def _pushes(self, env, target: int, depth: np.ndarray, plans: list[GraspPlan]):
         """Untried pushes that open a finger gap (:func:`~mpg_envs.policies.grasp_plans.push_options`)."""
-        if "push" not in env.primitives or not plans:
+        if PUSH not in env.primitives or not plans:
             return
         seen = set()
         for _, start, rotation in push_options(env.world, target, plans, self.config):
             r, c = clip_pixel(env.world.workspace, start)
-            if (rotation, r, c) not in seen and not self.memory.repeats("push", rotation, r, c, depth):
+            if (rotation, r, c) not in seen and not self.memory.repeats(PUSH, rotation, r, c, depth):
                 seen.add((rotation, r, c))
-                yield "push", rotation, r, c, {"kind": "push", "no_free_grasp": True}
+                yield PUSH, rotation, r, c, {"kind": PUSH, "no_free_grasp": True}
 
     def _look_ahead(self, env, target: int, depth: np.ndarray, ids: np.ndarray, plans: list[GraspPlan]):
         """Of the first ``verify_preparations`` untried moves and pushes, the first after which
@@ -226,7 +227,7 @@ class OraclePolicy:
                 mask, _ = sim.target_view(after, target)
                 plans_after = self.grasp_plans(env, target, after, ids_after)
                 for p in plans_after[: c.verify_grasps]:
-                    result = sim.try_primitive("grasp", p.rotation, p.row, p.col, after, target)
+                    result = sim.try_primitive(GRASP, p.rotation, p.row, p.col, after, target)
                     if result.lifted and result.grasped_object == target:
                         return primitive, rotation, row, col, {**info, "verified_next": True}
                 occluders = self.occluders(sim.world, target, after, ids_after, mask)
@@ -242,13 +243,13 @@ class OraclePolicy:
         for p in self.grasp_plans(env, target, depth, ids):
             if tried >= self.config.verify_grasps:
                 break
-            if self.memory.repeats("grasp", p.rotation, p.row, p.col, depth):
+            if self.memory.repeats(GRASP, p.rotation, p.row, p.col, depth):
                 continue
             tried += 1
-            result = env.sim.try_primitive("grasp", p.rotation, p.row, p.col, depth, target)
+            result = env.sim.try_primitive(GRASP, p.rotation, p.row, p.col, depth, target)
             if result.lifted and result.grasped_object == target:
-                return "grasp", p.rotation, p.row, p.col
-            self.memory.record("grasp", p.rotation, p.row, p.col, depth)
+                return GRASP, p.rotation, p.row, p.col
+            self.memory.record(GRASP, p.rotation, p.row, p.col, depth)
         return None
 
     def _first_new(self, primitive: str, plans: list[GraspPlan], depth: np.ndarray):

@@ -1,11 +1,12 @@
-"""The three motion primitives of the paper (Section III-B): move, push and grasp.
+"""The executor of the motion primitives, and the paper's three (Section III-B): move, push and grasp.
 
 Each takes ``(rotation, row, col)`` on the heightmap grid plus the current depth
 heightmap (for the local height ``h``) and runs the arm in simulation through its inverse
 kinematics and the arm's own position actuators. Motions through free space above the clutter
 (from the resting pose to above the action, back home, carrying a held object to its
 place) are shortcut by setting the joint angles directly, since nothing can touch there;
-every motion where contact can happen is simulated.
+every motion where contact can happen is simulated. A primitive's motion is looked up by name
+(:mod:`mpg_envs.simulation.motions`); the paper's three are registered here.
 """
 
 from __future__ import annotations
@@ -17,9 +18,10 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from mpg_envs.grid.actions import PRIMITIVES
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH, primitive_spec
 from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
 from mpg_envs.simulation.free_space import clutter_height, disc_offsets, free_spot
+from mpg_envs.simulation.motions import motion_of, register_motion
 from mpg_envs.simulation.robot import ArmIK, UnreachablePoseError, gripper_states
 from mpg_envs.simulation.world import World, WorldCheckpoint
 
@@ -60,7 +62,7 @@ class PrimitiveConfig:
 GRASP_FAILURES = ("closed_empty", "not_lifted", "unreachable")
 """Why a grasp held nothing: the fingers closed fully on nothing (missed), or something was
 between the pads but did not rise with them (slipped out, or pinned under another object),
-or the arm could not reach the pose (nothing moved; see :meth:`Primitives.execute`)."""
+or the arm could not reach the pose (nothing moved; see :meth:`PrimitiveExecutor.execute`)."""
 
 
 @dataclass
@@ -84,8 +86,8 @@ class PrimitiveResult:
     unreachable: bool = False  # the arm could not reach a pose of this motion: nothing moved
 
 
-class Primitives:
-    """Runs move/push/grasp on a :class:`World`."""
+class PrimitiveExecutor:
+    """Runs a primitive's motion (move, push, grasp, or one registered later) on a :class:`World`."""
 
     def __init__(self, world: World, config: PrimitiveConfig = PrimitiveConfig(), ik: ArmIK | None = None):
         self.world = world
@@ -112,8 +114,7 @@ class Primitives:
         returns a result with ``unreachable`` set (``grasp_failure="unreachable"`` for grasp
         and move), so the env and the oracle's trials both carry on.
         """
-        if primitive not in PRIMITIVES:
-            raise ValueError(f"unknown primitive {primitive!r}; valid: {PRIMITIVES}")
+        motion = motion_of(primitive)
         check_rotation(rotation)
         check_pixel(self.world.workspace, row, col)
         expected = self.world.workspace.shape
@@ -125,7 +126,7 @@ class Primitives:
         target_pose = world.object_pose(target) if target is not None and world.active[target] else None
         checkpoint = WorldCheckpoint(world)
         try:
-            result = getattr(self, f"_{primitive}")(int(rotation), int(row), int(col), depth, target)
+            result = motion(self, int(rotation), int(row), int(col), depth, target)
         except UnreachablePoseError:
             # An action inside the action space never ends in an exception: a pose the arm
             # cannot reach is a motion that did nothing (the world is put back).
@@ -147,26 +148,31 @@ class Primitives:
             int(rotation),
             (int(row), int(col)),
             (float(x), float(y), 0.0),
-            grasp_failure="unreachable" if primitive in ("grasp", "move") else None,
+            grasp_failure="unreachable" if primitive_spec(primitive).lifts else None,
             unreachable=True,
         )
 
     # ----------------------------------------------------------- primitives
-    def _grasp(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
+    def grasp(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
+        """Grasp's motion: descend open at the pixel, close, lift; what it holds leaves the scene.
+        Unchecked: :meth:`execute` runs it."""
         x, y, z, z_pre, theta = self._grasp_pose(rotation, row, col, depth)
-        result = PrimitiveResult("grasp", rotation, (row, col), (x, y, z))
-        held = self._pick(x, y, z, z_pre, theta, result)
+        result = PrimitiveResult(GRASP, rotation, (row, col), (x, y, z))
+        held = self.pick(x, y, z, z_pre, theta, result)
         if held is not None:
             result.lifted, result.grasped_object = True, held
             self.world.remove_object(held)
             result.removed_objects = (held,)
-        self._finish()
+        self.finish()
         return result
 
-    def _move(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
+    def move(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
+        """Move's motion: grasp as a grasp does, then put what it holds down at the most open spot
+        (:func:`~mpg_envs.simulation.free_space.free_spot`; off the table when there is none).
+        Unchecked: :meth:`execute` runs it."""
         x, y, z, z_pre, theta = self._grasp_pose(rotation, row, col, depth)
-        result = PrimitiveResult("move", rotation, (row, col), (x, y, z))
-        held = self._pick(x, y, z, z_pre, theta, result)
+        result = PrimitiveResult(MOVE, rotation, (row, col), (x, y, z))
+        held = self.pick(x, y, z, z_pre, theta, result)
         if held is not None:
             result.lifted, result.grasped_object = True, held
             spot = free_spot(self.world, held, target, self.config.place_margin, self.config.place_clear_of_target)
@@ -177,10 +183,12 @@ class Primitives:
             else:
                 self._place(held, spot, theta)
                 result.placed_object = held
-        self._finish()
+        self.finish()
         return result
 
-    def _push(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
+    def push(self, rotation: int, row: int, col: int, depth: np.ndarray, target: int | None) -> PrimitiveResult:
+        """Push's motion: the closed fingers slide ``push_length`` along the rotation's direction.
+        Unchecked: :meth:`execute` runs it."""
         cfg, ws = self.config, self.world.workspace
         x, y = pixel_to_world(ws, row, col)
         h = float(depth[row, col])
@@ -190,13 +198,13 @@ class Primitives:
         end = np.clip(end, (ws.x_min, ws.y_min), (ws.x_max, ws.y_max))
         # The closed fingers present their broad side to the push.
         theta = direction + math.pi / 2
-        result = PrimitiveResult("push", rotation, (row, col), (x, y, z))
-        z_pre = max(clutter_height(depth, row, col, self._footprint_offsets), z) + cfg.clearance
-        q = self._teleport((x, y, z_pre), theta, closed=True)
-        q = self._linear((x, y, z_pre), (x, y, z), theta, q, cfg.approach_speed)
-        q = self._linear((x, y, z), (end[0], end[1], z), theta, q, cfg.push_speed)
-        self._linear((end[0], end[1], z), (end[0], end[1], z_pre), theta, q, cfg.lift_speed)
-        self._finish()
+        result = PrimitiveResult(PUSH, rotation, (row, col), (x, y, z))
+        z_pre = self.pre_height(depth, row, col, z)
+        q = self.teleport((x, y, z_pre), theta, closed=True)
+        q = self.linear((x, y, z_pre), (x, y, z), theta, q, cfg.approach_speed)
+        q = self.linear((x, y, z), (end[0], end[1], z), theta, q, cfg.push_speed)
+        self.linear((end[0], end[1], z), (end[0], end[1], z_pre), theta, q, cfg.lift_speed)
+        self.finish()
         return result
 
     # -------------------------------------------------------------- helpers
@@ -204,19 +212,24 @@ class Primitives:
         cfg = self.config
         x, y = pixel_to_world(self.world.workspace, row, col)
         z = max(float(depth[row, col]) - cfg.grasp_depth, cfg.grasp_min_height)
-        z_pre = max(clutter_height(depth, row, col, self._footprint_offsets), z) + cfg.clearance
-        return x, y, z, z_pre, rotation_angle(rotation)
+        return x, y, z, self.pre_height(depth, row, col, z), rotation_angle(rotation)
 
-    def _pick(self, x: float, y: float, z: float, z_pre: float, theta: float, result: PrimitiveResult) -> int | None:
+    # ------------------------------------------------------- motion pieces
+    def pre_height(self, depth: np.ndarray, row: int, col: int, z: float) -> float:
+        """The height of the pose above pixel ``(row, col)`` a motion descends from to ``z``:
+        clear of the highest clutter under the gripper's footprint by ``config.clearance``."""
+        return max(clutter_height(depth, row, col, self._footprint_offsets), z) + self.config.clearance
+
+    def pick(self, x: float, y: float, z: float, z_pre: float, theta: float, result: PrimitiveResult) -> int | None:
         """Descend open, close, lift; the index of the object held afterwards, if any (else
         ``result.grasp_failure`` says why)."""
         cfg, world = self.config, self.world
-        q = self._teleport((x, y, z_pre), theta, closed=False)
-        q = self._linear((x, y, z_pre), (x, y, z), theta, q, cfg.approach_speed)
+        q = self.teleport((x, y, z_pre), theta, closed=False)
+        q = self.linear((x, y, z_pre), (x, y, z), theta, q, cfg.approach_speed)
         heights = {i: world.object_position(i)[2] for i in world.active_objects()}
         self._actuate_gripper(closed=True)
         z_lift = z_pre + cfg.lift_height
-        self._linear((x, y, z), (x, y, z_lift), theta, q, cfg.lift_speed)
+        self.linear((x, y, z), (x, y, z_lift), theta, q, cfg.lift_speed)
         held = self._held_object(heights)
         if held is None:
             closed = world.robot.driver_angle(world.data) > self.gripper.closed_driver_angle - cfg.closed_margin
@@ -266,9 +279,9 @@ class Primitives:
         mujoco.mju_mat2Quat(new_quat, (r_new @ rel_rot).ravel())
         world.set_object_pose(held, data.site_xpos[tcp] + r_new @ rel_pos, new_quat)
         world.forward()
-        q = self._linear((spot[0], spot[1], z_carry), (spot[0], spot[1], z_release), theta, q, cfg.approach_speed)
+        q = self.linear((spot[0], spot[1], z_carry), (spot[0], spot[1], z_release), theta, q, cfg.approach_speed)
         self._actuate_gripper(closed=False)
-        self._linear((spot[0], spot[1], z_release), (spot[0], spot[1], z_carry), theta, q, cfg.lift_speed)
+        self.linear((spot[0], spot[1], z_release), (spot[0], spot[1], z_carry), theta, q, cfg.lift_speed)
 
     def _carry_pose(
         self, spot: tuple[float, float], theta: float, z_carry: float, z_release: float
@@ -286,7 +299,9 @@ class Primitives:
                     raise
                 z -= 0.05
 
-    def _teleport(self, position, theta: float, closed: bool) -> np.ndarray:
+    def teleport(self, position, theta: float, closed: bool) -> np.ndarray:
+        """Set the arm at the pose ``position`` (TCP) turned ``theta``, fingers closed or open
+        (a free-space shortcut, nothing simulated); its joint angles."""
         world = self.world
         q = self.ik.solve(position, theta, np.asarray(world.robot.config.home))
         world.robot.teleport_arm(world.data, q)
@@ -296,7 +311,7 @@ class Primitives:
         world.forward()
         return q
 
-    def _linear(self, start, end, theta: float, q_start: np.ndarray, speed: float) -> np.ndarray:
+    def linear(self, start, end, theta: float, q_start: np.ndarray, speed: float) -> np.ndarray:
         """Move the TCP along a straight line through IK waypoints, simulated."""
         cfg, world = self.config, self.world
         start, end = np.asarray(start, float), np.asarray(end, float)
@@ -350,7 +365,7 @@ class Primitives:
                 break
             last = angle
 
-    def _finish(self) -> None:
+    def finish(self) -> None:
         """Arm back home (free-space shortcut), gripper open, let the scene come to rest."""
         world = self.world
         cfg = world.robot.config
@@ -365,3 +380,10 @@ class Primitives:
         return bool(
             np.linalg.norm(new_pos - pos) > self.config.target_moved_distance or angle > self.config.target_moved_angle
         )
+
+
+Primitives = PrimitiveExecutor
+"""The executor's former name (kept: it is public)."""
+
+for _name, _motion in ((MOVE, PrimitiveExecutor.move), (PUSH, PrimitiveExecutor.push), (GRASP, PrimitiveExecutor.grasp)):
+    register_motion(_name, _motion)

@@ -19,6 +19,7 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.actions import PixelActionSpace
+from mpg_envs.grid.primitive_specs import primitive_spec
 from mpg_envs.perception.render import OverviewRenderer, render_overview
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
 from mpg_envs.scenes.arranged import ArrangedScenes
@@ -127,7 +128,7 @@ class MPGEnv(gym.Env):
         stage_spec = self.stage
         self.num_objects = check_num_objects(stage_spec.num_objects if num_objects is None else num_objects, stage_spec)
         self.default_num_objects = self.num_objects
-        self.wrong_grasp = check_wrong_grasp(wrong_grasp, stage_spec)
+        self.mis_pick_rule = check_wrong_grasp(wrong_grasp, stage_spec)  # the keyword wrong_grasp: the rule
         self.visible_range = check_visible_range(visible_range, stage_spec)
         self.use_test_set = check_use_test_set(use_test_set)
         self.max_motions = check_max_motions(max_motions, stage_spec)
@@ -189,7 +190,7 @@ class MPGEnv(gym.Env):
         primitive, rotation, row, col = self.action_space.decode(action)
         before, executor = self._obs, self.sim.executor
         assert before is not None and executor is not None  # an open episode has both
-        score_before = self._grasp_score(before) if primitive != "grasp" else None
+        score_before = None if primitive_spec(primitive).retrieves else self._grasp_score(before)
         visible_before = self._visible
         result = executor.execute(primitive, rotation, row, col, before["depth"], self.target)
         self.num_motions += 1
@@ -209,7 +210,7 @@ class MPGEnv(gym.Env):
         )
         info = {**action_info(primitive, rotation, row, col, result), **evaluation.info()}
         info.update(num_motions=self.num_motions, sim_warnings=sim_warnings, end_reason=end_reason)
-        info.update(self.naming.step_info(evaluation.wrong_grasp, result.grasped_object))
+        info.update(self.naming.step_info(evaluation.mis_pick, result.grasped_object))
         self._ended = None if end_reason is None else f"the episode has ended ({end_reason}); call reset() before step()"
         return self._copy_obs(self.naming.public(self._obs)), reward, bool(terminated), bool(truncated), info
 
@@ -243,7 +244,7 @@ class MPGEnv(gym.Env):
             self._live_world(),
             self.target,
             mask_all_objects=self.stage.mask_all_objects,
-            wrong_grasp=self.wrong_grasp,
+            mis_pick_rule=self.mis_pick_rule,
             change=self.config.change,
             grasp_gain=0.0 if score_before is None else self._grasp_score(obs) - score_before,
             visible_before=visible_before,
@@ -299,6 +300,12 @@ class MPGEnv(gym.Env):
     def target_index(self) -> int | None:
         """Index of the target object in ``world`` (``None`` in Stage I)."""
         return self.target
+
+    @property
+    def wrong_grasp(self) -> str:
+        """What a mis-pick does (the keyword ``wrong_grasp``: ``"remove"`` or ``"fail"``;
+        ``mis_pick_rule``)."""
+        return self.mis_pick_rule
 
     @property
     def scene_request(self) -> SceneRequest:

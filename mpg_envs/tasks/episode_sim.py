@@ -27,7 +27,7 @@ from mpg_envs.perception.heightmap import RaycastHeightmapper, geom_colors
 from mpg_envs.perception.occlusion import is_occluded, visible_fraction
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, randomized_raycast
 from mpg_envs.simulation.assets import ObjectAsset
-from mpg_envs.simulation.primitives import PrimitiveResult, Primitives
+from mpg_envs.simulation.primitives import PrimitiveExecutor, PrimitiveResult
 from mpg_envs.simulation.robot import ArmIK
 from mpg_envs.simulation.world import World, WorldCheckpoint
 from mpg_envs.tasks.config import OBS_MODES, EnvConfig
@@ -61,7 +61,7 @@ class EpisodeSim:
         obs_mode: ``"raycast"`` or ``"camera"`` (:data:`~mpg_envs.tasks.config.OBS_MODES`).
         mask_all_objects: the mask shows every object (Stage I), not one target.
         world: the current :class:`~mpg_envs.simulation.world.World` (``None`` before the first build).
-        executor: the :class:`~mpg_envs.simulation.primitives.Primitives` that runs
+        executor: the :class:`~mpg_envs.simulation.primitives.PrimitiveExecutor` that runs
             move/push/grasp on ``world``.
         random: the episode's generator (the env's ``np_random``; camera noise and scene
             drops draw from it), set by :meth:`initialize_episode`.
@@ -91,7 +91,7 @@ class EpisodeSim:
         self.mask_all_objects = bool(mask_all_objects)
         self.ik = ArmIK(config.robot) if ik is None else ik
         self.world: World | None = None
-        self.executor: Primitives | None = None
+        self.executor: PrimitiveExecutor | None = None
         self.random: np.random.Generator | None = None
         self.visuals: EpisodeVisuals | None = None
         self._assets: tuple[ObjectAsset, ...] | None = None
@@ -126,7 +126,7 @@ class EpisodeSim:
         c = self.config
         world = World(assets, c.workspace, c.robot, c.physics, extra_spec_hook=hook, robot_visual=self.robot_visual)
         self.world, self._assets = world, assets
-        self.executor = Primitives(world, c.primitives, self.ik)
+        self.executor = PrimitiveExecutor(world, c.primitives, self.ik)
         self._close_views()  # heightmappers are bound to one compiled model
         if self.obs_mode == "raycast":
             # The thread count is chosen once per env (choosing samples the machine's load).

@@ -17,11 +17,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mpg_envs.grid.grasp_geometry import angle_to_rotation, footprint_rect
+from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.grid.workspace import world_to_pixel
 from mpg_envs.perception.heightmap import RaycastHeightmapper
 from mpg_envs.scenes.generators import random_quat, yaw_quat
 from mpg_envs.simulation.objects import ObjectAsset
-from mpg_envs.simulation.primitives import Primitives
+from mpg_envs.simulation.primitives import PrimitiveExecutor
 from mpg_envs.simulation.robot import ArmIK
 from mpg_envs.simulation.world import World
 from mpg_envs.tasks.config import EnvConfig
@@ -51,13 +52,18 @@ class ShapeResult:
 
 
 class GraspBench:
-    """One object alone on the table, the env's world, heightmapper and primitives."""
+    """One object alone on the table, the env's world, heightmapper and primitive executor."""
 
     def __init__(self, asset: ObjectAsset, config: EnvConfig = EnvConfig(), ik: ArmIK | None = None):
         self.config = config
         self.world = World([asset], config.workspace, config.robot, config.physics)
-        self.primitives = Primitives(self.world, config.primitives, ik)
+        self.executor = PrimitiveExecutor(self.world, config.primitives, ik)
         self.heightmapper = RaycastHeightmapper(self.world.model, config.workspace, num_threads=1)
+
+    @property
+    def primitives(self) -> PrimitiveExecutor:
+        """The executor's former attribute name (kept)."""
+        return self.executor
 
     def close(self) -> None:
         self.heightmapper.close()
@@ -82,7 +88,7 @@ class GraspBench:
         centre, _, short_dir = footprint_rect(world.object_vertices(0)[:, :2])
         row, col = world_to_pixel(ws, float(centre[0]), float(centre[1]))
         try:
-            result = self.primitives.execute("grasp", angle_to_rotation(short_dir), row, col, depth, target=0)
+            result = self.executor.execute(GRASP, angle_to_rotation(short_dir), row, col, depth, target=0)
         except RuntimeError:
             return "ik"
         if result.lifted and result.grasped_object == 0:

@@ -1,8 +1,12 @@
-"""The paper's reward functions (Section III-C), as pure functions of what a step did."""
+"""The paper's reward functions (Section III-C), as pure functions of what a step did, and the
+per-primitive rules by key (a primitive's record names its rule)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+
+from mpg_envs.grid.primitive_specs import primitive_spec
 
 
 @dataclass(frozen=True)
@@ -99,10 +103,44 @@ def reward_push(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
     return 0.0
 
 
+RewardRule = Callable[[StepOutcome, RewardConfig], float]
+"""A reward as a pure function of a step's outcome and the reward settings."""
+
+_REWARD_RULES: dict[str, RewardRule] = {"uncover": reward_move, "push_gain": reward_push, "grasp_target": reward_grasp_target}
+PAPER_RULES: tuple[str, ...] = tuple(_REWARD_RULES)
+"""The keys of the paper's per-primitive rules: R_m (``uncover``), R_p (``push_gain``) and R_g2
+(``grasp_target``), a primitive record's ``reward_rule``."""
+
+
+def register_reward_rule(key: str, rule: RewardRule) -> None:
+    """Reward a primitive whose record's ``reward_rule`` is ``key`` with ``rule`` (in a stage
+    with a reward per primitive, :func:`reward_per_primitive`); a key taken is refused."""
+    if not isinstance(key, str) or not key:
+        raise ValueError(f"a reward rule's key must be a non-empty string, got {key!r}")
+    if not callable(rule):
+        raise TypeError(f"reward rule {key!r} must be callable, got {type(rule).__name__}")
+    if key in _REWARD_RULES:
+        raise ValueError(f"reward rule {key!r} is already registered; registered: {tuple(_REWARD_RULES)}")
+    _REWARD_RULES[key] = rule
+
+
+def unregister_reward_rule(key: str) -> None:
+    """Remove a rule :func:`register_reward_rule` added (the paper's stay)."""
+    if key in PAPER_RULES:
+        raise ValueError(f"the paper's reward rules {PAPER_RULES} cannot be unregistered, got {key!r}")
+    if _REWARD_RULES.pop(key, None) is None:
+        raise ValueError(f"reward rule {key!r} is not registered; registered: {tuple(_REWARD_RULES)}")
+
+
+def reward_rule(key: str) -> RewardRule:
+    """The reward rule registered under ``key``; a one-line ``ValueError`` for an unknown key."""
+    rule = _REWARD_RULES.get(key) if isinstance(key, str) else None
+    if rule is None:
+        raise ValueError(f"unknown reward rule {key!r}; registered: {tuple(_REWARD_RULES)}")
+    return rule
+
+
 def reward_per_primitive(o: StepOutcome, c: RewardConfig = RewardConfig()) -> float:
-    """Stage V and the test scenes: each primitive keeps its stage's reward."""
-    if o.primitive == "move":
-        return reward_move(o, c)
-    if o.primitive == "push":
-        return reward_push(o, c)
-    return reward_grasp_target(o, c)
+    """Stage V and the test scenes: each primitive keeps its stage's reward, the rule its
+    record names (:class:`~mpg_envs.grid.primitive_specs.PrimitiveSpec`'s ``reward_rule``)."""
+    return reward_rule(primitive_spec(o.primitive).reward_rule)(o, c)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.tasks.rewards import (
     RewardConfig,
     StepOutcome,
@@ -71,11 +72,11 @@ class StageSpec:
 STAGES: dict[str, StageSpec] = {
     s.name: s
     for s in (
-        StageSpec("Stage1", ("grasp",), "scattered", 5, 15, reward_grasp_any, mask_all_objects=True),
-        StageSpec("Stage2", ("grasp",), "isolated_target", 5, 10, reward_grasp_target),
+        StageSpec("Stage1", (GRASP,), "scattered", 5, 15, reward_grasp_any, mask_all_objects=True),
+        StageSpec("Stage2", (GRASP,), "isolated_target", 5, 10, reward_grasp_target),
         StageSpec(
             "Stage3",
-            ("move",),
+            (MOVE,),
             "occluded_target",
             2,
             5,
@@ -86,7 +87,7 @@ STAGES: dict[str, StageSpec] = {
         ),
         StageSpec(
             "Stage4",
-            ("push", "grasp"),
+            (PUSH, GRASP),
             "surrounded_target",
             7,
             6,
@@ -96,10 +97,10 @@ STAGES: dict[str, StageSpec] = {
             end_after_grasp=True,
             min_objects=2,
         ),
-        StageSpec("Stage5", ("move", "push", "grasp"), "clustered", 10, 10, reward_per_primitive),
+        StageSpec("Stage5", (MOVE, PUSH, GRASP), "clustered", 10, 10, reward_per_primitive),
         StageSpec(
             "Occluded",
-            ("move", "push", "grasp"),
+            (MOVE, PUSH, GRASP),
             "test_cluster",
             15,
             10,
@@ -110,7 +111,7 @@ STAGES: dict[str, StageSpec] = {
         ),
         StageSpec(
             "OccludedHard",
-            ("move", "push", "grasp"),
+            (MOVE, PUSH, GRASP),
             "test_cluster",
             15,
             10,
@@ -142,7 +143,7 @@ def episode_end(
     :data:`END_REASONS` on the last step and ``None`` before it. ``wrong_object``: a grasp
     lifted a non-target object under strict retrieval (a terminal failure)."""
     terminated = is_success or target_out or wrong_object or (stage.end_on_move_success and move_success)
-    grasp_ends = stage.end_after_grasp and primitive == "grasp"
+    grasp_ends = stage.end_after_grasp and primitive == GRASP
     truncated = not terminated and (num_motions >= max_motions or grasp_ends)
     if is_success:
         reason: str | None = "table_empty" if stage.mask_all_objects else "target_grasped"

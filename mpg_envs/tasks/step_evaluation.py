@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from mpg_envs.grid.primitive_specs import MOVE, primitive_spec
 from mpg_envs.perception.occlusion import ChangeConfig, change_detected
 from mpg_envs.simulation.primitives import PrimitiveResult
 from mpg_envs.simulation.world import World
@@ -33,9 +34,10 @@ class StepEvaluation:
 
     Attributes:
         outcome: the facts the paper's rewards need (:class:`~mpg_envs.tasks.rewards.StepOutcome`).
-        wrong_grasp: a grasp lifted an object other than the target (a mis-pick).
-        ends_wrong_object: ... and strict retrieval (``wrong_grasp="fail"``) ends the
-            episode for it.
+        mis_pick: a grasp lifted an object other than the target (the event; ``info["wrong_grasp"]``,
+            and ``wrong_grasp``, its former name here).
+        ends_wrong_object: ... and the env's mis-pick rule (its keyword ``wrong_grasp="fail"``,
+            strict retrieval) ends the episode for it.
         is_success: the task is done (the target grasped; Stage I: the table empty).
         target_out: the target left the workspace.
         occluded_before: the target was occluded before the step (the paper's flag).
@@ -46,7 +48,7 @@ class StepEvaluation:
     """
 
     outcome: StepOutcome
-    wrong_grasp: bool
+    mis_pick: bool
     ends_wrong_object: bool
     is_success: bool
     target_out: bool
@@ -55,6 +57,11 @@ class StepEvaluation:
     visible_fraction: float | None
     objects_left: int
 
+    @property
+    def wrong_grasp(self) -> bool:
+        """The former name of :attr:`mis_pick` (kept)."""
+        return self.mis_pick
+
     def info(self) -> dict[str, Any]:
         """The step-``info`` entries this evaluation owns (a fresh dict)."""
         o = self.outcome
@@ -62,7 +69,7 @@ class StepEvaluation:
             "lifted": bool(o.lifted),
             "grasp_success": bool(o.lifted),  # the spec's name of "lifted" (kept: users read it)
             "target_grasped": bool(o.target_grasped),
-            "wrong_grasp": bool(self.wrong_grasp),
+            "wrong_grasp": bool(self.mis_pick),  # the event's name users read
             "change_detected": bool(o.change_detected),
             "occluded_before": self.occluded_before,
             "occluded": self.occluded,
@@ -85,7 +92,7 @@ def judge_step(
     target: int | None,
     *,
     mask_all_objects: bool,
-    wrong_grasp: str,
+    mis_pick_rule: str,
     change: ChangeConfig,
     grasp_gain: float,
     visible_before: float | None,
@@ -93,9 +100,10 @@ def judge_step(
 ) -> StepEvaluation:
     """What the step did, judged on the new state ``obs`` of ``world`` against the observation
     ``before`` it: success (the target grasped; with ``mask_all_objects`` the table empty),
-    mis-pick (``wrong_grasp="fail"``: it ends the episode), move success (a move that left the
-    target uncovered), occlusion, the visible fraction ``visible`` and its gain over
-    ``visible_before``, change (``change``'s test); ``grasp_gain``: the grasp scorer's gain."""
+    mis-pick (with ``mis_pick_rule="fail"``, the env's ``wrong_grasp="fail"``, it ends the
+    episode), move success (a move that left the target uncovered), occlusion, the visible
+    fraction ``visible`` and its gain over ``visible_before``, change (``change``'s test);
+    ``grasp_gain``: the grasp scorer's gain."""
     target_grasped = bool(result.lifted and (mask_all_objects or result.grasped_object == target))
     target_out = (
         target is not None and bool(world.active[target]) and target in set(world.objects_outside_workspace().tolist())
@@ -104,9 +112,10 @@ def judge_step(
     occluded = bool(obs["occluded"][0])
     changed = change_detected(before["depth"], obs["depth"], before["mask"], result.lifted, change)
     cleared = occluded_before and not occluded and not target_grasped and not target_out
-    move_success = primitive == "move" and cleared
-    wrong = bool(primitive == "grasp" and result.lifted and not target_grasped)
-    is_success = world.objects_left() == 0 if mask_all_objects else bool(target_grasped and primitive == "grasp")
+    move_success = primitive == MOVE and cleared
+    retrieves = primitive_spec(primitive).retrieves  # what it lifts leaves the scene: a grasp
+    mis_pick = bool(retrieves and result.lifted and not target_grasped)
+    is_success = world.objects_left() == 0 if mask_all_objects else bool(target_grasped and retrieves)
     seen = 0.0 if visible is None or visible_before is None else visible - visible_before
     return StepEvaluation(
         outcome=StepOutcome(
@@ -120,8 +129,8 @@ def judge_step(
             covered_before=occluded_before,
             cleared=cleared,
         ),
-        wrong_grasp=wrong,
-        ends_wrong_object=wrong and wrong_grasp == "fail",
+        mis_pick=mis_pick,
+        ends_wrong_object=mis_pick and mis_pick_rule == "fail",
         is_success=is_success,
         target_out=bool(target_out),
         occluded_before=occluded_before,

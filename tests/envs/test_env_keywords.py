@@ -87,7 +87,7 @@ def obs(occluded: bool, height: float = 0.0) -> dict[str, np.ndarray]:
 
 
 def judge(primitive, before, after, result, world, **kw):
-    settings = dict(mask_all_objects=False, wrong_grasp="fail", change=ChangeConfig(), grasp_gain=0.0)
+    settings = dict(mask_all_objects=False, mis_pick_rule="fail", change=ChangeConfig(), grasp_gain=0.0)
     settings.update(visible_before=kw.pop("visible_before", 0.2), visible=kw.pop("visible", 0.7))
     return judge_step(primitive, before, after, result, world, 1, **{**settings, **kw})
 
@@ -97,7 +97,7 @@ def test_a_move_that_uncovers_the_target_succeeds_as_a_move():
     e = judge("move", obs(True), obs(False), result, TwoObjects(), grasp_gain=0.25)
     o = e.outcome
     assert o.move_success and o.cleared and o.covered_before and o.change_detected  # lifted: changed
-    assert not o.target_grasped and not e.wrong_grasp and not e.is_success and not e.ends_wrong_object
+    assert not o.target_grasped and not e.mis_pick and not e.is_success and not e.ends_wrong_object
     assert o.visible_gain == pytest.approx(0.5) and o.grasp_q_gain == 0.25
     assert (e.occluded_before, e.occluded, e.visible_fraction, e.objects_left) == (True, False, 0.7, 2)
 
@@ -105,14 +105,14 @@ def test_a_move_that_uncovers_the_target_succeeds_as_a_move():
 def test_grasps_of_the_target_and_of_another_object():
     right = PrimitiveResult("grasp", 0, (3, 3), (0.5, 0.0, 0.05), lifted=True, grasped_object=1)
     e = judge("grasp", obs(True), obs(True), right, TwoObjects(left=1), visible=None)
-    assert e.is_success and e.outcome.target_grasped and not e.wrong_grasp
+    assert e.is_success and e.outcome.target_grasped and not e.mis_pick
     assert e.outcome.visible_gain == 0.0  # no visible fraction after: no gain
     wrong = PrimitiveResult("grasp", 0, (3, 3), (0.5, 0.0, 0.05), lifted=True, grasped_object=0)
     e = judge("grasp", obs(True), obs(True), wrong, TwoObjects(left=1))
-    assert e.wrong_grasp and e.ends_wrong_object and not e.is_success
-    assert not judge("grasp", obs(True), obs(True), wrong, TwoObjects(), wrong_grasp="remove").ends_wrong_object
+    assert e.mis_pick and e.wrong_grasp and e.ends_wrong_object  # wrong_grasp: the former name and not e.is_success
+    assert not judge("grasp", obs(True), obs(True), wrong, TwoObjects(), mis_pick_rule="remove").ends_wrong_object
     e = judge("grasp", obs(True), obs(True), wrong, TwoObjects(left=0), mask_all_objects=True)
-    assert e.is_success and e.outcome.target_grasped and not e.wrong_grasp  # Stage I: every object, table empty
+    assert e.is_success and e.outcome.target_grasped and not e.mis_pick  # Stage I: every object, table empty
 
 
 def test_a_push_that_drives_the_target_out_clears_nothing():

@@ -41,7 +41,7 @@ def test_a_grasp_beside_the_object_fails_as_closed_empty(ceiling, ik) -> None:
         bench.world.drop_object(0, (0.5, 0.0), (1.0, 0.0, 0.0, 0.0))
         depth = bench.heightmapper(bench.world.data).depth
         row, col = world_to_pixel(bench.world.workspace, 0.5, 0.06)
-        result = bench.primitives.execute("grasp", 0, row, col, np.asarray(depth), target=0)
+        result = bench.executor.execute("grasp", 0, row, col, np.asarray(depth), target=0)
     finally:
         bench.close()
     assert not result.lifted

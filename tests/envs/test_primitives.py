@@ -8,7 +8,7 @@ import pytest
 
 from conftest import flat_quat
 from mpg_envs.perception.heightmap import RaycastHeightmapper
-from mpg_envs.simulation.primitives import Primitives
+from mpg_envs.simulation.primitives import PrimitiveExecutor
 from mpg_envs.simulation.world import World
 from mpg_envs.grid.workspace import world_to_pixel
 
@@ -22,7 +22,7 @@ def ik():
 
 def make(assets, ik):
     world = World(assets)
-    return world, Primitives(world, ik=ik), RaycastHeightmapper(world.model, world.workspace, num_threads=1)
+    return world, PrimitiveExecutor(world, ik=ik), RaycastHeightmapper(world.model, world.workspace, num_threads=1)
 
 
 def pixel_of(world, i):
