@@ -1,9 +1,12 @@
-"""Write the headline results into README.md and docs/index.md from the track table's file.
+"""Write the headline results into README.md and docs/index.md, and the track table into
+docs/results.md, from the track table's file.
 
-Both pages hold a block between ``<!-- headline:start -->`` and ``<!-- headline:end -->``: a
-sentence on the shipped MPGNet and one table (the shipped net, its Grasping-Only control, the
-peers' baselines and the oracle on each track at 15 and 30 objects), every figure read from
-``benchmarks/results/tracks/tracks.json``. Run it after the track table changes::
+README.md and the docs home hold a block between ``<!-- headline:start -->`` and
+``<!-- headline:end -->``: a sentence on the shipped MPGNet and one table (the shipped net, its
+Grasping-Only control, the peers' baselines and the oracle on each track at 15 and 30 objects);
+the Results page a block between ``<!-- tracks:start -->`` and ``<!-- tracks:end -->``: every
+row of the track table. Every figure is read from ``benchmarks/results/tracks/tracks.json``.
+Run it after the track table changes::
 
     python docs/make_headline.py            # rewrite the blocks
     python docs/make_headline.py --check    # exit 1 when a page's block differs from the file
@@ -21,8 +24,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 TRACKS_JSON = ROOT / "benchmarks" / "results" / "tracks" / "tracks.json"
-PAGES = (ROOT / "README.md", ROOT / "docs" / "index.md")
-START, END = "<!-- headline:start -->", "<!-- headline:end -->"
+PAGES = {ROOT / "README.md": "headline", ROOT / "docs" / "index.md": "headline", ROOT / "docs" / "results.md": "tracks"}
+"""Each page and the name of its block."""
 
 TRACKS = {"hard": "blocks", "hard-novel": "unseen shapes", "hard-camera": "camera images"}
 """The track table's tracks, as the headline names them."""
@@ -80,24 +83,49 @@ def headline(report: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def rewrite(text: str, block: str, page: str) -> str:
-    """``text`` with the block between the markers replaced by ``block``."""
-    if text.count(START) != 1 or text.count(END) != 1 or text.index(START) > text.index(END):
-        raise ValueError(f"{page} needs one {START} ... {END} block")
-    head, rest = text.split(START)
-    _, tail = rest.split(END)
-    return f"{head}{START}\n{block}\n{END}{tail}"
+def track_table(report: dict[str, Any]) -> str:
+    """Every row of the track table: success [95% interval] in mean motions per track and object count."""
+    objects = [str(n) for n in report["objects"]]
+    tracks = list(report["rows"])
+    lines = [
+        "| Method | " + " | ".join(f"{TRACKS.get(t, t)}, {n} obj." for t in tracks for n in objects) + " |",
+        "|---|" + "---:|" * (len(tracks) * len(objects)),
+    ]
+    for label in report["rows"][tracks[0]]:
+        cells = [cell_text(report["rows"][t][label][n]) if n in report["rows"][t].get(label, {}) else "-" for t in tracks for n in objects]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def blocks(report: dict[str, Any]) -> dict[str, str]:
+    """Each block's text by its name."""
+    return {"headline": headline(report), "tracks": track_table(report)}
+
+
+def markers(name: str) -> tuple[str, str]:
+    """The start and end markers of the block ``name``."""
+    return f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+
+
+def rewrite(text: str, block: str, page: str, name: str = "headline") -> str:
+    """``text`` with the block ``name`` between its markers replaced by ``block``."""
+    start, end = markers(name)
+    if text.count(start) != 1 or text.count(end) != 1 or text.index(start) > text.index(end):
+        raise ValueError(f"{page} needs one {start} ... {end} block")
+    head, rest = text.split(start)
+    _, tail = rest.split(end)
+    return f"{head}{start}\n{block}\n{end}{tail}"
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--check", action="store_true", help="only report pages whose block differs from the file")
     args = parser.parse_args(argv)
-    block = headline(json.loads(TRACKS_JSON.read_text()))
+    texts = blocks(json.loads(TRACKS_JSON.read_text()))
     stale = []
-    for page in PAGES:
+    for page, name in PAGES.items():
         text = page.read_text()
-        new = rewrite(text, block, page.name)
+        new = rewrite(text, texts[name], page.name, name)
         if new != text:
             stale.append(page.name)
             if not args.check:

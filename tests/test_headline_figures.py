@@ -14,6 +14,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 TRACKS_JSON = ROOT / "benchmarks" / "results" / "tracks" / "tracks.json"
 PAGES = [ROOT / "README.md", ROOT / "docs" / "index.md"]
+RESULTS = ROOT / "docs" / "results.md"
 CELL = re.compile(r"^(\d+)% \[(\d+), (\d+)\] in (\d+\.\d\d)$")
 
 
@@ -28,9 +29,9 @@ def headline():
     del sys.modules[spec.name]
 
 
-def table_rows(text: str) -> dict[str, list[str]]:
-    """The rows of the table between the headline markers: the first cell, then the others."""
-    block = text.split("<!-- headline:start -->")[1].split("<!-- headline:end -->")[0]
+def table_rows(text: str, name: str = "headline") -> dict[str, list[str]]:
+    """The rows of the table between the block's markers: the first cell, then the others."""
+    block = text.split(f"<!-- {name}:start -->")[1].split(f"<!-- {name}:end -->")[0]
     rows = {}
     for line in block.splitlines():
         if line.startswith("| ") and not line.startswith("| Method"):
@@ -71,8 +72,19 @@ def test_the_pages_headline_figures_are_the_files(page, headline):
             assert abs(motions - cell["motions"]) <= 0.005, (page.name, shown, text)
 
 
-def test_the_pages_headline_blocks_are_what_the_script_writes(headline):
-    block = headline.headline(json.loads(TRACKS_JSON.read_text()))
-    for page in PAGES:
+def test_the_pages_blocks_are_what_the_script_writes(headline):
+    texts = headline.blocks(json.loads(TRACKS_JSON.read_text()))
+    assert set(headline.PAGES) == {*PAGES, RESULTS}
+    for page, name in headline.PAGES.items():
         text = page.read_text()
-        assert headline.rewrite(text, block, page.name) == text, f"{page.name}: run python docs/make_headline.py"
+        assert headline.rewrite(text, texts[name], page.name, name) == text, f"{page.name}: run python docs/make_headline.py"
+
+
+def test_the_results_pages_track_table_is_the_files(headline):
+    report = json.loads(TRACKS_JSON.read_text())
+    rows = table_rows(RESULTS.read_text(), "tracks")
+    labels = list(report["rows"]["hard"])
+    assert list(rows) == labels
+    for label in labels:
+        expected = [headline.cell_text(report["rows"][t][label][str(n)]) for t in report["rows"] for n in report["objects"]]
+        assert rows[label] == expected, label
