@@ -26,15 +26,24 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+import matplotlib.pyplot as plt
 import numpy as np
 from PIL import Image
+
+import mpg_envs
+from mpg_agents.demo import scene_picture
+from mpg_agents.evaluation.policy_zoo import make_policy
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "images"
 TRACKS_JSON = ROOT / "benchmarks" / "results" / "tracks" / "tracks.json"
 MAX_BYTES = 200_000
 SEED = 500000
-TRACK_ENVS = {"hard": "MPG-OccludedHard-v0", "hard-novel": "MPG-OccludedHardNovel-v0", "hard-camera": "MPG-OccludedHardCamera-v0"}
+TRACK_ENVS = {
+    "hard": "MPG-OccludedHard-v0",
+    "hard-novel": "MPG-OccludedHardNovel-v0",
+    "hard-camera": "MPG-OccludedHardCamera-v0",
+}
 TRACK_NAMES = {"hard": "blocks", "hard-novel": "unseen shapes", "hard-camera": "camera images of blocks"}
 
 
@@ -64,10 +73,6 @@ def stacked(top: Image.Image, bottom: Image.Image) -> Image.Image:
 
 def scenes_and_qmaps() -> None:
     """The tracks' scenes, the shipped net's Q maps and the README's picture."""
-    import mpg_envs
-    from mpg_agents.demo import scene_picture
-    from mpg_agents.evaluation.policy_zoo import make_policy
-
     hard_scene = None
     for track, env_id in TRACK_ENVS.items():
         env = mpg_envs.make(env_id, render_mode="rgb_array")
@@ -96,11 +101,7 @@ def interval_errors(value: float, interval: list[float]) -> list[float]:
 
 def results_plot(report: dict[str, Any] | None = None) -> None:
     """Success and mean motions per track for each policy, with 95% intervals."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt.switch_backend("Agg")
     report = report if report is not None else json.loads(TRACKS_JSON.read_text())
     tracks = list(report["rows"])
     objects = [str(n) for n in report["objects"]]
@@ -118,7 +119,15 @@ def results_plot(report: dict[str, Any] | None = None) -> None:
                 xs = np.arange(len(objects)) + (i - (len(labels) - 1) / 2) * width
                 values = [scale * c[key] for c in cells]
                 errors = np.array([interval_errors(scale * c[key], [scale * v for v in c[ci_key]]) for c in cells]).T
-                ax.bar(xs, values, width, yerr=errors, capsize=1.5, color=colours(i % 10), label=label if col == 0 and row == 0 else None)
+                ax.bar(
+                    xs,
+                    values,
+                    width,
+                    yerr=errors,
+                    capsize=1.5,
+                    color=colours(i % 10),
+                    label=label if col == 0 and row == 0 else None,
+                )
             ax.set_xticks(range(len(objects)), [f"{n} objects" for n in objects])
             if row == 0:
                 ax.set_title(TRACK_NAMES.get(track, track))

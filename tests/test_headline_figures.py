@@ -44,9 +44,9 @@ def test_a_cell_is_written_as_the_track_table_writes_it(headline):
     cell = {"success": 0.99, "success_ci": [0.9455, 0.9982], "motions": 3.5449}
     assert headline.cell_text(cell) == "99% [95, 100] in 3.54"
     assert headline.percent(0.37) == "37%" and headline.percent(1.0) == "100%"
-    assert table_rows("x\n<!-- headline:start -->\n| Method | a |\n|---|---:|\n| A | 1% [0, 5] in 8.77 |\n<!-- headline:end -->") == {
-        "A": ["1% [0, 5] in 8.77"]
-    }
+    assert table_rows(
+        "x\n<!-- headline:start -->\n| Method | a |\n|---|---:|\n| A | 1% [0, 5] in 8.77 |\n<!-- headline:end -->"
+    ) == {"A": ["1% [0, 5] in 8.77"]}
 
 
 def test_a_page_without_its_markers_is_refused(headline):
@@ -68,7 +68,11 @@ def test_the_pages_headline_figures_are_the_files(page, headline):
             assert match, f"{page.name}: {shown}: {text!r} is not 'S% [LO, HI] in M'"
             success, lo, hi, motions = int(match[1]), int(match[2]), int(match[3]), float(match[4])
             assert abs(success - 100 * cell["success"]) <= 0.5, (page.name, shown, text)
-            assert abs(lo - 100 * cell["success_ci"][0]) <= 0.5 and abs(hi - 100 * cell["success_ci"][1]) <= 0.5, (page.name, shown, text)
+            assert abs(lo - 100 * cell["success_ci"][0]) <= 0.5 and abs(hi - 100 * cell["success_ci"][1]) <= 0.5, (
+                page.name,
+                shown,
+                text,
+            )
             assert abs(motions - cell["motions"]) <= 0.005, (page.name, shown, text)
 
 
