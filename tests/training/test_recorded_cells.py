@@ -20,7 +20,7 @@ from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_envs.simulation.mujoco_version import mujoco_major
 
 ROOT = Path(__file__).resolve().parents[2]
-EVALS = ROOT / "benchmarks" / "results" / "fast_pipeline" / "evals"
+TRACKS = ROOT / "benchmarks" / "results" / "tracks"
 OUTCOME = ("seed", "success", "motions", "end_reason", "primitives", "grasp_attempts", "target_grasps",
            "wrong_grasps", "objects_left", "visible_fraction", "actions")
 
@@ -54,10 +54,10 @@ def test_the_pixel_heuristic_replays_its_table1_episodes():
 @pytest.mark.parametrize(
     "cell, indices",
     [
-        ("colorfree_s1_held_MPG-OccludedHard-v0_15.json", [0, 1]),
-        ("colorfree_s1_held_MPG-OccludedHard-v0_30.json", [10]),
-        ("colorfree_s1_held_MPG-OccludedHardNovel-v0_15.json", [1]),
-        ("colorfree_s1_held_MPG-OccludedHardCamera-v0_15.json", [2]),
+        ("hard/cells/MPGNet__shipped_15.json", [0, 1]),
+        ("hard/cells/MPGNet__shipped_30.json", [10]),
+        ("hard-novel/cells/MPGNet__shipped_15.json", [1]),
+        ("hard-camera/cells/MPGNet__shipped_15.json", [2]),
     ],
     ids=["blocks-15", "blocks-30", "unseen-15", "camera-15"],
 )
@@ -66,4 +66,4 @@ def test_the_shipped_net_replays_its_held_out_episodes(cell, indices):
     assert (ROOT / "mpg_agents/checkpoints/mpgnet_small.safetensors").read_bytes() == (
         ROOT / "benchmarks/results/fast_pipeline/colorfree_s1.safetensors"
     ).read_bytes()
-    replay(EVALS / cell, "shipped", indices)
+    replay(TRACKS / cell, "shipped", indices)

@@ -312,7 +312,11 @@ def test_shipped_training_configs_load(name):
 
 
 @pytest.mark.parametrize(
-    "path", sorted(str(p.relative_to(REPO)) for p in (REPO / "benchmarks" / "results").glob("*/train.toml")),
+    "path",
+    sorted(
+        str(p.relative_to(REPO))
+        for p in [*(REPO / "benchmarks" / "results").glob("*/train*.toml"), *(REPO / "benchmarks" / "checkpoints").glob("*.toml")]
+    ),
 )
 def test_recorded_training_configs_still_load(path):
     """Every recorded run's config is still a valid stage table (its README command must run)."""
