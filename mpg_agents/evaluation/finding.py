@@ -79,13 +79,18 @@ class FindingTally:
 
 
 def finding_summary(records: Iterable[FindingRecord]) -> dict[str, Any]:
-    """Over the episodes reporting the target's visibility: how many (``episodes``), in how
+    """Over the episodes reporting the target's visibility (none if any was recorded before first
+    sight was kept): how many (``episodes``), in how
     many it showed at reset (``shown_at_reset``) or ever (``sighted``), and the mean motions to
     first sight of the sighted ones (``motions_to_sight``, ``None`` when none); over the ones
     reporting look-alikes: look-alike grasps and other mis-picks per episode
     (``lookalike_grasps_per_episode``, ``other_mispicks_per_episode``; absent when none reports them)."""
     records = list(records)
     seen = [r for r in records if r.visible_fraction is not None]
+    # A target visible at reset is first seen at motion 0: records that say otherwise were written
+    # before first sight was kept, and episodes pooled with them say nothing of finding either.
+    if any(r.visible_fraction is not None and r.visible_fraction > 0 and r.first_sight is None for r in records):
+        seen = []
     sights = [r.first_sight for r in seen if r.first_sight is not None]
     summary: dict[str, Any] = {
         "episodes": len(seen),

@@ -136,9 +136,7 @@ def merged_result(paths: Sequence[str | Path]) -> EvalResult:
         0.0,
         env_options=first.get("env_options", {}),
     )
-    # Episodes recorded before motions to first sight were kept say nothing of finding the target.
-    finding = result.finding if any("first_sight" in r for r in cell.by_seed.values()) else {}
-    return dataclasses.replace(result, versions={**first.get("versions", {}), MUJOCO_KEY: cell.mujoco}, finding=finding)
+    return dataclasses.replace(result, versions={**first.get("versions", {}), MUJOCO_KEY: cell.mujoco})
 
 
 def table_from_evals(track: str, cells: Mapping[str, Sequence[str | Path]], objects: int) -> tuple[dict[str, Any], str, str]:

@@ -30,7 +30,7 @@ def _records(first_sights: list[int | None], lookalikes: list[int | None], wrong
     return [
         EpisodeRecord(
             i, 500000 + i, True, 3, "target_grasped", {"move": 1, "push": 1, "grasp": 1}, 1 + w, 1, w, 14,
-            visible_fraction=0.0 if sight else 0.4, first_sight=sight, lookalike_grasps=look,
+            visible_fraction=0.4 if sight == 0 else 0.0, first_sight=sight, lookalike_grasps=look,
         )
         for i, (sight, look, w) in enumerate(zip(first_sights, lookalikes, wrong))
     ]
@@ -85,4 +85,8 @@ def test_a_pooled_cell_of_episodes_recorded_without_first_sight_reports_no_findi
     for record in old["records"]:
         del record["first_sight"]  # as files written before first sight was kept
     path.write_text(json.dumps(old))
-    assert merged_result([path]).finding == {}
+    assert merged_result([path]).finding["episodes"] == 0
+    for record in old["records"]:
+        record["first_sight"] = None  # as such files pooled and written again
+    path.write_text(json.dumps(old))
+    assert merged_result([path]).finding["episodes"] == 0

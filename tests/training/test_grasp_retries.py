@@ -16,7 +16,7 @@ from mpg_envs.scenes.arrangement_draw import draw_arrangement
 
 GRASP_NET = str(shipped_checkpoint().parent / "stage2_grasp_small.safetensors")
 # The shipped config trained on clean heightmaps (training seed 1): exported without grasp retries.
-CLEAN_NET = str(Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "strict_run" / "uncover_s1.safetensors")
+CLEAN_NET = str(Path(__file__).resolve().parents[2] / "benchmarks" / "checkpoints" / "uncover_s1.safetensors")
 
 
 class ScriptedAgent:

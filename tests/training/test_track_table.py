@@ -175,7 +175,7 @@ def test_the_repositorys_track_policies_and_reused_blocks_cells_hold(monkeypatch
     specs = read_policy_specs(ROOT / "benchmarks" / "tracks.toml")
     assert [s.policy for s in specs][:6] == [
         "oracle", "grasp-only", "random", "shipped",
-        "benchmarks/results/generalize/blocks_rand_s1.safetensors", "benchmarks/results/strict_run/uncover_s1.safetensors",
+        "benchmarks/checkpoints/blocks_rand_s1.safetensors", "benchmarks/checkpoints/uncover_s1.safetensors",
     ] and len(specs) == 10
     assert all(s.policy in BUILTIN or (ROOT / s.policy).is_file() for s in specs)
     reused = read_reused(ROOT / "benchmarks" / "results" / "tracks" / "reused.toml")
