@@ -9,8 +9,9 @@
 
 checked as a cell file is (:class:`~mpg_agents.evaluation.track_cells.CellRequest`): eval files by
 their env, object count, seeds, env options and the name the policy gave itself (a built-in's
-name, or the checkpoint's file name); a report's row by the report's env, seed, episodes, env
-options and the policy entry it ran under the label. Anything else raises
+name, or the checkpoint's file name), another track table's cell files by the policy entry they
+ran; a report's row by the report's env, seed, episodes, env options and the policy entry it ran
+under the label. Anything else raises
 :class:`~mpg_agents.evaluation.track_cells.CellMismatchError`.
 """
 
@@ -37,6 +38,16 @@ def _names_policy(name: str, policy: str) -> bool:
     return name.split(" ")[0] == Path(policy).name
 
 
+def _ran_policy(files: list[str], name: str, request: CellRequest) -> bool:
+    """Whether recorded files ran ``request``'s policy: a track table's cell files by the policy
+    entry they ran (its label aside), other evaluations by their policy's name."""
+    entries = [json.loads(Path(f).read_text()).get("table_policy") for f in files]
+    if all(entry is not None for entry in entries):
+        asked = {k: v for k, v in request.policy_entry().items() if k != "label"}
+        return all({k: v for k, v in entry.items() if k != "label"} == asked for entry in entries)
+    return _names_policy(name, request.spec.policy)
+
+
 @dataclass(frozen=True)
 class ReusedCell:
     """A cell taken from an earlier run: ``evals`` (a glob of ``mpg-eval --json`` files) or
@@ -61,7 +72,7 @@ class ReusedCell:
                 )
             result = merged_result(files)
             request.check(result, self.evals)
-            if not _names_policy(result.policy, request.spec.policy):
+            if not _ran_policy(files, result.policy, request):
                 raise CellMismatchError(
                     f"{self.evals} is policy {result.policy!r}, not {request.spec.policy!r} (label {self.label!r})"
                 )

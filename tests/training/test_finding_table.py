@@ -90,3 +90,17 @@ def test_a_pooled_cell_of_episodes_recorded_without_first_sight_reports_no_findi
         record["first_sight"] = None  # as such files pooled and written again
     path.write_text(json.dumps(old))
     assert merged_result([path]).finding["episodes"] == 0
+
+
+def test_another_tables_cell_files_are_reused_by_the_policy_entry_they_ran(tmp_path: Path):
+    from mpg_agents.evaluation.reused_cells import ReusedCell
+    from mpg_agents.evaluation.track_cells import CellMismatchError, write_cell_file
+
+    result = summarise(_records([0, 0], [None, None]), "colorfree_s1.safetensors", "MPG-OccludedHard-v0", 15, 500000, 1.0)
+    ran = CellRequest("hard", PolicySpec("MPGNet (shipped)", "shipped", ()), 15, 2, 500000)
+    write_cell_file(ran, result, tmp_path / "shipped_15.json")
+    reused = ReusedCell("hard", "MPGNet, mask", 15, evals=str(tmp_path / "shipped_15.json"))
+    asked = CellRequest("hard", PolicySpec("MPGNet, mask", "shipped", ()), 15, 2, 500000)
+    assert reused.load(asked)["success"] == 1.0  # the file's own name is the checkpoint's: its entry says shipped
+    with pytest.raises(CellMismatchError, match="not 'random'"):
+        reused.load(CellRequest("hard", PolicySpec("MPGNet, mask", "random", ()), 15, 2, 500000))
