@@ -34,21 +34,19 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from numbers import Real
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
 
+from mpg_agents.acting.decision import Decision
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_envs.files import write_text_whole
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.tasks.stages import STAGES
-
-if TYPE_CHECKING:
-    from mpg_agents.acting.agent import MPGAgent
 
 UNCALIBRATED: float | None = None
 """Q*_g before any estimate: the coordination then compares the best grasp and push Q instead."""
@@ -179,8 +177,26 @@ class Calibration:
     target_grasp_q: tuple[float, ...]
 
 
+class GraspDecider(Protocol):
+    """What Q*_g calibration asks of an agent (an :class:`~mpg_agents.acting.agent.MPGAgent` is one)."""
+
+    @property
+    def usable_primitives(self) -> tuple[str, ...]:
+        """The env's primitives it has a branch for."""
+        ...
+
+    @property
+    def branches(self) -> tuple[str, ...]:
+        """Its network's branches."""
+        ...
+
+    def decide(self, observation: Mapping[str, Any], primitive: str | None = None) -> Decision:
+        """Its greedy decision on ``observation`` (with ``primitive`` instead of the coordination's choice)."""
+        ...
+
+
 def calibrate_q_star(
-    agent: MPGAgent,
+    agent: GraspDecider,
     env: gym.Env,
     episodes: int,
     seed: int,
@@ -191,9 +207,8 @@ def calibrate_q_star(
     """Measure Q*_g of ``agent`` in ``env``'s scenes (greedy grasps only, nothing learned).
 
     Args:
-        agent: the net (an :class:`~mpg_agents.acting.agent.MPGAgent`, or anything with
-            ``decide(obs, primitive)``, ``usable_primitives`` and ``branches``); only its grasp
-            branch acts.
+        agent: the net (an :class:`~mpg_agents.acting.agent.MPGAgent`, or any :class:`GraspDecider`);
+            only its grasp branch acts.
         env: the scenes; episode ``k`` is reset with ``episode_seed(seed, k, calibration=True)``,
             a seed that gives no valid scene passing to the next
             (:func:`~mpg_agents.acting.seeds.reset_first_valid`).
