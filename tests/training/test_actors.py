@@ -134,7 +134,7 @@ def test_an_actor_steps_its_env_with_the_weights_and_trials_it_is_given():
     stage = with_overrides(TRAINING_STAGES, {"Stage5": {
         "env_id": "MPG-Occluded-v0", "objects": [6, 6], "coordination": "grasp_first", "grasp_trials": 2, "alternate_every": 1,
     }})[-1]
-    actor = Actor(ActorSpec(TrainConfig(**TINY), stage, index=1, start_iteration=0, num_objects=6))
+    actor = Actor.from_spec(ActorSpec(TrainConfig(**TINY), stage, index=1, start_iteration=0, num_objects=6))
     try:
         with pytest.raises(RuntimeError, match="before it was given weights"):
             actor.step(ActRequest(0.0, 6, 0))

@@ -11,7 +11,6 @@ import torch
 
 from mpg_agents.cli import eval_main, plot_main, train_main
 from mpg_agents.learning.learner import Learner, StopRequested
-from mpg_agents.learning.learner_episodes import reset_episode
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
@@ -289,7 +288,7 @@ def test_stage4_grasps_after_five_pushes(tmp_path):
     cfg = TrainConfig(steps=1, epsilon_start=0.0, epsilon_end=0.0, **TINY)
     learner = Learner(cfg, "MPG-Stage4-v0", tmp_path, log=lambda s: None)
     assert learner.stage.push_budget == 5  # from the stage table, not the env
-    obs = reset_episode(learner)
+    obs, _ = learner.env.reset(seed=0)
     learner.counters.pushes_in_episode = 5
     choice = learner.act(obs)
     assert choice.primitive == "grasp" and choice.how == "greedy"
