@@ -185,15 +185,15 @@ def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
 def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
     cfg = TrainConfig(steps=5, **TINY)
     learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
-    original = learner.iteration
+    original = learner.learn_from
 
-    def iteration_then_kill(obs):
-        out = original(obs)
+    def iteration_then_kill(step):
+        out = original(step)
         if learner.counters.iteration == 3:
             os.kill(os.getpid(), signal.SIGTERM)  # the real signal path
         return out
 
-    learner.iteration = iteration_then_kill
+    learner.learn_from = iteration_then_kill
     with pytest.raises(StopRequested):
         learner.run()
     killed = (learner.counters.iteration, learner.counters.episode, learner.replay.size())
