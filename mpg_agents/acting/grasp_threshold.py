@@ -41,6 +41,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from mpg_agents.acting.calibration_quantile import CALIBRATION_QUANTILE, check_quantile
 from mpg_agents.acting.decision import Decision
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
@@ -137,7 +138,7 @@ class GraspThreshold(nn.Module):
 
 
 # -------------------------------------------------------------------------------- estimate
-def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = 0.5) -> float:
+def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = CALIBRATION_QUANTILE) -> float:
     """Q*_g from the Q of greedy grasps that took the target: their ``quantile``.
 
     0.5 is the median (where the Q of successful grasps settles, the paper's reading); a lower
@@ -147,8 +148,7 @@ def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = 0.5) -> f
         ValueError: ``quantile`` outside [0, 1], no grasp to take a quantile of, or a quantile
             outside :func:`q_star_range` (a diverged grasp net: no weights header may carry it).
     """
-    if not 0.0 <= quantile <= 1.0:
-        raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
+    check_quantile(quantile)
     if len(target_grasp_q) == 0:
         raise ValueError("Q*_g needs the Q of at least one grasp that took the target")
     q_star = float(np.quantile(target_grasp_q, quantile))
@@ -200,7 +200,7 @@ def calibrate_q_star(
     env: gym.Env,
     episodes: int,
     seed: int,
-    quantile: float = 0.5,
+    quantile: float = CALIBRATION_QUANTILE,
     on_episode: Callable[[int, int, int], None] | None = None,
     on_skip: Callable[[int, Exception], None] | None = None,
 ) -> Calibration:
@@ -226,8 +226,7 @@ def calibrate_q_star(
         raise ValueError(f"Q*_g calibration needs a grasp branch; the net has {agent.branches}")
     if episodes < 1:
         raise ValueError(f"calibration needs at least one episode, got {episodes}")
-    if not 0.0 <= quantile <= 1.0:
-        raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
+    check_quantile(quantile)
     taken: list[float] = []
     grasps = 0
     k = -1
