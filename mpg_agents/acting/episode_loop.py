@@ -18,15 +18,15 @@ from typing import Any, Generic, TypeVar
 
 import gymnasium as gym
 
-Choice = TypeVar("Choice")
+Chosen = TypeVar("Chosen")
 
 
 @dataclass(frozen=True)
-class Step(Generic[Choice]):
+class Step(Generic[Chosen]):
     """One step of an episode: what was chosen on ``obs`` and what the env answered."""
 
     obs: Mapping[str, Any]
-    choice: Choice  # what ``choose`` returned (an action, a decision, ...)
+    choice: Chosen  # what ``choose`` returned (an action, a decision, ...)
     action: Any  # what went to ``env.step``
     next_obs: Mapping[str, Any]
     reward: float
@@ -45,9 +45,9 @@ class Step(Generic[Choice]):
 def episode_steps(
     env: gym.Env,
     obs: Mapping[str, Any],
-    choose: Callable[[Mapping[str, Any]], Choice],
-    action_of: Callable[[Choice], Any] = lambda choice: choice,
-) -> Iterator[Step[Choice]]:
+    choose: Callable[[Mapping[str, Any]], Chosen],
+    action_of: Callable[[Chosen], Any] = lambda choice: choice,
+) -> Iterator[Step[Chosen]]:
     """Step ``env`` from ``obs`` (its observation after a reset) until it ends the episode.
 
     Args:

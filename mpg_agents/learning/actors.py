@@ -36,7 +36,7 @@ from mpg_agents.acting.discriminator import Discriminator
 from mpg_agents.acting.episode_loop import Step, episode_steps
 from mpg_agents.acting.seeds import episode_seed
 from mpg_agents.acting.spaces import finger_geometry, geometry_of_config
-from mpg_agents.learning.exploration import Choice, Explorer
+from mpg_agents.learning.exploration import Explorer, TakenAction
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.training_objects import stage_env_config, training_object_set
 from mpg_agents.learning.training_stages import TrainingStage
@@ -113,7 +113,7 @@ def choose_action(
     epsilon: float,
     pushes_in_episode: int,
     failed_grasps_in_a_row: int,
-) -> Choice:
+) -> TakenAction:
     """The action to take: the policy's decision (a grasp forced after the stage's push budget),
     then exploration and the training aids."""
     budget = stage.push_budget
@@ -180,7 +180,7 @@ class ActorStep:
     episode: int
     skipped: str | None = None
     obs: dict[str, np.ndarray] = field(default_factory=dict)
-    choice: Choice | None = None
+    choice: TakenAction | None = None
     next_obs: dict[str, np.ndarray] = field(default_factory=dict)
     reward: float = 0.0
     terminated: bool = False
@@ -234,7 +234,7 @@ def count_step(counts: EpisodeCounts, primitive: str, info: Mapping[str, Any]) -
 
 
 # ---------------------------------------------------------------------------------- actor
-Chosen = tuple[Choice, list[tuple[Mapping[str, Any], int, float, bool]], TrialCounts]
+ActorChoice = tuple[TakenAction, list[tuple[Mapping[str, Any], int, float, bool]], TrialCounts]
 """What an actor chose on an observation: the action, its trials' transitions and their counts."""
 
 
@@ -272,7 +272,7 @@ class Actor:
         self.has_weights = given_weights
         self.episode = -1
         self.epsilon = 0.0  # the current request's
-        self.steps: Iterator[Step[Chosen]] | None = None  # the running episode's (None: none runs)
+        self.steps: Iterator[Step[ActorChoice]] | None = None  # the running episode's (None: none runs)
 
     @classmethod
     def from_spec(cls, spec: ActorSpec) -> Actor:
@@ -333,7 +333,7 @@ class Actor:
             step.step_seconds,
         )
 
-    def choose(self, obs: Mapping[str, Any]) -> Chosen:
+    def choose(self, obs: Mapping[str, Any]) -> ActorChoice:
         """The action on ``obs`` (:func:`choose_action`) and the stage's trials around it, tried and undone."""
         choice = choose_action(
             self.policy,

@@ -57,7 +57,7 @@ from mpg_agents.learning.actor_feed import actor_steps
 from mpg_agents.learning.actor_pool import check_actor_backend
 from mpg_agents.learning.actors import ActorStep, build_agent, choose_action, make_explorer, make_training_env
 from mpg_agents.learning.demonstrations import collect_demonstrations
-from mpg_agents.learning.exploration import Choice, linear_epsilon
+from mpg_agents.learning.exploration import TakenAction, linear_epsilon
 from mpg_agents.learning.learner_episodes import own_steps
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
@@ -290,7 +290,7 @@ class Learner:
 
     def record(
         self,
-        choice: Choice,
+        choice: TakenAction,
         reward: float,
         info: dict[str, Any],
         loss: float,
@@ -306,7 +306,7 @@ class Learner:
         if choice.primitive == "grasp":
             c.window_grasps += 1
             c.window_target_grasps += int(info["target_grasped"])
-            if info["target_grasped"] and choice.how == "greedy" and math.isfinite(choice.q_value):
+            if info["target_grasped"] and choice.chosen_by == "greedy" and math.isfinite(choice.q_value):
                 c.successful_grasp_q = (c.successful_grasp_q + [choice.q_value])[-200:]
         rate = None
         if c.iteration % self.config.window == 0 and c.window_grasps:
@@ -318,7 +318,7 @@ class Learner:
                 c.iteration,
                 episode,
                 choice.primitive,
-                choice.how,
+                choice.chosen_by,
                 reward,
                 loss,
                 self.epsilon(),
@@ -343,7 +343,7 @@ class Learner:
             [{}],
         )
 
-    def act(self, obs: Mapping[str, Any]) -> Choice:
+    def act(self, obs: Mapping[str, Any]) -> TakenAction:
         """The action to take: the policy's decision, then exploration and the training aids."""
         c = self.counters
         return choose_action(

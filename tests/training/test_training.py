@@ -291,7 +291,7 @@ def test_stage4_grasps_after_five_pushes(tmp_path):
     obs, _ = learner.env.reset(seed=0)
     learner.counters.pushes_in_episode = 5
     choice = learner.act(obs)
-    assert choice.primitive == "grasp" and choice.how == "greedy"
+    assert choice.primitive == "grasp" and choice.chosen_by == "greedy"
     assert learner.env.unwrapped.action_space.decode(choice.action).primitive == "grasp"
     with pytest.raises(ValueError, match="not allowed"):
         learner.policy.decide(obs, "move")
