@@ -23,6 +23,7 @@ from typing import Any
 
 import gymnasium as gym
 
+from mpg_agents.acting.calibration_quantile import CALIBRATION_QUANTILE, check_quantile
 from mpg_agents.acting.coordination import COORDINATIONS
 from mpg_agents.acting.device import DEVICES
 from mpg_agents.cli_eval import eval_main
@@ -190,8 +191,8 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--quantile",
         type=float,
-        default=0.5,
-        help="0.5: the median, the paper's reading (default); the shipped config calibrates at 0.25",
+        default=CALIBRATION_QUANTILE,
+        help=f"{CALIBRATION_QUANTILE:g}: the median, the paper's reading (default); the shipped config calibrates at 0.25",
     )
     parser.add_argument(
         "--seed", type=int, default=0, help="the run seed whose calibration scenes are used (a run's own: --seed of mpg-train)"
@@ -215,8 +216,10 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
             check_checkpoint(args.policy)
         if args.episodes < 1:
             raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
-        if not 0.0 <= args.quantile <= 1.0:
-            raise UsageError(f"--quantile must be in [0, 1], got {args.quantile}")
+        try:
+            quantile = check_quantile(args.quantile, "--quantile")
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
         env = gym.make(args.env, **({"num_objects": args.num_objects} if args.num_objects is not None else {}))
         options = {"grasp_fingers": args.grasp_fingers} if args.grasp_fingers else {}
         net = make_policy(args.policy, env, **options, **({"device": args.device} if args.device else {})).policy
@@ -225,7 +228,7 @@ def calibrate_main(argv: Sequence[str] | None = None) -> int:
         def progress(k: int, grasps: int, taken: int) -> None:
             print(f"  episode {k + 1}/{args.episodes}: {taken} of {grasps} grasps took the target", flush=True)
 
-        measured = calibrate_q_star(net, env, args.episodes, args.seed, args.quantile, on_episode=progress)
+        measured = calibrate_q_star(net, env, args.episodes, args.seed, quantile, on_episode=progress)
         env.close()
     except (UsageError, FileNotFoundError, ValueError, RuntimeError) as exc:
         return fail(exc)

@@ -4,9 +4,7 @@ checkpoints; bad input is a :class:`UsageError`, reported on one line with exit 
 from __future__ import annotations
 
 import importlib.util
-import json
 import sys
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -16,6 +14,7 @@ import gymnasium as gym
 import mpg_envs
 from mpg_agents.acting.seeds import check_seed
 from mpg_envs.files import WriteFailed, check_writable, same_file
+from mpg_envs.settings_fields import read_settings_file
 from mpg_envs.threads import requested_threads
 
 # Start-up time: checks that need torch (a checkpoint's header and tensors, Q*_g, the net's
@@ -50,13 +49,10 @@ def read_config(path: str | None) -> dict[str, Any]:
     """The settings of a TOML or JSON config file (none without a path)."""
     if path is None:
         return {}
-    p = Path(path)
-    if not p.is_file():
-        raise UsageError(f"config file {path!r} does not exist")
     try:
-        settings = tomllib.loads(p.read_text()) if p.suffix == ".toml" else json.loads(p.read_text())
-    except (json.JSONDecodeError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise UsageError(f"config file {path!r} is not valid {p.suffix[1:] or 'JSON'}: {exc}") from exc
+        settings = read_settings_file(path, "config file")
+    except ValueError as exc:
+        raise UsageError(str(exc)) from exc
     if not isinstance(settings, dict):
         raise UsageError(
             f"config file {path!r} holds a {type(settings).__name__}; valid: a JSON object (or TOML table) of "

@@ -67,7 +67,7 @@ def batch_observation(observation: Mapping[str, Any], device: torch.device | str
     return out, int(out["color"].shape[0])
 
 
-class AgentMethods:
+class MPGAgentBase:
     """What an MPGNet agent does with ``q_net`` (:class:`~mpg_agents.acting.q_function.MPGQFunction`),
     ``threshold`` (:class:`~mpg_agents.acting.grasp_threshold.GraspThreshold`) and ``coordination``:
     decide, hold Q*_g, save and load weights. :class:`MPGAgent` and the SB3 adapter's
@@ -186,7 +186,7 @@ class AgentMethods:
         return header
 
 
-class MPGAgent(AgentMethods):
+class MPGAgent(MPGAgentBase):
     """MPGNet acting with the coordination and Q*_g (greedy; exploration is the learner's).
 
     Args:

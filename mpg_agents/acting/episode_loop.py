@@ -2,11 +2,12 @@
 
 Evaluation (:func:`mpg_agents.evaluation.evaluate.run_episode`), Q*_g calibration
 (:func:`mpg_agents.acting.grasp_threshold.calibrate_q_star`), oracle demonstrations
-(:func:`mpg_agents.learning.demonstrations.collect_demonstrations`) and the learner
-(:class:`mpg_agents.learning.learner.Learner`) all step their envs through :func:`episode_steps`;
+(:func:`mpg_agents.learning.demonstrations.collect_demonstrations`) and training (every
+:class:`mpg_agents.learning.actors.Actor`: the learner's own, or a parallel one) all step their
+envs through :func:`episode_steps`, the one ``env.step`` of their episodes;
 each resets its env its own way (seeds, options) and reads what it needs from the yielded
 :class:`Step`. A generator in the manner of CleanRL's loops: the caller may stop between steps
-(the learner's iteration budget, a stop signal) and the episode is left as it is.
+(an actor answers one request at a time; the learner's budget, a stop signal) and the episode is left as it is.
 """
 
 from __future__ import annotations
@@ -18,15 +19,15 @@ from typing import Any, Generic, TypeVar
 
 import gymnasium as gym
 
-Choice = TypeVar("Choice")
+Chosen = TypeVar("Chosen")
 
 
 @dataclass(frozen=True)
-class Step(Generic[Choice]):
+class Step(Generic[Chosen]):
     """One step of an episode: what was chosen on ``obs`` and what the env answered."""
 
     obs: Mapping[str, Any]
-    choice: Choice  # what ``choose`` returned (an action, a decision, ...)
+    choice: Chosen  # what ``choose`` returned (an action, a decision, ...)
     action: Any  # what went to ``env.step``
     next_obs: Mapping[str, Any]
     reward: float
@@ -45,9 +46,9 @@ class Step(Generic[Choice]):
 def episode_steps(
     env: gym.Env,
     obs: Mapping[str, Any],
-    choose: Callable[[Mapping[str, Any]], Choice],
-    action_of: Callable[[Choice], Any] = lambda choice: choice,
-) -> Iterator[Step[Choice]]:
+    choose: Callable[[Mapping[str, Any]], Chosen],
+    action_of: Callable[[Chosen], Any] = lambda choice: choice,
+) -> Iterator[Step[Chosen]]:
     """Step ``env`` from ``obs`` (its observation after a reset) until it ends the episode.
 
     Args:

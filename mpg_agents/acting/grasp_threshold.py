@@ -34,22 +34,21 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from numbers import Real
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
 
+from mpg_agents.acting.calibration_quantile import CALIBRATION_QUANTILE, check_quantile
+from mpg_agents.acting.decision import Decision
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_agents.acting.seeds import episode_seed, reset_first_valid
 from mpg_envs.files import write_text_whole
 from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.tasks.rewards import RewardConfig
 from mpg_envs.tasks.stages import STAGES
-
-if TYPE_CHECKING:
-    from mpg_agents.acting.agent import MPGAgent
 
 UNCALIBRATED: float | None = None
 """Q*_g before any estimate: the coordination then compares the best grasp and push Q instead."""
@@ -140,7 +139,7 @@ class GraspThreshold(nn.Module):
 
 
 # -------------------------------------------------------------------------------- estimate
-def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = 0.5) -> float:
+def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = CALIBRATION_QUANTILE) -> float:
     """Q*_g from the Q of greedy grasps that took the target: their ``quantile``.
 
     0.5 is the median (where the Q of successful grasps settles, the paper's reading); a lower
@@ -150,8 +149,7 @@ def estimate_q_star(target_grasp_q: Sequence[float], quantile: float = 0.5) -> f
         ValueError: ``quantile`` outside [0, 1], no grasp to take a quantile of, or a quantile
             outside :func:`q_star_range` (a diverged grasp net: no weights header may carry it).
     """
-    if not 0.0 <= quantile <= 1.0:
-        raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
+    check_quantile(quantile)
     if len(target_grasp_q) == 0:
         raise ValueError("Q*_g needs the Q of at least one grasp that took the target")
     q_star = float(np.quantile(target_grasp_q, quantile))
@@ -180,21 +178,38 @@ class Calibration:
     target_grasp_q: tuple[float, ...]
 
 
+class GraspDecider(Protocol):
+    """What Q*_g calibration asks of an agent (an :class:`~mpg_agents.acting.agent.MPGAgent` is one)."""
+
+    @property
+    def usable_primitives(self) -> tuple[str, ...]:
+        """The env's primitives it has a branch for."""
+        ...
+
+    @property
+    def branches(self) -> tuple[str, ...]:
+        """Its network's branches."""
+        ...
+
+    def decide(self, observation: Mapping[str, Any], primitive: str | None = None) -> Decision:
+        """Its greedy decision on ``observation`` (with ``primitive`` instead of the coordination's choice)."""
+        ...
+
+
 def calibrate_q_star(
-    agent: MPGAgent,
+    agent: GraspDecider,
     env: gym.Env,
     episodes: int,
     seed: int,
-    quantile: float = 0.5,
+    quantile: float = CALIBRATION_QUANTILE,
     on_episode: Callable[[int, int, int], None] | None = None,
     on_skip: Callable[[int, Exception], None] | None = None,
 ) -> Calibration:
     """Measure Q*_g of ``agent`` in ``env``'s scenes (greedy grasps only, nothing learned).
 
     Args:
-        agent: the net (an :class:`~mpg_agents.acting.agent.MPGAgent`, or anything with
-            ``decide(obs, primitive)``, ``usable_primitives`` and ``branches``); only its grasp
-            branch acts.
+        agent: the net (an :class:`~mpg_agents.acting.agent.MPGAgent`, or any :class:`GraspDecider`);
+            only its grasp branch acts.
         env: the scenes; episode ``k`` is reset with ``episode_seed(seed, k, calibration=True)``,
             a seed that gives no valid scene passing to the next
             (:func:`~mpg_agents.acting.seeds.reset_first_valid`).
@@ -212,8 +227,7 @@ def calibrate_q_star(
         raise ValueError(f"Q*_g calibration needs a grasp branch; the net has {agent.branches}")
     if episodes < 1:
         raise ValueError(f"calibration needs at least one episode, got {episodes}")
-    if not 0.0 <= quantile <= 1.0:
-        raise ValueError(f"calibration quantile must be in [0, 1], got {quantile}")
+    check_quantile(quantile)
     taken: list[float] = []
     grasps = 0
     k = -1

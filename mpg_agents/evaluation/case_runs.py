@@ -36,7 +36,8 @@ from mpg_agents.evaluation.failures import EpisodeFailure, NothingFinished, desc
 from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_envs._version import __version__
 from mpg_envs.scenes.cases import Case, CaseSet, jitter_scene
-from mpg_envs.scenes.scene_io import SCENE_FORMAT, SceneFile, SceneFileError
+from mpg_envs.scenes.scene_file import SceneFile, SceneFileError
+from mpg_envs.scenes.scene_io import SCENE_FORMAT
 from mpg_envs.scenes.scene_loading import place_scene
 from mpg_envs.simulation.mujoco_version import running_mujoco
 

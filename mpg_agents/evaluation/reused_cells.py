@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import glob
 import json
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,7 @@ from mpg_agents.evaluation.policy_zoo import BUILTIN
 from mpg_agents.evaluation.table_runs import merged_result
 from mpg_agents.evaluation.tables import TRACKS, cell_json
 from mpg_agents.evaluation.track_cells import CellMismatchError, CellRequest
+from mpg_envs.settings_fields import read_settings_file
 
 
 def _names_policy(name: str, policy: str) -> bool:
@@ -117,10 +117,7 @@ def read_reused(path: str | Path) -> dict[tuple[str, str, int], ReusedCell]:
     """The ``[[cell]]`` entries of a reuse file (see the module docstring), keyed (track,
     label, objects). Raises ``ValueError`` naming an entry that is incomplete, names an
     unknown track, gives both or neither of ``evals`` and ``table``, or repeats a cell."""
-    try:
-        doc = tomllib.loads(Path(path).read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ValueError(f"reuse file {str(path)!r} is not readable TOML: {exc}") from exc
+    doc = read_settings_file(path, "reuse file", "TOML")
     cells: dict[tuple[str, str, int], ReusedCell] = {}
     for k, entry in enumerate(doc.get("cell", [])):
         where = f"reuse file {str(path)!r}, cell {k}"

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import tomllib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +31,7 @@ from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
 from mpg_agents.evaluation.evaluate import summarise
 from mpg_agents.evaluation.motion_log import MotionRecord
 from mpg_agents.evaluation.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
+from mpg_envs.settings_fields import read_settings_file
 from mpg_envs.simulation.mujoco_version import MUJOCO_KEY
 
 
@@ -50,10 +50,7 @@ def read_policy_specs(path: str | Path) -> list[PolicySpec]:
     checkpoint paths are read from the current directory. Raises ``ValueError`` naming the
     entry that lacks ``label`` or ``policy``."""
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise ValueError(f"policy file {str(path)!r} is not readable TOML: {exc}") from exc
+    doc = read_settings_file(path, "policy file", "TOML")
     specs = []
     for k, entry in enumerate(doc.get("policy", [])):
         if not isinstance(entry, dict) or "label" not in entry or "policy" not in entry:

@@ -7,9 +7,10 @@ settings (:mod:`~mpg_agents.learning.train_config`), the one gradient step
 :mod:`~mpg_agents.learning.replay_codec`),
 exploration (:mod:`~mpg_agents.learning.exploration`), oracle demonstrations
 (:mod:`~mpg_agents.learning.demonstrations`), the learner of one stage
-(:mod:`~mpg_agents.learning.learner`; its own episodes, :mod:`~mpg_agents.learning.learner_episodes`,
-and its Q*_g calibrations, :mod:`~mpg_agents.learning.stage_calibration`) and its parallel actors
-(:mod:`~mpg_agents.learning.actors`,
+(:mod:`~mpg_agents.learning.learner`: one loop, a source of steps feeding one learning step; the
+face it shows its sources and calibrations, :mod:`~mpg_agents.learning.learner_handle`; its own
+actor, :mod:`~mpg_agents.learning.learner_episodes`, and its Q*_g calibrations,
+:mod:`~mpg_agents.learning.stage_calibration`) and its actors (:mod:`~mpg_agents.learning.actors`,
 :mod:`~mpg_agents.learning.actor_pool`, :mod:`~mpg_agents.learning.actor_feed`), its resumable state and log
 (:mod:`~mpg_agents.learning.run_state`, :mod:`~mpg_agents.learning.train_log`), its run folder's
 lock and resume check (:mod:`~mpg_agents.learning.run_folder`), learning curves

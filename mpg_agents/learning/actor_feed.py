@@ -1,15 +1,16 @@
-"""The learner's side of parallel actors (Ape-X): what it asks them for and what it does with their steps.
+"""The learner's side of parallel actors (Ape-X): what it asks them for, and their steps as its source.
 
-:func:`train_with_actors` runs a :class:`~mpg_agents.learning.learner.Learner`'s iterations with
-``TrainConfig.actors`` actors (:mod:`mpg_agents.learning.actors`) in an
-:class:`~mpg_agents.learning.actor_pool.ActorPool`. Each step an actor returns is stored in the
-learner's replay (its trials first), learnt from at the replay ratio, counted, logged and saved
-by the learner as its own steps are (:func:`learn_from_step`); before that the actor is asked
-for its next step, so it acts while the learner learns. An iteration is one env step of any
-actor: the curriculum, the exploration schedule, the alternation and the periodic Q*_g
-calibration follow the global count, as with one actor. Steps in flight when the run stops
-(the budget reached, a signal) are dropped; the saved state holds the steps learnt from, and a
-resumed run's actors start episodes the run has not handed out.
+:func:`actor_steps` is the many-actor source of a learner's steps (a
+:class:`~mpg_agents.learning.learner_handle.LearnerHandle`), the counterpart of
+:func:`mpg_agents.learning.learner_episodes.own_steps`: ``TrainConfig.actors`` actors
+(:mod:`mpg_agents.learning.actors`) in an :class:`~mpg_agents.learning.actor_pool.ActorPool`.
+Before each step is handed to the learner (which stores it, its trials first, learns from it
+at the replay ratio, counts, logs and saves it as any step), its actor is asked for its next
+step, so it acts while the learner learns. An iteration is one env step of any actor: the
+curriculum, the exploration schedule, the alternation and the periodic Q*_g calibration follow
+the global count, as with one actor. Steps in flight when the run stops (the budget reached, a
+signal) are dropped; the saved state holds the steps learnt from, and a resumed run's actors
+start episodes the run has not handed out.
 
 :class:`ActorLedger` is the learner's record of its actors: the weights each holds (new ones
 are published every ``weights_refresh`` gradient steps, and at once when Q*_g changes), whether
@@ -18,25 +19,20 @@ its episode runs, and the seeds in a row that gave it no valid scene.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-from dataclasses import asdict
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Generator
 
 import numpy as np
 
 from mpg_agents.acting.seeds import MAX_SKIPPED_SEEDS
 from mpg_agents.learning.actor_pool import open_actor_pool
 from mpg_agents.learning.actors import ActorSpec, ActorStep, ActRequest, Weights, weights_of
-from mpg_agents.learning.stage_calibration import calibrate_if_due
+from mpg_agents.learning.learner_handle import LearnerHandle
 from mpg_envs.scenes.generators import InvalidSceneError
 
-if TYPE_CHECKING:
-    from mpg_agents.learning.learner import Learner
 
-
-def train_with_actors(learner: Learner, bar: Any = None) -> None:
-    """Run ``learner``'s remaining iterations with its config's actors (``bar``: a progress bar)."""
+def actor_steps(learner: LearnerHandle) -> Generator[ActorStep, None, None]:
+    """The steps of ``learner``'s config's actors until its iteration budget is spent (the pool
+    closes when the iteration ends or is closed)."""
     c, cfg = learner.counters, learner.config
     specs = [ActorSpec(cfg, learner.stage, a, c.iteration, learner.objects_now(c.iteration)) for a in range(cfg.actors)]
     ledger = ActorLedger(cfg.actors, cfg.weights_refresh)
@@ -51,13 +47,10 @@ def train_with_actors(learner: Learner, bar: Any = None) -> None:
             if c.iteration + (step.skipped is None) + pool.in_flight < learner.steps:
                 pool.submit(step.actor, next_request(learner, ledger, step.actor))
             if step.skipped is None:
-                learn_from_step(learner, step)
-                if bar is not None:
-                    bar.update(1)
-                learner.save_or_stop()
+                yield step
 
 
-def next_request(learner: Learner, ledger: ActorLedger, actor: int) -> ActRequest:
+def next_request(learner: LearnerHandle, ledger: ActorLedger, actor: int) -> ActRequest:
     """``actor``'s next request: the global epsilon and object count, the learner's weights when due."""
     c, policy = learner.counters, learner.policy
     if ledger.stale(c.gradient_steps, policy.q_star):
@@ -68,27 +61,6 @@ def next_request(learner: Learner, ledger: ActorLedger, actor: int) -> ActReques
         return c.episode - 1
 
     return ledger.request(actor, learner.epsilon(), learner.objects_now(c.iteration), next_episode)
-
-
-def learn_from_step(learner: Learner, step: ActorStep) -> None:
-    """The learner's iteration for an actor's step: its trials and the step stored, learnt from
-    (:meth:`~mpg_agents.learning.learner.Learner.learn_owed`), counted and logged; at its
-    episode's end, the stage's periodic Q*_g calibration."""
-    learning = time.perf_counter()
-    c, choice = learner.counters, step.choice
-    if choice is None:
-        raise ValueError(f"actor {step.actor} sent no step (episode {step.episode} skipped)")
-    for next_obs, action, reward, terminated in step.trials:
-        learner.store(step.obs, next_obs, action, reward, terminated)
-    for name, value in asdict(step.trial_counts).items():
-        setattr(c, name, getattr(c, name) + value)
-    learner.store(step.obs, step.next_obs, choice.action, step.reward, step.terminated)
-    loss = learner.learn_owed(2 if step.trials else 1)
-    learner.record(
-        choice, step.reward, step.info, loss, step.choose_seconds, step.step_seconds, learning, step.episode, step.done
-    )
-    if step.done:
-        calibrate_if_due(learner)
 
 
 class ActorLedger:

@@ -107,7 +107,7 @@ def _actor_process(spec: ActorSpec, conn: Any) -> None:
     worker_init()
     actor = None
     try:
-        actor = Actor(spec)
+        actor = Actor.from_spec(spec)
         while True:
             try:
                 request = conn.recv()
@@ -201,7 +201,7 @@ class _RayActor:
 
     def __init__(self, spec: ActorSpec) -> None:
         worker_init()
-        self.actor = Actor(spec)
+        self.actor = Actor.from_spec(spec)
 
     def step(self, request: ActRequest) -> ActorStep:
         return self.actor.step(request)

@@ -1,27 +1,30 @@
-"""The acting side of training: what chooses an action, and the actor that steps its own env.
+"""The acting side of training: what chooses an action, and the actor that steps an env.
 
-The learner (:mod:`mpg_agents.learning.learner`) acts in its own process with ``TrainConfig.actors
-= 1``; with ``actors = N > 1`` (Ape-X style) N :class:`Actor` objects, each in its own process
-(:mod:`mpg_agents.learning.actor_pool`), step their own envs and send each step to the learner,
-which owns the replay, the counters, the weights, Q*_g and the checkpoints. Both sides decide
-with :func:`choose_action` and try a stage's trials with
-:func:`~mpg_agents.learning.trials.try_alternatives`, so every stage trains the same way.
+Every training step comes from an :class:`Actor`: it steps its env through the one episode loop
+(:func:`~mpg_agents.acting.episode_loop.episode_steps`), deciding with :func:`choose_action` and
+trying the stage's trials (:func:`~mpg_agents.learning.trials.try_alternatives`), and hands the
+learner an :class:`ActorStep` to learn from. With ``TrainConfig.actors = 1`` the learner's own
+actor runs in its process on the learner's env, agent and counters
+(:mod:`mpg_agents.learning.learner_episodes`); with ``actors = N > 1`` (Ape-X style) N actors,
+each in its own process (:mod:`mpg_agents.learning.actor_pool`,
+:mod:`mpg_agents.learning.actor_feed`), step their own envs. The learner owns the replay, the
+run's counters, the weights, Q*_g and the checkpoints; so every stage trains the same way.
 
 What the learner keeps global, it sends with each :class:`ActRequest`: epsilon of the global
 env-step counter (the exploration schedule), the curriculum's object count and the index of the
 episode to start (so every episode seed of a run is used once, and a resumed run goes on with
 new ones), and its weights with Q*_g when they are newer than the actor's. What is an episode's
-own stays with the actor: the push budget, the failed grasps before the heuristic grasp.
-An actor's generator (exploration, trials) is seeded with (run seed, actor index, the iteration
-its pool started at): a resumed run draws afresh. Each actor computes on one torch thread.
+own stays with the actor (:class:`EpisodeCounts`, counted by :func:`count_step`): the push
+budget, the failed grasps before the heuristic grasp. An actor's generator (exploration,
+trials) in its own process is seeded with (run seed, actor index, the iteration its pool started
+at): a resumed run draws afresh. Each such actor computes on one torch thread.
 """
 
 from __future__ import annotations
 
-import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium as gym
 import numpy as np
@@ -30,9 +33,10 @@ import torch
 import mpg_envs  # noqa: F401  (registers the envs in a fresh actor process)
 from mpg_agents.acting.agent import MPGAgent
 from mpg_agents.acting.discriminator import Discriminator
+from mpg_agents.acting.episode_loop import Step, episode_steps
 from mpg_agents.acting.seeds import episode_seed
 from mpg_agents.acting.spaces import finger_geometry, geometry_of_config
-from mpg_agents.learning.exploration import Choice, Explorer
+from mpg_agents.learning.exploration import Explorer, TakenAction
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.training_objects import stage_env_config, training_object_set
 from mpg_agents.learning.training_stages import TrainingStage
@@ -110,7 +114,7 @@ def choose_action(
     epsilon: float,
     pushes_in_episode: int,
     failed_grasps_in_a_row: int,
-) -> Choice:
+) -> TakenAction:
     """The action to take: the policy's decision (a grasp forced after the stage's push budget),
     then exploration and the training aids."""
     budget = stage.push_budget
@@ -177,7 +181,7 @@ class ActorStep:
     episode: int
     skipped: str | None = None
     obs: dict[str, np.ndarray] = field(default_factory=dict)
-    choice: Choice | None = None
+    choice: TakenAction | None = None
     next_obs: dict[str, np.ndarray] = field(default_factory=dict)
     reward: float = 0.0
     terminated: bool = False
@@ -195,101 +199,178 @@ class ActorStep:
         return self.terminated or self.truncated
 
 
-# ---------------------------------------------------------------------------------- actor
-class Actor:
-    """Steps its own env of the stage with the learner's weights; one :meth:`step` per request."""
+# ------------------------------------------------------------------------------ per episode
+class EpisodeCounts(Protocol):
+    """An episode's own counters, as :func:`count_step` updates them (the learner's
+    :class:`~mpg_agents.learning.run_state.Counters` with one actor, an :class:`ActorCounts` in an actor)."""
 
-    def __init__(self, spec: ActorSpec) -> None:
+    episode_motions: int
+    failed_grasps_in_a_row: int
+    pushes_in_episode: int
+
+
+@dataclass
+class ActorCounts:
+    """An actor's :class:`EpisodeCounts`."""
+
+    episode_motions: int = 0
+    failed_grasps_in_a_row: int = 0
+    pushes_in_episode: int = 0
+
+
+def start_episode(counts: EpisodeCounts) -> None:
+    """Zero the counters of an episode that starts."""
+    counts.episode_motions = counts.failed_grasps_in_a_row = counts.pushes_in_episode = 0
+
+
+def count_step(counts: EpisodeCounts, primitive: str, info: Mapping[str, Any]) -> None:
+    """Count a step of ``primitive`` whose env ``info`` it was: a motion; a grasp that lifted
+    nothing adds to the failed grasps in a row (one that lifted something ends them); a push
+    spends the push budget."""
+    if primitive == GRASP:
+        counts.failed_grasps_in_a_row = 0 if info["lifted"] else counts.failed_grasps_in_a_row + 1
+    if primitive == PUSH:
+        counts.pushes_in_episode += 1
+    counts.episode_motions += 1
+
+
+# ---------------------------------------------------------------------------------- actor
+ActorChoice = tuple[TakenAction, list[tuple[Mapping[str, Any], int, float, bool]], TrialCounts]
+"""What an actor chose on an observation: the action, its trials' transitions and their counts."""
+
+
+class Actor:
+    """Steps one env of the stage, an episode through the one episode loop
+    (:func:`~mpg_agents.acting.episode_loop.episode_steps`); one :meth:`step` per request.
+
+    An actor in its own process (:meth:`from_spec`) holds a copy of the learner's agent and is
+    sent newer weights; the learner's own actor (one actor) acts with the learner's env,
+    agent, exploration, generator and counters themselves.
+
+    Args:
+        env, policy, explorer, rng, stage: what it acts with and in.
+        run_seed: the run's seed (the episodes' env seeds, :func:`~mpg_agents.acting.seeds.episode_seed`).
+        counts: where its episode's counters are kept.
+        index: which actor (in messages and its steps).
+        given_weights: whether ``policy`` already holds the weights to act with (else it waits
+            for a request that brings some).
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        policy: MPGAgent,
+        explorer: Explorer,
+        rng: np.random.Generator,
+        stage: TrainingStage,
+        run_seed: int,
+        counts: EpisodeCounts,
+        index: int = 0,
+        given_weights: bool = True,
+    ) -> None:
+        self.env, self.policy, self.explorer, self.rng, self.stage = env, policy, explorer, rng, stage
+        self.run_seed, self.counts, self.index = run_seed, counts, index
+        self.has_weights = given_weights
+        self.episode = -1
+        self.epsilon = 0.0  # the current request's
+        self.steps: Iterator[Step[ActorChoice]] | None = None  # the running episode's (None: none runs)
+
+    @classmethod
+    def from_spec(cls, spec: ActorSpec) -> Actor:
+        """An actor built in its own process, on one torch thread, waiting for the learner's weights."""
         torch.set_num_threads(1)
         torch.set_flush_denormal(True)  # as the learner: a young net's denormals slow the CPU down
-        self.spec, cfg = spec, spec.config
-        self.env = make_training_env(spec.stage, cfg, spec.num_objects, "cpu")
-        self.policy = build_agent(spec.stage, cfg, self.env)
-        self.rng = np.random.default_rng([cfg.seed, spec.index, spec.start_iteration])
-        unwrapped: Any = self.env.unwrapped
-        self.explorer = make_explorer(self.policy, spec.stage, tuple(unwrapped.primitives), self.rng, cfg)
-        self.version = 0
-        self.episode = -1
-        self.obs: dict[str, np.ndarray] | None = None  # None: no episode running
-        self.pushes_in_episode = self.failed_grasps_in_a_row = 0
+        cfg = spec.config
+        env = make_training_env(spec.stage, cfg, spec.num_objects, "cpu")
+        policy = build_agent(spec.stage, cfg, env)
+        rng = np.random.default_rng([cfg.seed, spec.index, spec.start_iteration])
+        unwrapped: Any = env.unwrapped
+        explorer = make_explorer(policy, spec.stage, tuple(unwrapped.primitives), rng, cfg)
+        return cls(env, policy, explorer, rng, spec.stage, cfg.seed, ActorCounts(), spec.index, given_weights=False)
+
+    @property
+    def running(self) -> bool:
+        """Whether an episode runs (else the next request must name one to start)."""
+        return self.steps is not None
 
     def load(self, weights: Weights) -> None:
         """Act with ``weights`` (and their Q*_g) from now on."""
         # Copies: Ray hands over read-only arrays, which torch.from_numpy warns about.
         self.policy.q_net.mpgnet.load_state_dict({k: torch.tensor(np.asarray(v)) for k, v in weights.state.items()})
         self.policy.set_q_star(weights.q_star)
-        self.version = weights.version
+        self.has_weights = True
 
     def step(self, request: ActRequest) -> ActorStep:
         """One env step (a reset first when no episode runs)."""
         if request.weights is not None:
             self.load(request.weights)
-        if self.version == 0:
-            raise RuntimeError(f"actor {self.spec.index}: asked to act before it was given weights")
-        if self.obs is None:
+        if not self.has_weights:
+            raise RuntimeError(f"actor {self.index}: asked to act before it was given weights")
+        if self.steps is None:
             skipped = self._reset(request)
             if skipped is not None:
-                return ActorStep(self.spec.index, self.episode, skipped=skipped)
-        obs = self.obs
-        assert obs is not None
-        start = time.perf_counter()
+                return ActorStep(self.index, self.episode, skipped=skipped)
+        assert self.steps is not None
+        self.epsilon = request.epsilon
+        step = next(self.steps)
+        choice, trials, counts = step.choice
+        count_step(self.counts, choice.primitive, step.info)
+        if step.done:
+            self.steps = None
+        return ActorStep(
+            self.index,
+            self.episode,
+            None,
+            dict(step.obs),
+            choice,
+            dict(step.next_obs),
+            step.reward,
+            step.terminated,
+            step.truncated,
+            step.info,
+            trials,
+            counts,
+            step.choose_seconds,
+            step.step_seconds,
+        )
+
+    def choose(self, obs: Mapping[str, Any]) -> ActorChoice:
+        """The action on ``obs`` (:func:`choose_action`) and the stage's trials around it, tried and undone."""
         choice = choose_action(
             self.policy,
             self.explorer,
-            self.spec.stage,
+            self.stage,
             obs,
-            request.epsilon,
-            self.pushes_in_episode,
-            self.failed_grasps_in_a_row,
+            self.epsilon,
+            self.counts.pushes_in_episode,
+            self.counts.failed_grasps_in_a_row,
         )
         trials: list[tuple[Mapping[str, Any], int, float, bool]] = []
         counts = TrialCounts()
         try_alternatives(
             self.env.unwrapped,
             self.policy,
-            self.spec.stage,
+            self.stage,
             counts,
             obs,
             choice,
             self.rng,
             lambda _, next_obs, action, reward, terminated: trials.append((next_obs, action, reward, terminated)),
         )
-        chosen = time.perf_counter()
-        next_obs, reward, terminated, truncated, info = self.env.step(choice.action)
-        stepped = time.perf_counter()
-        if choice.primitive == GRASP:
-            self.failed_grasps_in_a_row = 0 if info["grasp_success"] else self.failed_grasps_in_a_row + 1
-        if choice.primitive == PUSH:
-            self.pushes_in_episode += 1
-        self.obs = None if terminated or truncated else next_obs
-        return ActorStep(
-            self.spec.index,
-            self.episode,
-            None,
-            obs,
-            choice,
-            next_obs,
-            float(reward),
-            bool(terminated),
-            bool(truncated),
-            info,
-            trials,
-            counts,
-            chosen - start,
-            stepped - chosen,
-        )
+        return choice, trials, counts
 
     def _reset(self, request: ActRequest) -> str | None:
         """Start episode ``request.episode``; returns why its seed gave no valid scene, if it did not."""
         if request.episode is None:
-            raise RuntimeError(f"actor {self.spec.index}: no episode runs and the request names none to start")
+            raise RuntimeError(f"actor {self.index}: no episode runs and the request names none to start")
         self.episode = request.episode
         options = None if request.num_objects is None else {"num_objects": request.num_objects}
         try:
-            self.obs, _ = self.env.reset(seed=episode_seed(self.spec.config.seed, self.episode), options=options)
+            obs, _ = self.env.reset(seed=episode_seed(self.run_seed, self.episode), options=options)
         except InvalidSceneError as exc:
             return str(exc)
-        self.pushes_in_episode = self.failed_grasps_in_a_row = 0
+        start_episode(self.counts)
+        self.steps = episode_steps(self.env, obs, self.choose, lambda chosen: chosen[0].action)
         return None
 
     def close(self) -> None:

@@ -31,12 +31,14 @@ PUSH_REACH_PX = 25
 
 
 @dataclass(frozen=True)
-class Choice:
-    """An action the learner takes, how it was chosen and the Q it was chosen by."""
+class TakenAction:
+    """An action a training step takes, how it was chosen and the Q it was chosen by: the agent's
+    greedy :class:`~mpg_agents.acting.decision.Decision`, or exploration's or the heuristic's
+    action in its place (:meth:`Explorer.choose`)."""
 
     action: int
     primitive: str
-    how: str  # "greedy", "explore" or "heuristic"
+    chosen_by: str  # "greedy", "explore" or "heuristic" (progress.csv's column "how")
     q_value: float = float("nan")
 
 
@@ -94,20 +96,22 @@ class Explorer:
         self.move_band_m = move_band_m
         self.visible_band_m = visible_band_m
 
-    def choose(self, obs: Mapping[str, np.ndarray], decision: Decision, epsilon: float, failed_grasps_in_a_row: int) -> Choice:
+    def choose(
+        self, obs: Mapping[str, np.ndarray], decision: Decision, epsilon: float, failed_grasps_in_a_row: int
+    ) -> TakenAction:
         """The action for ``obs`` given the policy's greedy ``decision`` (its primitive is kept
         unless :attr:`random_primitive`)."""
         primitive = decision.primitive
         n = self.heuristic_after_failed_grasps
         if primitive == GRASP and n and failed_grasps_in_a_row >= n and obs["mask"].any():
             rot, row, col = heuristic_grasp(obs)
-            return Choice(encode_action(self.primitives, GRASP, rot, row, col), GRASP, "heuristic")
+            return TakenAction(encode_action(self.primitives, GRASP, rot, row, col), GRASP, "heuristic")
         if self.rng.random() < epsilon:
             if self.random_primitive:
                 primitive = self.usable[int(self.rng.integers(len(self.usable)))]
             rot, row, col = self.explore_pixel(obs, primitive)
-            return Choice(encode_action(self.primitives, primitive, rot, row, col), primitive, "explore")
-        return Choice(int(decision.action), primitive, "greedy", float(decision.q_value))
+            return TakenAction(encode_action(self.primitives, primitive, rot, row, col), primitive, "explore")
+        return TakenAction(int(decision.action), primitive, "greedy", float(decision.q_value))
 
     def explore_pixel(self, obs: Mapping[str, np.ndarray], primitive: str) -> tuple[int, int, int]:
         """A random ``(rotation, row, col)`` where ``primitive`` can matter.

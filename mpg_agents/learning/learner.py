@@ -1,13 +1,16 @@
 """The DQN learner of MPGNet for one training stage (paper Sections III-C and III-D).
 
-Episodes run through the one episode loop (:func:`mpg_agents.acting.episode_loop.episode_steps`;
-:mod:`mpg_agents.learning.learner_episodes`). One iteration: decide
-(:class:`~mpg_agents.acting.agent.MPGAgent`; Stage IV's forced grasp after its push budget),
-explore (:mod:`mpg_agents.learning.exploration`), act, store, and ``replay_ratio`` gradient steps
+One training loop, as Stable-Baselines3 splits collecting from training: a source of steps
+feeds one learning step (:meth:`Learner.learn_from`). The steps come from actors
+(:class:`~mpg_agents.learning.actors.Actor`: decide with the
+:class:`~mpg_agents.acting.agent.MPGAgent`, Stage IV's forced grasp after its push budget;
+explore, :mod:`mpg_agents.learning.exploration`; act through the one episode loop,
+:func:`mpg_agents.acting.episode_loop.episode_steps`): with one actor the learner's own, in this
+process (:func:`~mpg_agents.learning.learner_episodes.own_steps`); with ``actors > 1`` parallel
+ones, each in its own env and process (:func:`~mpg_agents.learning.actor_feed.actor_steps`).
+An iteration is one step of any of them: store it, and ``replay_ratio`` gradient steps
 (:func:`mpg_agents.learning.td_step.td_step`; 1: one per iteration) with the stage's frozen
-branches left out. With ``actors > 1`` parallel actors (:mod:`mpg_agents.learning.actors`,
-:mod:`mpg_agents.learning.actor_pool`) do the deciding and acting, each in its own env; an
-iteration is then one step of any of them.
+branches left out; count, log, save when due.
 The stage is a :class:`~mpg_agents.learning.training_stages.TrainingStage`, the settings a
 :class:`~mpg_agents.learning.train_config.TrainConfig`.
 
@@ -33,7 +36,8 @@ import json
 import math
 import signal
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Generator, Mapping
+from contextlib import closing
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -45,17 +49,16 @@ from tqdm import tqdm
 
 import mpg_envs  # noqa: F401  (registers the envs)
 from mpg_agents.acting.device import resolve_device
-from mpg_agents.acting.episode_loop import Step
 from mpg_agents.acting.grasp_threshold import from_header, starting_q_star
 from mpg_agents.acting.q_function import MPGQFunction
 from mpg_agents.acting.seeds import episode_seed
 from mpg_agents.acting.weights import load_mpgnet_weights
-from mpg_agents.learning.actor_feed import train_with_actors
+from mpg_agents.learning.actor_feed import actor_steps
 from mpg_agents.learning.actor_pool import check_actor_backend
-from mpg_agents.learning.actors import build_agent, choose_action, make_explorer, make_training_env
+from mpg_agents.learning.actors import ActorStep, build_agent, choose_action, make_explorer, make_training_env
 from mpg_agents.learning.demonstrations import collect_demonstrations
-from mpg_agents.learning.exploration import Choice, linear_epsilon
-from mpg_agents.learning.learner_episodes import train_alone
+from mpg_agents.learning.exploration import TakenAction, linear_epsilon
+from mpg_agents.learning.learner_episodes import own_steps
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
 from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
@@ -64,8 +67,8 @@ from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
-from mpg_agents.learning.trials import TRIAL_COUNTERS, try_alternatives
-from mpg_envs.grid.primitive_specs import GRASP, PUSH
+from mpg_agents.learning.trials import TRIAL_COUNTERS
+from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.simulation.objects import check_not_held_out
 
 
@@ -202,10 +205,11 @@ class Learner:
         handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)
         try:
-            with TrainingLog(self.out, self.counters.iteration) as self._log:
-                if self.config.actors > 1:
-                    train_with_actors(self, bar)
-                train_alone(self, bar)  # one actor: this process decides and acts (nothing left after actors)
+            with TrainingLog(self.out, self.counters.iteration) as self._log, closing(self.steps_to_learn()) as steps:
+                for step in steps:
+                    self.learn_from(step)
+                    bar.update(1)
+                    self.save_or_stop()
         finally:
             self._log = None
             bar.close()
@@ -261,27 +265,33 @@ class Learner:
         stage with a finish trains its ``finish_trainable`` alone at the end)."""
         return self.stage.branches_at(self.counters.iteration, self.steps, self.trainable)
 
-    def iteration(self, step: Step[tuple[Choice, list[int]]]) -> None:
-        """One iteration after the env stepped: store, learn, count, log (times: deciding with the
-        trials, the env's step, all); at an episode's end, a stage's periodic Q*_g calibration."""
+    def steps_to_learn(self) -> Generator[ActorStep, None, None]:
+        """The source of this run's steps: its own actor, or its config's parallel actors."""
+        return actor_steps(self) if self.config.actors > 1 else own_steps(self)
+
+    def learn_from(self, step: ActorStep) -> None:
+        """The one learning step of an actor's step: its trials and the step stored, the gradient
+        steps they earn (:meth:`learn_owed`), counted and logged; at its episode's end, the
+        stage's periodic Q*_g calibration."""
         learning = time.perf_counter()
-        c = self.counters
-        (choice, trials), info = step.choice, step.info
+        c, choice = self.counters, step.choice
+        if choice is None:
+            raise ValueError(f"actor {step.actor} sent no step (episode {step.episode} skipped)")
+        for next_obs, action, reward, terminated in step.trials:
+            self.store(step.obs, next_obs, action, reward, terminated)
+        for name, value in asdict(step.trial_counts).items():
+            setattr(c, name, getattr(c, name) + value)
         self.store(step.obs, step.next_obs, choice.action, step.reward, step.terminated)
-        loss = self.learn_owed(2 if trials else 1)  # the replay grew by 1 + len(trials) transitions
-        if choice.primitive == GRASP:
-            c.failed_grasps_in_a_row = 0 if info["grasp_success"] else c.failed_grasps_in_a_row + 1
-        if choice.primitive == PUSH:
-            c.pushes_in_episode += 1
-        c.episode_motions += 1  # this process's episode (unused with actors: their envs count)
-        self.record(choice, step.reward, info, loss, step.choose_seconds, step.step_seconds, learning, c.episode, step.done)
+        loss = self.learn_owed(2 if step.trials else 1)  # the replay grew by 1 + len(trials) transitions
+        self.record(
+            choice, step.reward, step.info, loss, step.choose_seconds, step.step_seconds, learning, step.episode, step.done
+        )
         if step.done:
-            c.episode += 1
             calibrate_if_due(self)
 
     def record(
         self,
-        choice: Choice,
+        choice: TakenAction,
         reward: float,
         info: dict[str, Any],
         loss: float,
@@ -297,7 +307,7 @@ class Learner:
         if choice.primitive == GRASP:
             c.window_grasps += 1
             c.window_target_grasps += int(info["target_grasped"])
-            if info["target_grasped"] and choice.how == "greedy" and math.isfinite(choice.q_value):
+            if info["target_grasped"] and choice.chosen_by == "greedy" and math.isfinite(choice.q_value):
                 c.successful_grasp_q = (c.successful_grasp_q + [choice.q_value])[-200:]
         rate = None
         if c.iteration % self.config.window == 0 and c.window_grasps:
@@ -309,7 +319,7 @@ class Learner:
                 c.iteration,
                 episode,
                 choice.primitive,
-                choice.how,
+                choice.chosen_by,
                 reward,
                 loss,
                 self.epsilon(),
@@ -334,12 +344,7 @@ class Learner:
             [{}],
         )
 
-    def try_alternatives(self, obs: Mapping[str, Any], choice: Choice) -> list[int]:
-        """The stage's counterfactual trials of this step (:func:`mpg_agents.learning.trials.try_alternatives`),
-        tried, stored and counted; returns their actions (none when the stage has none)."""
-        return try_alternatives(self.env.unwrapped, self.policy, self.stage, self.counters, obs, choice, self.rng, self.store)
-
-    def act(self, obs: Mapping[str, Any]) -> Choice:
+    def act(self, obs: Mapping[str, Any]) -> TakenAction:
         """The action to take: the policy's decision, then exploration and the training aids."""
         c = self.counters
         return choose_action(

@@ -1,58 +1,55 @@
-"""The learner's own episodes: with one actor (``TrainConfig.actors == 1``) this process decides and acts.
+"""The learner's own steps: with one actor (``TrainConfig.actors == 1``) this process decides and acts.
 
-:func:`train_alone` runs a :class:`~mpg_agents.learning.learner.Learner`'s remaining iterations
-through the one episode loop (:func:`mpg_agents.acting.episode_loop.episode_steps`) on the
-learner's env, the counterpart of :func:`mpg_agents.learning.actor_feed.train_with_actors`. Each
-episode starts on the next seed that gives a valid scene, with the curriculum's object count
-(:func:`reset_episode`); each step is decided by :func:`choose` (the action and the stage's
-trials of the actions not taken) and learnt from by the learner's ``iteration``, then saved
-when due.
+:func:`own_steps` is the one-actor source of the learner's steps, the counterpart of
+:func:`mpg_agents.learning.actor_feed.actor_steps`: an :class:`~mpg_agents.learning.actors.Actor`
+on the learner's own env, agent, exploration, generator and counters, asked for a step at a time
+with the current epsilon. Each episode starts on the next seed that gives a valid scene, with
+the curriculum's object count; the running episode's index is the learner's
+``counters.episode`` (a resumed run restarts an interrupted episode on the same scene), counted
+on when the episode ends, before the learner learns from its last step.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Generator
 
-import numpy as np
-
-from mpg_agents.acting.episode_loop import episode_steps
-from mpg_agents.acting.seeds import episode_seed, reset_first_valid
-from mpg_agents.learning.exploration import Choice
-
-if TYPE_CHECKING:
-    from mpg_agents.learning.learner import Learner
+from mpg_agents.acting.seeds import MAX_SKIPPED_SEEDS
+from mpg_agents.learning.actors import Actor, ActorStep, ActRequest
+from mpg_agents.learning.learner_handle import LearnerHandle
+from mpg_envs.scenes.generators import InvalidSceneError
 
 
-def train_alone(learner: Learner, bar: Any = None) -> None:
-    """Run ``learner``'s remaining iterations in this process (``bar``: a progress bar)."""
-    while learner.counters.iteration < learner.steps:
-        for step in episode_steps(
-            learner.env, reset_episode(learner), lambda obs: choose(learner, obs), lambda chosen: chosen[0].action
-        ):
-            learner.iteration(step)
-            if bar is not None:
-                bar.update(1)
-            learner.save_or_stop()
-            if learner.counters.iteration >= learner.steps:
-                break
-
-
-def reset_episode(learner: Learner) -> dict[str, np.ndarray]:
-    """Reset ``learner``'s env for its next episode (the curriculum's object count, without
-    rebuilding the env; seeds that give no valid scene skipped) and zero the episode's counters."""
-    c = learner.counters
-    n = learner.objects_now(c.iteration)
-    options = None if n is None else {"num_objects": n}
-    obs, _, c.episode = reset_first_valid(
-        learner.env, lambda k: episode_seed(learner.config.seed, k), c.episode, options, learner.skipped_scene
+def own_actor(learner: LearnerHandle) -> Actor:
+    """The learner's own actor: its env, agent, exploration, generator and counters."""
+    return Actor(
+        learner.env, learner.policy, learner.explorer, learner.rng, learner.stage, learner.config.seed, learner.counters
     )
-    c.episode_motions = c.failed_grasps_in_a_row = c.pushes_in_episode = 0
-    return obs
 
 
-def choose(learner: Learner, obs: Mapping[str, Any]) -> tuple[Choice, list[int]]:
-    """What ``learner``'s step does on ``obs``: the action (its ``act``) and the stage's trials of
-    the actions not taken, tried and stored before it (its ``try_alternatives``)."""
-    choice = learner.act(obs)
-    return choice, learner.try_alternatives(obs, choice)
+def own_steps(learner: LearnerHandle, actor: Actor | None = None) -> Generator[ActorStep, None, None]:
+    """The steps of ``learner``'s own actor (:func:`own_actor` unless given) until its iteration
+    budget is spent (read again before each step).
+
+    Raises:
+        InvalidSceneError: more than :data:`~mpg_agents.acting.seeds.MAX_SKIPPED_SEEDS` seeds in a
+            row gave no valid scene.
+    """
+    actor = own_actor(learner) if actor is None else actor
+    c = learner.counters
+    skips = 0
+    while c.iteration < learner.steps:
+        episode = None if actor.running else c.episode
+        step = actor.step(ActRequest(learner.epsilon(), learner.objects_now(c.iteration), episode))
+        if step.skipped is not None:
+            skips += 1
+            if skips > MAX_SKIPPED_SEEDS:
+                raise InvalidSceneError(
+                    f"{skips} seeds in a row up to episode {step.episode} gave no valid scene: {step.skipped}"
+                )
+            learner.skipped_scene(step.episode, RuntimeError(step.skipped))
+            c.episode = step.episode + 1
+            continue
+        skips = 0
+        if step.done:
+            c.episode += 1  # the next episode's index, counted before the learner saves its state
+        yield step

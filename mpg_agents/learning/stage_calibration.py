@@ -1,4 +1,4 @@
-"""Q*_g calibrated during a training stage, for the learner (:class:`~mpg_agents.learning.learner.Learner`).
+"""Q*_g calibrated during a training stage, for the learner (a :class:`~mpg_agents.learning.learner_handle.LearnerHandle`).
 
 Q*_g (:mod:`mpg_agents.acting.grasp_threshold`) starts as ``TrainConfig.q_star`` or the starting
 checkpoint's. A stage with ``calibration_episodes`` calibrates it in its own scenes before it
@@ -10,16 +10,14 @@ the learner's state; the weights carry Q*_g.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star, format_q_star, write_calibration
 from mpg_agents.learning.actors import make_training_env
-
-if TYPE_CHECKING:
-    from mpg_agents.learning.learner import Learner
+from mpg_agents.learning.learner_handle import LearnerHandle
 
 
-def calibrate_in_scenes(learner: Learner, episodes: int) -> float:
+def calibrate_in_scenes(learner: LearnerHandle, episodes: int) -> float:
     """Calibrate ``learner``'s Q*_g in its stage's scenes
     (:func:`~mpg_agents.acting.grasp_threshold.calibrate_q_star`, at the stage's
     ``calibration_quantile``) and save the state (a resumed run keeps it); ``calibration.json``
@@ -59,7 +57,7 @@ def calibrate_in_scenes(learner: Learner, episodes: int) -> float:
     return measured.q_star
 
 
-def calibrate_from_own_grasps(learner: Learner) -> float | None:
+def calibrate_from_own_grasps(learner: LearnerHandle) -> float | None:
     """``learner``'s ``calibrates_q_star`` stage at its end: Q*_g estimated from the Q of its recent
     greedy grasps that took the target (:func:`~mpg_agents.acting.grasp_threshold.estimate_q_star`
     at the stage's ``calibration_quantile``), and the state saved; unchanged when no greedy
@@ -81,7 +79,7 @@ def calibrate_from_own_grasps(learner: Learner) -> float | None:
     return learner.policy.q_star
 
 
-def calibrate_if_due(learner: Learner) -> None:
+def calibrate_if_due(learner: LearnerHandle) -> None:
     """At an episode's end: the stage's periodic Q*_g calibration, once every ``calibrate_every`` iterations."""
     c, every = learner.counters, learner.stage.calibrate_every
     if every and c.iteration < learner.steps and c.iteration // every > max(c.calibrated_at, 0) // every:

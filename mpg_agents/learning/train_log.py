@@ -49,7 +49,7 @@ class IterationRecord:
     iteration: int
     episode: int
     primitive: str
-    how: str  # "greedy", "explore" or "heuristic"
+    chosen_by: str  # "greedy", "explore" or "heuristic" (the column "how")
     reward: float
     loss: float  # NaN when no gradient step was taken
     epsilon: float
@@ -65,7 +65,7 @@ class IterationRecord:
             self.iteration,
             self.episode,
             self.primitive,
-            self.how,
+            self.chosen_by,
             f"{self.reward:.3f}",
             f"{self.loss:.5f}",
             f"{self.epsilon:.4f}",

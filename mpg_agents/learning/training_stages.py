@@ -16,6 +16,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from mpg_agents.acting.calibration_quantile import CALIBRATION_QUANTILE, check_quantile
 from mpg_agents.acting.coordination import check_coordination
 from mpg_agents.learning.training_objects import OBS_MODES, STAGE_ENV_OPTIONS, object_set_entries, stage_env_config
 from mpg_envs.grid.actions import check_primitives
@@ -118,7 +119,7 @@ class TrainingStage:
     coordination: str = "workflow"
     calibrates_q_star: bool = False
     calibration_episodes: int = 0
-    calibration_quantile: float = 0.5
+    calibration_quantile: float = CALIBRATION_QUANTILE
     calibrate_every: int = 0
     uses_discriminator: bool = False
     push_budget: int | None = None
@@ -212,8 +213,7 @@ class TrainingStage:
         check_coordination(self.coordination)
         if self.calibration_episodes < 0:
             raise ValueError(f"stage {self.name}: calibration_episodes must be >= 0, got {self.calibration_episodes}")
-        if not 0.0 <= self.calibration_quantile <= 1.0:
-            raise ValueError(f"stage {self.name}: calibration_quantile must be in [0, 1], got {self.calibration_quantile}")
+        check_quantile(self.calibration_quantile, f"stage {self.name}: calibration_quantile")
         if self.calibrate_every < 0 or (self.calibrate_every and not self.calibration_episodes):
             raise ValueError(
                 f"stage {self.name}: calibrate_every must be 0, or >= 1 with calibration_episodes, got {self.calibrate_every}"

@@ -106,7 +106,7 @@ def try_alternatives(
     store: Store,
 ) -> list[int]:
     """The trials ``stage`` (a :class:`~mpg_agents.learning.training_stages.TrainingStage`) asks for
-    around ``choice`` (the step's :class:`~mpg_agents.learning.exploration.Choice` on ``obs``):
+    around ``choice`` (the step's :class:`~mpg_agents.learning.exploration.TakenAction` on ``obs``):
     tried, stored and counted in ``counters`` (the learner's
     :class:`~mpg_agents.learning.run_state.Counters`); returns their actions."""
     c = counters

@@ -2,7 +2,7 @@
 
 ``stable_baselines3.DQN(MPGNetPolicy, env)`` works on every MPG env: the Q-network returns the
 flat Q vector in the env's action order, and the policy acts as
-:class:`~mpg_agents.acting.agent.MPGAgent` does (:class:`~mpg_agents.acting.agent.AgentMethods` over its online
+:class:`~mpg_agents.acting.agent.MPGAgent` does (:class:`~mpg_agents.acting.agent.MPGAgentBase` over its online
 network, coordination and Q*_g); the target network is SB3's.
 """
 
@@ -19,7 +19,7 @@ from stable_baselines3.common.type_aliases import PyTorchObs, Schedule
 from stable_baselines3.dqn.policies import DQNPolicy, QNetwork
 from torch import Tensor, nn
 
-from mpg_agents.acting.agent import AgentMethods
+from mpg_agents.acting.agent import MPGAgentBase
 from mpg_agents.acting.agent_settings import AgentSettings
 from mpg_agents.acting.grasp_threshold import GraspThreshold
 from mpg_agents.acting.q_function import MPGQFunction, check_action_space
@@ -72,7 +72,7 @@ class MPGQNetwork(MPGQFunction, QNetwork):  # type: ignore[misc]  # forward: MPG
         return data
 
 
-class MPGNetPolicy(AgentMethods, DQNPolicy):
+class MPGNetPolicy(MPGAgentBase, DQNPolicy):
     """SB3 DQN policy (online and target MPGNet) with coordination, Q*_g and safetensors weights:
     it decides, holds Q*_g and saves weights as :class:`~mpg_agents.acting.agent.MPGAgent` does.
 

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.scenes.scene_io import SceneFile, SceneObject
+from mpg_envs.scenes.scene_file import SceneFile, SceneObject
 from mpg_envs.scenes.scene_loading import LOAD_TOLERANCE_DEG, LOAD_TOLERANCE_M, pose_errors
 from mpg_envs.simulation.blocks import blocks_object_set
 

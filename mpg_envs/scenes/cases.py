@@ -40,7 +40,8 @@ import mujoco
 import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, kept_target, objects_outside, read_scene
+from mpg_envs.scenes.scene_file import SceneFile, SceneFileError
+from mpg_envs.scenes.scene_io import kept_target, objects_outside, read_scene
 
 CASE_SETS = ("challenge", "epg", "gti")
 """The named case sets."""

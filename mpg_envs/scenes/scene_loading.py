@@ -28,17 +28,15 @@ import mujoco
 import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.scenes.scene_io import (
+from mpg_envs.scenes.scene_file import (
     BELOW_TABLE,
     PENETRATION_TOLERANCE_M,
     SceneFile,
     SceneFileError,
     SceneObject,
     check_scene,
-    kept_target,
-    objects_outside,
-    resolve_outside,
 )
+from mpg_envs.scenes.scene_io import kept_target, objects_outside, resolve_outside
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.world import World
 

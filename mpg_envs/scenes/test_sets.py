@@ -33,7 +33,7 @@ import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.scenes.generators import GeneratorConfig
-from mpg_envs.scenes.scene_io import SceneFile, SceneObject
+from mpg_envs.scenes.scene_file import SceneFile, SceneObject
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.families import FAMILY_SEED_RANGES
 from mpg_envs.simulation.mujoco_version import MUJOCO_KEY, mujoco_major, recorded_mujoco, running_mujoco

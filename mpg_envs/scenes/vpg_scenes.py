@@ -38,7 +38,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from mpg_envs.scenes.scene_io import BELOW_TABLE, SceneFile, SceneFileError, SceneObject, scene_text
+from mpg_envs.scenes.scene_file import BELOW_TABLE, SceneFile, SceneFileError, SceneObject, scene_text
 from mpg_envs.simulation.assets import ObjectAsset
 from mpg_envs.simulation.objects import blocks_object_set, load_mesh_folder
 

@@ -11,17 +11,37 @@ it may use the executor's motion pieces (``teleport``, ``linear``, ``pick``, ``f
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING
-
-import numpy as np
+from dataclasses import dataclass
 
 from mpg_envs.grid.primitive_specs import PAPER_PRIMITIVES, primitive_spec
 
-if TYPE_CHECKING:
-    from mpg_envs.simulation.primitives import PrimitiveExecutor, PrimitiveResult
 
-Motion = Callable[["PrimitiveExecutor", int, int, int, np.ndarray, "int | None"], "PrimitiveResult"]
-"""``(executor, rotation, row, col, depth, target) -> PrimitiveResult``."""
+@dataclass
+class PrimitiveResult:
+    """What a primitive did."""
+
+    primitive: str
+    rotation: int
+    pixel: tuple[int, int]
+    position: tuple[float, float, float]  # world (x, y, z) the TCP was sent to
+    lifted: bool = False  # an object came up in the fingers (a grasp or a move lifted it)
+    grasped_object: int | None = None  # index of that object
+    grasp_failure: str | None = None  # grasp/move that held nothing: one of primitives.GRASP_FAILURES
+    placed_object: int | None = None  # move: the object put down elsewhere
+    removed_objects: tuple[int, ...] = ()  # objects taken out of the scene by this primitive
+    target_moved: bool = False
+    physics_steps: int = 0
+    physics_seconds: float = 0.0
+    seconds: float = 0.0
+    ik_solves: int = 0
+    unreachable: bool = False  # the arm could not reach a pose of this motion: nothing moved
+
+
+# The executor's type stays unnamed here: the executor imports this module for its motions.
+Motion = Callable[..., PrimitiveResult]
+"""``(executor, rotation, row, col, depth, target) -> PrimitiveResult``: the executor
+(:class:`~mpg_envs.simulation.primitives.PrimitiveExecutor`), the action's rotation and pixel,
+the depth heightmap and the target's index (or ``None``)."""
 
 _MOTIONS: dict[str, Motion] = {}
 

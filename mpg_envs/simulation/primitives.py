@@ -21,7 +21,7 @@ import numpy as np
 from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH, primitive_spec
 from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
 from mpg_envs.simulation.free_space import clutter_height, disc_offsets, free_spot
-from mpg_envs.simulation.motions import motion_of, register_motion
+from mpg_envs.simulation.motions import PrimitiveResult, motion_of, register_motion
 from mpg_envs.simulation.robot import ArmIK, UnreachablePoseError, gripper_states
 from mpg_envs.simulation.world import World, WorldCheckpoint
 
@@ -63,27 +63,6 @@ GRASP_FAILURES = ("closed_empty", "not_lifted", "unreachable")
 """Why a grasp held nothing: the fingers closed fully on nothing (missed), or something was
 between the pads but did not rise with them (slipped out, or pinned under another object),
 or the arm could not reach the pose (nothing moved; see :meth:`PrimitiveExecutor.execute`)."""
-
-
-@dataclass
-class PrimitiveResult:
-    """What a primitive did."""
-
-    primitive: str
-    rotation: int
-    pixel: tuple[int, int]
-    position: tuple[float, float, float]  # world (x, y, z) the TCP was sent to
-    lifted: bool = False  # an object came up in the fingers (a grasp or a move lifted it)
-    grasped_object: int | None = None  # index of that object
-    grasp_failure: str | None = None  # grasp/move that held nothing: one of GRASP_FAILURES
-    placed_object: int | None = None  # move: the object put down elsewhere
-    removed_objects: tuple[int, ...] = ()  # objects taken out of the scene by this primitive
-    target_moved: bool = False
-    physics_steps: int = 0
-    physics_seconds: float = 0.0
-    seconds: float = 0.0
-    ik_solves: int = 0
-    unreachable: bool = False  # the arm could not reach a pose of this motion: nothing moved
 
 
 class PrimitiveExecutor:

@@ -24,7 +24,7 @@ from mpg_envs.perception.render import OverviewRenderer, render_overview
 from mpg_envs.perception.visual_randomization import EpisodeVisuals, VisualRandomization, episode_visuals
 from mpg_envs.scenes.arranged import ArrangedScenes
 from mpg_envs.scenes.generators import InvalidSceneError
-from mpg_envs.scenes.scene_io import SceneFile
+from mpg_envs.scenes.scene_file import SceneFile
 from mpg_envs.scenes.scene_loading import scene_of
 from mpg_envs.simulation.objects import ObjectAsset
 from mpg_envs.simulation.primitives import PrimitiveResult

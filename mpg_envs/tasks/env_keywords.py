@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from mpg_envs.perception.occlusion import check_band
-from mpg_envs.scenes.scene_io import MAX_OBJECTS
+from mpg_envs.scenes.scene_file import MAX_OBJECTS
 from mpg_envs.tasks.config import OBS_MODES
 from mpg_envs.tasks.stages import STAGES, WRONG_GRASP_RULES, StageSpec
 

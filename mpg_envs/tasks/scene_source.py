@@ -45,7 +45,8 @@ from mpg_envs.scenes import generators
 from mpg_envs.scenes.arranged import ArrangedScenes, ArrangementError, arrangement_scene, check_settled
 from mpg_envs.scenes.arrangement_draw import draw_arrangement
 from mpg_envs.scenes.generators import BURIED, GENERATORS, InvalidSceneError, keep_inside
-from mpg_envs.scenes.scene_io import SceneFile, SceneFileError, read_scene
+from mpg_envs.scenes.scene_file import SceneFile, SceneFileError
+from mpg_envs.scenes.scene_io import read_scene
 from mpg_envs.scenes.scene_loading import load_scene
 from mpg_envs.scenes.test_sets import TEST_SEEDS, TEST_SET_WORKSPACE, TestSet, find_test_set, test_set_name
 from mpg_envs.simulation.assets import ObjectAsset

@@ -44,7 +44,7 @@ def test_exploratory_pixels_stay_where_the_primitive_can_matter():
             for _ in range(200):
                 choice = explorer.choose(obs, _decision(primitive), epsilon=1.0, failed_grasps_in_a_row=0)
                 a = decode_action(PRIMS, choice.action)
-                assert choice.how == "explore" and a.primitive == primitive
+                assert choice.chosen_by == "explore" and a.primitive == primitive
                 pad = PUSH_REACH_PX if primitive == "push" else 0
                 assert rect[0] - pad <= a.row <= rect[1] + pad and rect[2] - pad <= a.col <= rect[3] + pad
                 off_target += int(obs["mask"][a.row, a.col] == 0)
@@ -68,10 +68,10 @@ def test_greedy_and_heuristic_choices():
     obs = _obs()
     explorer = Explorer(PRIMS, np.random.default_rng(0), heuristic_after_failed_grasps=2)
     greedy = explorer.choose(obs, _decision("grasp"), epsilon=0.0, failed_grasps_in_a_row=1)
-    assert greedy.how == "greedy" and greedy.q_value == 1.0
+    assert greedy.chosen_by == "greedy" and greedy.q_value == 1.0
     forced = explorer.choose(obs, _decision("grasp"), epsilon=0.0, failed_grasps_in_a_row=2)
     a = decode_action(PRIMS, forced.action)
-    assert forced.how == "heuristic" and obs["mask"][a.row, a.col] == 1
+    assert forced.chosen_by == "heuristic" and obs["mask"][a.row, a.col] == 1
 
 
 def test_a_random_primitive_is_one_the_network_has():

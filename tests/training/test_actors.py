@@ -11,7 +11,7 @@ import torch
 from mpg_agents.cli import train_main
 from mpg_agents.learning.actor_feed import ActorLedger
 from mpg_agents.learning.actor_pool import check_actor_backend
-from mpg_agents.learning.actors import ActorStep, Choice
+from mpg_agents.learning.actors import ActorStep, TakenAction
 from mpg_agents.learning.learner import Learner, StopRequested
 from mpg_agents.learning.train_config import TrainConfig
 from .tiny import TINY
@@ -95,7 +95,7 @@ def test_ledger_sends_weights_once_per_version_and_hands_out_episodes():
     handed = iter(range(10))
     first = ledger.request(0, 0.5, 4, lambda: next(handed))
     assert first.weights is not None and first.weights.version == 1 and first.episode == 0 and first.num_objects == 4
-    ledger.received(ActorStep(0, 0, choice=Choice(1, "grasp", "greedy")), 50)  # the episode goes on
+    ledger.received(ActorStep(0, 0, choice=TakenAction(1, "grasp", "greedy")), 50)  # the episode goes on
     again = ledger.request(0, 0.4, 4, lambda: next(handed))
     assert again.weights is None and again.episode is None
     assert ledger.request(1, 0.4, 4, lambda: next(handed)).episode == 1
@@ -134,14 +134,14 @@ def test_an_actor_steps_its_env_with_the_weights_and_trials_it_is_given():
     stage = with_overrides(TRAINING_STAGES, {"Stage5": {
         "env_id": "MPG-Occluded-v0", "objects": [6, 6], "coordination": "grasp_first", "grasp_trials": 2, "alternate_every": 1,
     }})[-1]
-    actor = Actor(ActorSpec(TrainConfig(**TINY), stage, index=1, start_iteration=0, num_objects=6))
+    actor = Actor.from_spec(ActorSpec(TrainConfig(**TINY), stage, index=1, start_iteration=0, num_objects=6))
     try:
         with pytest.raises(RuntimeError, match="before it was given weights"):
             actor.step(ActRequest(0.0, 6, 0))
         weights = Weights(1, weights_of(actor.policy), -10.0)  # Q*_g -10: every decision a grasp
         step = actor.step(ActRequest(0.0, 6, 7, weights))
         assert actor.policy.q_star == -10.0 and step.episode == 7 and step.skipped is None
-        assert step.choice.primitive == "grasp" and step.choice.how == "greedy"
+        assert step.choice.primitive == "grasp" and step.choice.chosen_by == "greedy"
         assert len(step.trials) == step.trial_counts.grasp_trials == 2  # its two other orientations, tried and undone
         assert step.info["num_motions"] == 1
         if not step.done:  # the episode goes on: no new index is needed

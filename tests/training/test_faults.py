@@ -63,15 +63,15 @@ class Crash(Exception):
 def test_a_run_crashed_between_saves_resumes_with_every_iteration_once(tmp_path):
     cfg = TrainConfig(steps=6, **TINY)
     learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
-    original = learner.iteration
+    original = learner.learn_from
 
-    def iteration_then_crash(obs):
-        out = original(obs)
+    def iteration_then_crash(step):
+        out = original(step)
         if learner.counters.iteration == 5:
             raise Crash()  # the state holds iteration 4, the log rows 1..5
         return out
 
-    learner.iteration = iteration_then_crash
+    learner.learn_from = iteration_then_crash
     with pytest.raises(Crash):
         learner.run()
     log = tmp_path / "progress.csv"
@@ -288,7 +288,7 @@ def test_a_train_config_that_is_no_table_is_named(tmp_path, capsys):
         path.write_bytes(text.encode("utf-8", "surrogateescape"))
         assert train_main(["--env", "MPG-Stage2-v0", "--config", str(path), "--out", str(tmp_path / "run")]) == 2
         err = capsys.readouterr().err
-        expected = f"holds a {held}; valid: a JSON object (or TOML table) of settings by name" if held else "is not valid json: "
+        expected = f"holds a {held}; valid: a JSON object (or TOML table) of settings by name" if held else "is not readable JSON: "
         assert f"config file {str(path)!r} {expected}" in err and err.count("\n") == 1
     assert not (tmp_path / "run").exists()
 

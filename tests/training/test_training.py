@@ -11,7 +11,6 @@ import torch
 
 from mpg_agents.cli import eval_main, plot_main, train_main
 from mpg_agents.learning.learner import Learner, StopRequested
-from mpg_agents.learning.learner_episodes import reset_episode
 from mpg_agents.learning.train_config import TrainConfig
 from mpg_agents.learning.pipeline import PipelineConfig, run_pipeline
 from mpg_agents.learning.training_stages import TRAINING_STAGES, with_overrides
@@ -186,15 +185,15 @@ def test_a_push_grasp_baseline_trains_and_acts_without_move(tmp_path):
 def test_killed_run_resumes_with_its_counters_and_replay(tmp_path):
     cfg = TrainConfig(steps=5, **TINY)
     learner = Learner(cfg, "MPG-Stage2-v0", tmp_path, log=lambda s: None)
-    original = learner.iteration
+    original = learner.learn_from
 
-    def iteration_then_kill(obs):
-        out = original(obs)
+    def iteration_then_kill(step):
+        out = original(step)
         if learner.counters.iteration == 3:
             os.kill(os.getpid(), signal.SIGTERM)  # the real signal path
         return out
 
-    learner.iteration = iteration_then_kill
+    learner.learn_from = iteration_then_kill
     with pytest.raises(StopRequested):
         learner.run()
     killed = (learner.counters.iteration, learner.counters.episode, learner.replay.size())
@@ -289,10 +288,10 @@ def test_stage4_grasps_after_five_pushes(tmp_path):
     cfg = TrainConfig(steps=1, epsilon_start=0.0, epsilon_end=0.0, **TINY)
     learner = Learner(cfg, "MPG-Stage4-v0", tmp_path, log=lambda s: None)
     assert learner.stage.push_budget == 5  # from the stage table, not the env
-    obs = reset_episode(learner)
+    obs, _ = learner.env.reset(seed=0)
     learner.counters.pushes_in_episode = 5
     choice = learner.act(obs)
-    assert choice.primitive == "grasp" and choice.how == "greedy"
+    assert choice.primitive == "grasp" and choice.chosen_by == "greedy"
     assert learner.env.unwrapped.action_space.decode(choice.action).primitive == "grasp"
     with pytest.raises(ValueError, match="not allowed"):
         learner.policy.decide(obs, "move")
