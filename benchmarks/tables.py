@@ -16,7 +16,7 @@ time, and checks the two runs gave the same records.
 
     python benchmarks/tables.py --track hard --policy-file benchmarks/tables.toml \\
         --episodes 100 --objects 15 30 --seed 500000 --workers 2 [--backend processes] [--out DIR]
-    python benchmarks/tables.py --track table1 --policies oracle grasp-only random shipped [CKPT ...]
+    python benchmarks/tables.py --track table1 --policies oracle pixel-heuristic random shipped [CKPT ...]
     python benchmarks/tables.py --track hard --objects 30 --from-evals "Oracle=runs/hard30/oracle_*.json" ...
 
 ``--from-evals LABEL=GLOB ...`` runs nothing: it makes the table of one object count from
@@ -48,7 +48,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from mpg_agents.evaluation.env_options import parse_env_options  # noqa: E402
-from mpg_agents.evaluation.policy_zoo import BUILTIN  # noqa: E402
+from mpg_agents.evaluation.policy_zoo import BUILTIN, is_builtin  # noqa: E402
 from mpg_agents.evaluation.reused_cells import read_reused  # noqa: E402
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
 from mpg_agents.evaluation.tables import TRACKS  # noqa: E402
@@ -69,7 +69,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="with --tracks: run each missing cell as blocks of K seeds, each kept as it ends (a stopped cell resumes at its first missing block)",
     )
     parser.add_argument("--no-run", action="store_true", help="with --tracks: run nothing, make the table of the cells recorded")
-    parser.add_argument("--policies", nargs="+", help=f"{' | '.join(BUILTIN)} or checkpoint paths (default: oracle grasp-only random shipped)")
+    parser.add_argument("--policies", nargs="+", help=f"{' | '.join(BUILTIN)} or checkpoint paths (default: oracle pixel-heuristic random shipped)")
     parser.add_argument("--policy-file", help="a TOML file of [[policy]] entries (label, policy, settings) instead of --policies")
     parser.add_argument("--episodes", type=int, default=100, help="per cell")
     parser.add_argument("--objects", type=int, nargs="+", default=[15, 30])
@@ -108,13 +108,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error("--speedup measures a --track run, not --tracks")
     try:
         args.specs = read_policy_specs(args.policy_file) if args.policy_file else [
-            PolicySpec(p, p) for p in (args.policies or ["oracle", "grasp-only", "random", "shipped"])
+            PolicySpec(p, p) for p in (args.policies or ["oracle", "pixel-heuristic", "random", "shipped"])
         ]
         args.env_options = parse_env_options(args.env_option)
     except ValueError as exc:
         parser.error(str(exc))
     for spec in args.specs:
-        if spec.policy not in BUILTIN and not Path(spec.policy).is_file():
+        if not is_builtin(spec.policy) and not Path(spec.policy).is_file():
             parser.error(f"policy {spec.label!r}: {spec.policy!r} is neither one of {BUILTIN} nor a checkpoint file")
     if args.run_policies:
         unknown = set(args.run_policies) - {spec.policy for spec in args.specs}

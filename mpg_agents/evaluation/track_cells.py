@@ -21,6 +21,15 @@ from mpg_agents.evaluation.eval_result import EvalResult
 from mpg_agents.evaluation.evaluate import registered_options
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
 from mpg_agents.evaluation.tables import TRACKS, cell_json
+from mpg_envs.policies.registry import baseline_name
+
+
+def compared_entry(entry: Any) -> Any:
+    """A policy entry as it is compared with another: a scripted baseline's former name read as
+    its name (an entry recorded with ``grasp-only`` is one of ``pixel-heuristic``); anything else as it is."""
+    if not isinstance(entry, dict) or not isinstance(entry.get("policy"), str):
+        return entry
+    return {**entry, "policy": baseline_name(entry["policy"]) or entry["policy"]}
 
 
 class CellMismatchError(ValueError):
@@ -84,7 +93,7 @@ class CellRequest:
 def read_cell_file(request: CellRequest, path: Path) -> dict[str, Any]:
     """A cell file this module wrote, checked against ``request`` (policy entry included)."""
     data = json.loads(path.read_text())
-    if data.get("table_policy") != request.policy_entry():
+    if compared_entry(data.get("table_policy")) != compared_entry(request.policy_entry()):
         raise CellMismatchError(
             f"{path} ran policy entry {data.get('table_policy')}, the policy file now says {request.policy_entry()}: "
             "delete the file to run the cell again, or restore the entry"

@@ -36,6 +36,7 @@ from mpg_agents.evaluation.track_cells import (
     CellRequest,
     block_folder,
     cell_file_name,
+    compared_entry,
     read_cell_file,
     write_cell_file,
 )
@@ -107,7 +108,7 @@ def _run_in_blocks(
             result, wall = _run_seeds(request, request.seed + start, n, workers, ray_address, backend, on_record)
             write_cell_file(request, result, block)
             seconds += wall
-        elif json.loads(block.read_text()).get("table_policy") != request.policy_entry():
+        elif compared_entry(json.loads(block.read_text()).get("table_policy")) != compared_entry(request.policy_entry()):
             raise CellMismatchError(
                 f"{block} ran another policy entry than {request.policy_entry()}: delete {folder} to run the cell again"
             )

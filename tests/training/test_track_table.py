@@ -170,14 +170,14 @@ def test_a_bad_reuse_file_is_refused_naming_the_entry(tmp_path, text, match):
 
 
 def test_the_repositorys_track_policies_and_reused_blocks_cells_hold(monkeypatch):
-    from mpg_agents.evaluation.policy_zoo import BUILTIN
+    from mpg_agents.evaluation.policy_zoo import is_builtin
 
     specs = read_policy_specs(ROOT / "benchmarks" / "tracks.toml")
     assert [s.policy for s in specs][:6] == [
-        "oracle", "grasp-only", "random", "shipped",
+        "oracle", "pixel-heuristic", "random", "shipped",
         "benchmarks/checkpoints/blocks_rand_s1.safetensors", "benchmarks/checkpoints/uncover_s1.safetensors",
     ] and len(specs) == 10
-    assert all(s.policy in BUILTIN or (ROOT / s.policy).is_file() for s in specs)
+    assert all(is_builtin(s.policy) or (ROOT / s.policy).is_file() for s in specs)
     reused = read_reused(ROOT / "benchmarks" / "results" / "tracks" / "reused.toml")
     # The shipped net's blocks cells and the colour-trunk nets' are cell files in tracks/hard/cells/.
     in_files = {s.label for s in specs[3:6]}
