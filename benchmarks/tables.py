@@ -51,16 +51,16 @@ from mpg_agents.evaluation.env_options import parse_env_options  # noqa: E402
 from mpg_agents.evaluation.policy_zoo import BUILTIN, is_builtin  # noqa: E402
 from mpg_agents.evaluation.reused_cells import read_reused  # noqa: E402
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
-from mpg_agents.evaluation.tables import TRACKS  # noqa: E402
+from mpg_agents.evaluation.tables import TABLE_TRACKS  # noqa: E402
 from mpg_agents.evaluation.track_cells import CellRequest, cell_file_name  # noqa: E402
 from mpg_agents.evaluation.track_table import make_track_table  # noqa: E402
 
-STRICT_TRACKS = tuple(name for name, track in TRACKS.items() if track.strict_columns)
+STRICT_TRACKS = tuple(name for name, track in TABLE_TRACKS.items() if track.strict_columns)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--track", choices=tuple(TRACKS), default="table1", help="; ".join(f"{name}: {t.env_id}" for name, t in TRACKS.items()))
+    parser.add_argument("--track", choices=tuple(TABLE_TRACKS), default="table1", help="; ".join(f"{name}: {t.env_id}" for name, t in TABLE_TRACKS.items()))
     parser.add_argument("--tracks", nargs="+", choices=STRICT_TRACKS, help="the track table over these tracks, cell by cell in OUT/<track>/cells/ (resumes)")
     parser.add_argument("--reuse", help="with --tracks: a TOML file of [[cell]] entries recorded by earlier runs")
     parser.add_argument("--run-policies", nargs="+", metavar="POLICY", help="with --tracks: run only these policies' missing cells")
@@ -175,7 +175,7 @@ def main(argv: list[str] | None = None) -> dict:
     def on_record(job, record) -> None:
         print(f"  [{Path(job.policy).name}, {job.num_objects} obj.] {record.describe()}", flush=True)
 
-    env_id = TRACKS[args.track].env_id
+    env_id = TABLE_TRACKS[args.track].env_id
     print(f"{args.track}: {len(args.specs) * len(args.objects)} cells x {args.episodes} episodes on {env_id}, seeds {args.seed}..{args.seed + args.episodes - 1}", flush=True)
     report, text, markdown = run_table(
         args.track, args.specs, args.objects, args.episodes, args.seed, args.workers, args.ray_address,

@@ -25,7 +25,7 @@ from typing import Any
 
 from mpg_agents.evaluation.policy_zoo import is_builtin
 from mpg_agents.evaluation.table_runs import merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json
 from mpg_agents.evaluation.track_cells import CellMismatchError, CellRequest, compared_entry
 from mpg_envs.policies.registry import baseline_name
 from mpg_envs.settings_fields import read_settings_file
@@ -126,8 +126,8 @@ def read_reused(path: str | Path) -> dict[tuple[str, str, int], ReusedCell]:
         where = f"reuse file {str(path)!r}, cell {k}"
         if not isinstance(entry, dict) or not {"track", "label", "objects"} <= set(entry):
             raise ValueError(f"{where}: needs 'track', 'label' and 'objects'")
-        if entry["track"] not in TRACKS:
-            raise ValueError(f"{where}: unknown track {entry['track']!r}; valid: {', '.join(TRACKS)}")
+        if entry["track"] not in TABLE_TRACKS:
+            raise ValueError(f"{where}: unknown track {entry['track']!r}; valid: {', '.join(TABLE_TRACKS)}")
         if ("evals" in entry) == ("table" in entry):
             raise ValueError(f"{where}: give one of 'evals' (a glob of mpg-eval JSON files) and 'table' (a tables.py report)")
         unknown = set(entry) - {"track", "label", "objects", "evals", "table"}

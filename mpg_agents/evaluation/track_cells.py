@@ -20,7 +20,7 @@ from typing import Any
 from mpg_agents.evaluation.eval_result import EvalResult
 from mpg_agents.evaluation.evaluate import registered_options
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json
 from mpg_envs.policies.registry import baseline_name
 
 
@@ -55,7 +55,7 @@ class CellRequest:
 
     @property
     def env_id(self) -> str:
-        return TRACKS[self.track].env_id
+        return TABLE_TRACKS[self.track].env_id
 
     def policy_entry(self) -> dict[str, Any]:
         """The policy-file entry, as a cell file records it."""
@@ -68,7 +68,7 @@ class CellRequest:
     @property
     def all_env_options(self) -> tuple[tuple[str, Any], ...]:
         """The track's env keywords, then the extra ones (an extra one wins)."""
-        return tuple({**dict(TRACKS[self.track].env_options), **dict(self.env_options)}.items())
+        return tuple({**dict(TABLE_TRACKS[self.track].env_options), **dict(self.env_options)}.items())
 
     def check(self, result: EvalResult, source: str) -> None:
         """Raise :class:`CellMismatchError` unless ``result`` is this cell's evaluation (env,

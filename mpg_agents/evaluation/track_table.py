@@ -30,7 +30,7 @@ from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
 from mpg_agents.evaluation.finding_table import finding_rows
 from mpg_agents.evaluation.reused_cells import ReusedCell
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows
 from mpg_agents.evaluation.track_cells import (
     CellMismatchError,
     CellRequest,
@@ -156,9 +156,9 @@ def make_track_table(
     if len(set(labels)) != len(labels):
         raise ValueError(f"policy labels must differ, got {labels}")
     for name in tracks:
-        if name not in TRACKS or not TRACKS[name].strict_columns:
+        if name not in TABLE_TRACKS or not TABLE_TRACKS[name].strict_columns:
             raise ValueError(
-                f"unknown or non-strict track {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}"
+                f"unknown or non-strict track {name!r}; valid: {[t for t, s in TABLE_TRACKS.items() if s.strict_columns]}"
             )
     reused = dict(reused or {})
     strangers = sorted({label for _, label, _ in reused} - set(labels))
@@ -197,7 +197,7 @@ def make_track_table(
         rows.setdefault(name, {}).setdefault(label, {})[str(n)] = cell
     mujoco_versions = sorted({recorded_mujoco(cell.get("versions")) for cell in cells.values()})
     report = {
-        "tracks": {name: TRACKS[name].env_id for name in tracks},
+        "tracks": {name: TABLE_TRACKS[name].env_id for name in tracks},
         "objects": list(objects),
         "episodes": episodes,
         "seed": seed,
@@ -227,7 +227,7 @@ def make_track_table(
         markdown += (
             "\n\nNot run yet: "
             + "; ".join(
-                f"{TRACKS[name].scenes} ({TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells"
+                f"{TABLE_TRACKS[name].scenes} ({TABLE_TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells"
                 for name, k in counts.items()
                 if k
             )
