@@ -8,7 +8,7 @@ mis-picks per run``. Runs follow
 cell is reproducible on its own. ``--json`` also writes every result (rows and records).
 
     python benchmarks/cases.py --peers PATH/TO/PEERS [--sets challenge epg gti] \\
-        [--policies oracle grasp-only random shipped] [--runs 3] [--json cases.json]
+        [--policies oracle pixel-heuristic random shipped] [--runs 3] [--json cases.json]
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ os.environ.setdefault("MPG_NUM_THREADS", "1")
 from mpg_agents.evaluation.case_runs import CaseRow, CaseRunResult, run_case_set  # noqa: E402
 from mpg_envs.scenes.cases import CASE_SETS, load_cases  # noqa: E402
 
-POLICIES = ("oracle", "grasp-only", "random", "shipped")
+POLICIES = ("oracle", "pixel-heuristic", "random", "shipped")
 
 
 def cell(row: CaseRow) -> str:

@@ -16,7 +16,7 @@ time, and checks the two runs gave the same records.
 
     python benchmarks/tables.py --track hard --policy-file benchmarks/tables.toml \\
         --episodes 100 --objects 15 30 --seed 500000 --workers 2 [--backend processes] [--out DIR]
-    python benchmarks/tables.py --track table1 --policies oracle grasp-only random shipped [CKPT ...]
+    python benchmarks/tables.py --track table1 --policies oracle pixel-heuristic random shipped [CKPT ...]
     python benchmarks/tables.py --track hard --objects 30 --from-evals "Oracle=runs/hard30/oracle_*.json" ...
 
 ``--from-evals LABEL=GLOB ...`` runs nothing: it makes the table of one object count from
@@ -48,19 +48,19 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 from mpg_agents.evaluation.env_options import parse_env_options  # noqa: E402
-from mpg_agents.evaluation.policy_zoo import BUILTIN  # noqa: E402
+from mpg_agents.evaluation.policy_zoo import BUILTIN, is_builtin  # noqa: E402
 from mpg_agents.evaluation.reused_cells import read_reused  # noqa: E402
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs, run_table, table_from_evals  # noqa: E402
-from mpg_agents.evaluation.tables import TRACKS  # noqa: E402
+from mpg_agents.evaluation.tables import TABLE_TRACKS  # noqa: E402
 from mpg_agents.evaluation.track_cells import CellRequest, cell_file_name  # noqa: E402
 from mpg_agents.evaluation.track_table import make_track_table  # noqa: E402
 
-STRICT_TRACKS = tuple(name for name, track in TRACKS.items() if track.strict_columns)
+STRICT_TRACKS = tuple(name for name, track in TABLE_TRACKS.items() if track.strict_columns)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--track", choices=tuple(TRACKS), default="table1", help="; ".join(f"{name}: {t.env_id}" for name, t in TRACKS.items()))
+    parser.add_argument("--track", choices=tuple(TABLE_TRACKS), default="table1", help="; ".join(f"{name}: {t.env_id}" for name, t in TABLE_TRACKS.items()))
     parser.add_argument("--tracks", nargs="+", choices=STRICT_TRACKS, help="the track table over these tracks, cell by cell in OUT/<track>/cells/ (resumes)")
     parser.add_argument("--reuse", help="with --tracks: a TOML file of [[cell]] entries recorded by earlier runs")
     parser.add_argument("--run-policies", nargs="+", metavar="POLICY", help="with --tracks: run only these policies' missing cells")
@@ -69,7 +69,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         help="with --tracks: run each missing cell as blocks of K seeds, each kept as it ends (a stopped cell resumes at its first missing block)",
     )
     parser.add_argument("--no-run", action="store_true", help="with --tracks: run nothing, make the table of the cells recorded")
-    parser.add_argument("--policies", nargs="+", help=f"{' | '.join(BUILTIN)} or checkpoint paths (default: oracle grasp-only random shipped)")
+    parser.add_argument("--policies", nargs="+", help=f"{' | '.join(BUILTIN)} or checkpoint paths (default: oracle pixel-heuristic random shipped)")
     parser.add_argument("--policy-file", help="a TOML file of [[policy]] entries (label, policy, settings) instead of --policies")
     parser.add_argument("--episodes", type=int, default=100, help="per cell")
     parser.add_argument("--objects", type=int, nargs="+", default=[15, 30])
@@ -108,13 +108,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
         parser.error("--speedup measures a --track run, not --tracks")
     try:
         args.specs = read_policy_specs(args.policy_file) if args.policy_file else [
-            PolicySpec(p, p) for p in (args.policies or ["oracle", "grasp-only", "random", "shipped"])
+            PolicySpec(p, p) for p in (args.policies or ["oracle", "pixel-heuristic", "random", "shipped"])
         ]
         args.env_options = parse_env_options(args.env_option)
     except ValueError as exc:
         parser.error(str(exc))
     for spec in args.specs:
-        if spec.policy not in BUILTIN and not Path(spec.policy).is_file():
+        if not is_builtin(spec.policy) and not Path(spec.policy).is_file():
             parser.error(f"policy {spec.label!r}: {spec.policy!r} is neither one of {BUILTIN} nor a checkpoint file")
     if args.run_policies:
         unknown = set(args.run_policies) - {spec.policy for spec in args.specs}
@@ -175,7 +175,7 @@ def main(argv: list[str] | None = None) -> dict:
     def on_record(job, record) -> None:
         print(f"  [{Path(job.policy).name}, {job.num_objects} obj.] {record.describe()}", flush=True)
 
-    env_id = TRACKS[args.track].env_id
+    env_id = TABLE_TRACKS[args.track].env_id
     print(f"{args.track}: {len(args.specs) * len(args.objects)} cells x {args.episodes} episodes on {env_id}, seeds {args.seed}..{args.seed + args.episodes - 1}", flush=True)
     report, text, markdown = run_table(
         args.track, args.specs, args.objects, args.episodes, args.seed, args.workers, args.ray_address,

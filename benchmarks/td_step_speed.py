@@ -71,7 +71,7 @@ def record(path: str, transitions: int, seed: int) -> None:
     import gymnasium as gym
 
     import mpg_envs  # noqa: F401
-    from mpg_agents.acting.heuristics import heuristic_grasp_action
+    from mpg_envs.policies.pixel_heuristic import heuristic_grasp_action
 
     env = gym.make("MPG-Stage5-v0")
     space = env.unwrapped.action_space

@@ -4,7 +4,7 @@ Trains SB3's PPO and DQN with ``CnnPolicy`` through the standard wrappers,
 ``ImageObservation(GridAction(env))`` (an 84 x 84 x 5 image; 6,272 grid actions: 8 x 8
 pixel cells x 8 grasp angles), for a fixed budget of env steps on a ``SubprocVecEnv``
 (``--envs`` workers, one torch/OpenMP thread and ``raycast_threads=1`` each). Then it
-evaluates each trained model, and the built-in ``random``, ``grasp-only`` and ``shipped``
+evaluates each trained model, and the built-in ``random``, ``pixel-heuristic`` and ``shipped``
 (MPGNet) policies on the raw env, with ``mpg_agents.evaluation.evaluate.evaluate``: the same
 episodes for all, seeded ``--eval-seed + k`` (held out: training envs draw scenes from
 ``--seed + worker``).
@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 
 ENV_ID = "MPG-Stage2-v0"
 ALGOS = ("ppo", "dqn")
-BASELINES = ("random", "grasp-only", "shipped")
+BASELINES = ("random", "pixel-heuristic", "shipped")
 
 
 # ----------------------------------------------------------------------------- envs
@@ -286,7 +286,7 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", default="runs/third_party", help="folder for the trained models")
     args = parser.parse_args(argv)
     algos = [a for a in args.algos.split(",") if a]
-    baselines = [b for b in args.baselines.split(",") if b]
+    baselines = ["pixel-heuristic" if b == "grasp-only" else b for b in args.baselines.split(",") if b]  # its former name
     bad = [a for a in algos if a not in ALGOS] + [b for b in baselines if b not in BASELINES]
     if bad or args.steps < 1 or args.envs < 1 or args.episodes < 1:
         parser.error(f"--steps, --envs, --episodes must be >= 1; algorithms from {ALGOS}, baselines from {BASELINES} (got {bad})")

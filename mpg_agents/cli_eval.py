@@ -30,7 +30,7 @@ from mpg_agents.cli_input import (
 from mpg_agents.cli_net_settings import add_net_setting_arguments, net_settings
 from mpg_agents.evaluation.env_options import parse_env_options
 from mpg_agents.evaluation.failures import NothingFinished
-from mpg_agents.evaluation.policy_zoo import BUILTIN
+from mpg_agents.evaluation.policy_zoo import BUILTIN, is_builtin
 from mpg_envs.files import WriteFailed, write_text_whole
 
 # Start-up time: the evaluation (torch, the simulation, scipy) is imported inside the functions,
@@ -43,9 +43,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="mpg-eval", description="Evaluate a policy with the paper's metrics (task success within 10 motions, motions)."
     )
-    parser.add_argument(
-        "--policy", required=True, help="a checkpoint (.safetensors), or oracle | random | grasp-only | shipped"
-    )
+    parser.add_argument("--policy", required=True, help=f"a checkpoint (.safetensors), or {' | '.join(BUILTIN)}")
     parser.add_argument("--env", default="MPG-Occluded-v0")
     parser.add_argument("--num-objects", type=int)
     parser.add_argument("--episodes", type=int, default=50)
@@ -109,11 +107,11 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         check_output(
             args.json,
             "--json",
-            {"the --policy checkpoint": None if args.policy in BUILTIN else args.policy, "the --cases file": args.cases},
+            {"the --policy checkpoint": None if is_builtin(args.policy) else args.policy, "the --cases file": args.cases},
         )
         if args.device is not None:
             resolve_device(args.device)  # CUDA asked for where there is none: say so before any episode
-        if args.policy not in BUILTIN:
+        if not is_builtin(args.policy):
             check_checkpoint(args.policy)
         if args.episodes < 1:
             raise UsageError(f"--episodes must be >= 1, got {args.episodes}")

@@ -28,10 +28,11 @@ import numpy as np
 import mpg_envs  # noqa: F401  (registers the envs; picks EGL/OSMesa on headless Linux)
 from mpg_agents.acting.device import DEVICES, resolve_device
 from mpg_agents.cli_input import UsageError, check_checkpoint, check_env_id, fail
-from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
+from mpg_agents.evaluation.policy_zoo import BUILTIN, is_builtin, make_policy
 from mpg_envs.files import WriteFailed, check_folder_writable, write_bytes_whole
 from mpg_envs.grid.primitive_specs import MOVE
 from mpg_envs.perception.render import RenderUnavailableError
+from mpg_envs.policies.registry import scripted_baseline_names
 from mpg_envs.threads import set_torch_threads
 
 DEMO_ENV = "MPG-OccludedHard-v0"
@@ -134,7 +135,7 @@ def check_arguments(args: argparse.Namespace) -> str:
     if args.seed < 0:
         raise UsageError(f"--seed must be >= 0, got {args.seed}")
     check_env_id(args.env)
-    if args.policy not in BUILTIN:
+    if not is_builtin(args.policy):
         if not Path(args.policy).exists():
             raise UsageError(
                 f"unknown policy {args.policy!r}; valid: {', '.join(BUILTIN)} or the path of a .safetensors checkpoint"
@@ -152,8 +153,9 @@ def check_arguments(args: argparse.Namespace) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="MPG demo: a policy on a few seeded scenes.")
+    scripted = ", ".join(scripted_baseline_names())
     parser.add_argument(
-        "--policy", default="shipped", help="shipped (the trained checkpoint), oracle, random, grasp-only or a checkpoint path"
+        "--policy", default="shipped", help=f"shipped (the trained checkpoint), {scripted} or a checkpoint path"
     )
     parser.add_argument(
         "--env",

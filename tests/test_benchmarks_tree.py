@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from mpg_agents.evaluation.policy_zoo import BUILTIN
+from mpg_agents.evaluation.policy_zoo import is_builtin
 from mpg_agents.evaluation.table_runs import read_policy_specs
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -68,7 +68,7 @@ def test_every_result_file_is_in_the_index():
 @pytest.mark.parametrize("name", ["tables.toml", "tracks.toml", "finding.toml"])
 def test_every_net_a_table_evaluates_is_in_the_repository(name):
     specs = read_policy_specs(ROOT / "benchmarks" / name)
-    assert all(s.policy in BUILTIN or (ROOT / s.policy).is_file() for s in specs), name
+    assert all(is_builtin(s.policy) or (ROOT / s.policy).is_file() for s in specs), name
 
 
 def test_the_results_tables_nets_live_in_the_checkpoints_folder():
@@ -76,5 +76,5 @@ def test_the_results_tables_nets_live_in_the_checkpoints_folder():
     # cells name by their path under benchmarks/results/ (tracks.toml's).
     pinned = {s.policy for s in read_policy_specs(ROOT / "benchmarks" / "tracks.toml")}
     for spec in read_policy_specs(ROOT / "benchmarks" / "tables.toml"):
-        if spec.policy not in BUILTIN and spec.policy not in pinned:
+        if not is_builtin(spec.policy) and spec.policy not in pinned:
             assert spec.policy.startswith("benchmarks/checkpoints/"), spec.policy

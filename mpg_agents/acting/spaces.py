@@ -12,8 +12,9 @@ import numpy as np
 from gymnasium import spaces
 
 from mpg_agents.network.finger_geometry import FingerGeometry
-from mpg_envs.grid.actions import PRIMITIVES, check_primitives
+from mpg_envs.grid.actions import HEIGHTMAP_SIZE, PRIMITIVES, check_primitives
 from mpg_envs.grid.primitive_specs import GRASP, PUSH
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 
 def finger_geometry(env: gym.Env | None = None) -> FingerGeometry:
@@ -56,10 +57,12 @@ def resolve_primitives(action_space: spaces.Space, primitives: Sequence[str] | N
         return found
     if primitives is not None:
         return check_primitives(primitives)
-    per = 16 * 224 * 224
+    per = NUM_ROTATIONS * HEIGHTMAP_SIZE * HEIGHTMAP_SIZE  # one primitive's actions on the default grid
     n = int(action_space.n)
     if n % per:
-        raise ValueError(f"action space Discrete({n}) is not P * 16 * 224 * 224 pixel actions")
+        raise ValueError(
+            f"action space Discrete({n}) is not P * {NUM_ROTATIONS} * {HEIGHTMAP_SIZE} * {HEIGHTMAP_SIZE} pixel actions"
+        )
     count = n // per
     if count == 3:
         return PRIMITIVES

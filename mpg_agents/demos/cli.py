@@ -22,7 +22,7 @@ from mpg_agents.demos.dataset import (
 )
 from mpg_agents.demos.recording import DemoJob, record_episodes
 from mpg_agents.evaluation.env_options import parse_env_options
-from mpg_agents.evaluation.policy_zoo import BUILTIN
+from mpg_agents.evaluation.policy_zoo import BUILTIN, is_builtin
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -36,7 +36,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--policy",
         required=True,
-        help="oracle, random, grasp-only, shipped, or an MPGNet checkpoint (.safetensors), as mpg-eval takes them",
+        help=f"{', '.join(BUILTIN)}, or an MPGNet checkpoint (.safetensors), as mpg-eval takes them",
     )
     parser.add_argument("--env", required=True, help="an env or track id, e.g. MPG-OccludedHard-v0")
     parser.add_argument("--episodes", type=int, required=True)
@@ -88,7 +88,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise UsageError(f"--workers must be >= 1, got {args.workers}")
         if args.num_objects is not None and args.num_objects < 1:
             raise UsageError(f"--num-objects must be >= 1, got {args.num_objects}")
-        if args.policy not in BUILTIN:
+        if not is_builtin(args.policy):
             check_checkpoint(args.policy)
         check_new_folder(args.out)
         check_dataset_id(args.dataset_id if args.dataset_id is not None else default_dataset_id(args.out))

@@ -34,7 +34,7 @@ import mpg_envs  # registers the envs in a fresh worker
 from mpg_agents.evaluation.eval_result import EpisodeRecord, EvalResult
 from mpg_agents.evaluation.evaluate import env_id_of, registered_options, run_episodes, summarise
 from mpg_agents.evaluation.failures import EpisodeFailure
-from mpg_agents.evaluation.policy_zoo import BUILTIN, make_policy
+from mpg_agents.evaluation.policy_zoo import is_builtin, make_policy
 from mpg_envs.threads import WORKER_THREAD_ENV as THREAD_ENV
 from mpg_envs.threads import one_thread_children, worker_init
 
@@ -56,7 +56,7 @@ class EvalJob:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
         if self.num_objects is not None and self.num_objects < 1:
             raise ValueError(f"num_objects must be >= 1, got {self.num_objects}")
-        if self.policy not in BUILTIN and Path(self.policy).exists():
+        if not is_builtin(self.policy) and Path(self.policy).exists():
             # workers may start in another directory
             object.__setattr__(self, "policy", str(Path(self.policy).resolve()))
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from mpg_agents.evaluation.tables import TRACKS
+from mpg_agents.evaluation.tables import TABLE_TRACKS
 
 FINDING_COLUMNS = ("shown at reset", "ever seen", "motions to first sight", "look-alike grasps/ep.", "other mis-picks/ep.")
 """The columns of each object count, in order."""
@@ -43,11 +43,11 @@ def finding_rows(
     """Header and rows: one row per (track, policy, object count) whose cell reports finding
     (``cells`` maps (track, policy label, objects) to
     :func:`~mpg_agents.evaluation.tables.cell_json` data); tracks, policies and object counts in
-    the order given. Raises ``ValueError`` for a track :data:`~mpg_agents.evaluation.tables.TRACKS`
+    the order given. Raises ``ValueError`` for a track :data:`~mpg_agents.evaluation.tables.TABLE_TRACKS`
     does not have."""
-    unknown = [name for name in tracks if name not in TRACKS]
+    unknown = [name for name in tracks if name not in TABLE_TRACKS]
     if unknown:
-        raise ValueError(f"unknown tracks {unknown}; valid: {list(TRACKS)}")
+        raise ValueError(f"unknown tracks {unknown}; valid: {list(TABLE_TRACKS)}")
     header = ["Track", "Method", "objects", *FINDING_COLUMNS]
     body = []
     for name in tracks:
@@ -55,6 +55,6 @@ def finding_rows(
             for n in objects:
                 cell = cells.get((name, policy, n))
                 if cell and cell.get("finding", {}).get("episodes"):
-                    body.append([f"{TRACKS[name].scenes} ({TRACKS[name].env_id})", policy, str(n)])
+                    body.append([f"{TABLE_TRACKS[name].scenes} ({TABLE_TRACKS[name].env_id})", policy, str(n)])
                     body[-1] += finding_cells_text(cell["finding"])
     return header, body

@@ -1,16 +1,15 @@
-"""The policies ``mpg-eval``, the demo and the benchmarks ask for by name: a checkpoint or a
-built-in baseline (:func:`make_policy`). The learned baselines of Table I are stage tables
-(:data:`mpg_agents.learning.stage_variants.BASELINES`); once trained they load here as checkpoints.
+"""The policies ``mpg-eval``, the demo and the benchmarks ask for by name: a scripted baseline,
+the shipped net or a checkpoint (:func:`make_policy`). The learned baselines of Table I are stage
+tables (:data:`mpg_agents.learning.stage_variants.BASELINES`); once trained they load here as
+checkpoints.
 
 Every policy is a :class:`mpg_envs.policies.policy.Policy`: ``name``, ``reset()`` at each episode's
 start and ``act(obs) -> flat action``. Network policies also have ``save_qmaps(path, obs)`` and
 ``primitives`` (what they act with).
 
-- ``oracle``: :class:`mpg_envs.policies.oracle.OraclePolicy` (reads the simulator: upper baseline).
-- ``random``: uniform over the whole action space (seeded).
-- ``grasp-only``: the pixel-only heuristic grasp at the target mask, every step.
-- ``matcher``: :class:`mpg_envs.policies.exemplar_matcher.ExemplarMatcher`, for envs that name the
-  target by an exemplar (``target_spec="exemplar"``): finds it by colour and shape, uncovers it, grasps it.
+- the scripted baselines, by the names of their one registry
+  (:mod:`mpg_envs.policies.registry`: ``oracle``, ``random``, ``pixel-heuristic`` (formerly
+  ``grasp-only``, still accepted), ``matcher``); they need no torch and ship with the envs.
 - ``shipped``: the move-push-grasp MPGNet trained on this project's CPU (Stages I-V, Stage V
   under strict retrieval) that ships in ``mpg_agents/checkpoints/`` (:data:`SHIPPED_CHECKPOINT`,
   its model card beside it).
@@ -33,15 +32,23 @@ import gymnasium as gym
 import numpy as np
 
 from mpg_agents.acting.device import resolve_device
-from mpg_agents.acting.heuristics import heuristic_grasp_action
 from mpg_agents.acting.spaces import finger_geometry
 from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.policies.action_memory import ActionMemory, RepeatRule
-from mpg_envs.policies.exemplar_matcher import ExemplarMatcher
-from mpg_envs.policies.oracle import OraclePolicy
+from mpg_envs.policies.policy import check_has_mask
+from mpg_envs.policies.registry import baseline_name, make_baseline, scripted_baseline_names
 
-BUILTIN = ("oracle", "random", "grasp-only", "shipped", "matcher")
 SHIPPED_CHECKPOINT = "mpgnet_small.safetensors"
+LEARNED = ("shipped",)
+"""The learned policies by name (beside a checkpoint's path)."""
+BUILTIN = (*scripted_baseline_names(), *LEARNED)
+"""Every policy name that is no path: the scripted baselines' (their registry owns them), then the learned ones."""
+
+
+def is_builtin(name: str) -> bool:
+    """Whether ``name`` names a built-in policy (a scripted baseline, by its name or a former one, or
+    a learned one), not a checkpoint path."""
+    return name in LEARNED or baseline_name(name) is not None
 
 
 def shipped_checkpoint() -> Path:
@@ -50,46 +57,6 @@ def shipped_checkpoint() -> Path:
     if not path.is_file():
         raise FileNotFoundError(f"the shipped checkpoint {path} is missing from this installation")
     return path
-
-
-class RandomBaseline:
-    """Uniform over the whole action space."""
-
-    def __init__(self, env: gym.Env, seed: int = 0):
-        self.name = "random"
-        space: Any = env.action_space  # a Discrete
-        self._space: gym.spaces.Discrete = gym.spaces.Discrete(int(space.n), seed=seed)
-
-    def seed(self, seed: int) -> None:
-        """Restart the action stream; evaluation calls it with each episode's seed."""
-        self._space.seed(seed)
-
-    def reset(self) -> None:
-        """Nothing to forget between episodes."""
-
-    def act(self, obs: Mapping[str, np.ndarray]) -> int:
-        return int(self._space.sample())
-
-
-class GraspOnlyBaseline:
-    """The pixel-only heuristic grasp at the target every step (random when no target is visible)."""
-
-    def __init__(self, env: gym.Env):
-        check_has_mask(env, "grasp-only")
-        self.name = "grasp-only"
-        unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
-        self.primitives = tuple(unwrapped.primitives)
-        if GRASP not in self.primitives:
-            raise ValueError(f"grasp-only needs an env that allows grasping; this one allows {self.primitives}")
-        self._space = env.action_space
-
-    def reset(self) -> None:
-        """Nothing to forget between episodes."""
-
-    def act(self, obs: Mapping[str, np.ndarray]) -> int:
-        if not np.asarray(obs["mask"]).any():
-            return int(self._space.sample())  # no target visible: nothing better to do
-        return heuristic_grasp_action(obs, self.primitives)
 
 
 class NetworkPolicy:
@@ -238,26 +205,11 @@ def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
     return f" ({used[0]}-only net)" if len(used) == 1 else f" ({'+'.join(used)} net)"
 
 
-def check_has_mask(env: gym.Env, policy: str) -> None:
-    """Raise ``ValueError`` when ``env``'s observations have no target ``mask`` (an env that names
-    its target by an exemplar), which ``policy`` needs."""
-    if "mask" not in getattr(env.observation_space, "spaces", {}):
-        raise ValueError(
-            f"{policy} needs the target's mask in the observation; this env names the target by an exemplar "
-            "(target_spec='exemplar'): use target_spec='mask' or 'visible', or the matcher, oracle or random policy"
-        )
-
-
 def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
-    """A policy by name (see the module docstring) for ``env``."""
-    if name == "oracle":
-        return OraclePolicy(env)
-    if name == "random":
-        return RandomBaseline(env, seed)
-    if name == "grasp-only":
-        return GraspOnlyBaseline(env)
-    if name == "matcher":
-        return ExemplarMatcher(env)
+    """A policy by name (see the module docstring) for ``env``; ``seed`` seeds a scripted baseline,
+    ``kwargs`` are a network policy's settings (:class:`NetworkPolicy`)."""
+    if baseline_name(name) is not None:  # the scripted baselines take no network settings
+        return make_baseline(name, env, seed)
     if name == "shipped":
         return NetworkPolicy(shipped_checkpoint(), env, name="shipped:" + SHIPPED_CHECKPOINT, **kwargs)
     path = Path(name)

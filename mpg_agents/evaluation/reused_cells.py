@@ -23,18 +23,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mpg_agents.evaluation.policy_zoo import BUILTIN
+from mpg_agents.evaluation.policy_zoo import is_builtin
 from mpg_agents.evaluation.table_runs import merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json
-from mpg_agents.evaluation.track_cells import CellMismatchError, CellRequest
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json
+from mpg_agents.evaluation.track_cells import CellMismatchError, CellRequest, compared_entry
+from mpg_envs.policies.registry import baseline_name
 from mpg_envs.settings_fields import read_settings_file
 
 
 def _names_policy(name: str, policy: str) -> bool:
     """Whether a recorded evaluation's policy name is ``policy``'s: a built-in's keyword
-    (``shipped:<file>`` for the shipped net), else the checkpoint's file name first."""
-    if policy in BUILTIN:
-        return name == policy or name.startswith(f"{policy}:")
+    (``shipped:<file>`` for the shipped net; a scripted baseline's former name is its name), else
+    the checkpoint's file name first."""
+    if is_builtin(policy):
+        keyword = name.split(":")[0]
+        return (baseline_name(keyword) or keyword) == (baseline_name(policy) or policy)
     return name.split(" ")[0] == Path(policy).name
 
 
@@ -43,8 +46,8 @@ def _ran_policy(files: list[str], name: str, request: CellRequest) -> bool:
     entry they ran (its label aside), other evaluations by their policy's name."""
     entries = [json.loads(Path(f).read_text()).get("table_policy") for f in files]
     if all(entry is not None for entry in entries):
-        asked = {k: v for k, v in request.policy_entry().items() if k != "label"}
-        return all({k: v for k, v in entry.items() if k != "label"} == asked for entry in entries)
+        asked = compared_entry({k: v for k, v in request.policy_entry().items() if k != "label"})
+        return all(compared_entry({k: v for k, v in entry.items() if k != "label"}) == asked for entry in entries)
     return _names_policy(name, request.spec.policy)
 
 
@@ -97,7 +100,7 @@ class ReusedCell:
         }
         if found != json.loads(json.dumps(asked)):
             raise CellMismatchError(f"{path} ran {found}, the table asks {asked}")
-        if report.get("policies", {}).get(self.label) != entry:
+        if compared_entry(report.get("policies", {}).get(self.label)) != compared_entry(entry):
             raise CellMismatchError(
                 f"{path} ran label {self.label!r} as "
                 f"{report.get('policies', {}).get(self.label)}, the policy file says {entry}"
@@ -123,8 +126,8 @@ def read_reused(path: str | Path) -> dict[tuple[str, str, int], ReusedCell]:
         where = f"reuse file {str(path)!r}, cell {k}"
         if not isinstance(entry, dict) or not {"track", "label", "objects"} <= set(entry):
             raise ValueError(f"{where}: needs 'track', 'label' and 'objects'")
-        if entry["track"] not in TRACKS:
-            raise ValueError(f"{where}: unknown track {entry['track']!r}; valid: {', '.join(TRACKS)}")
+        if entry["track"] not in TABLE_TRACKS:
+            raise ValueError(f"{where}: unknown track {entry['track']!r}; valid: {', '.join(TABLE_TRACKS)}")
         if ("evals" in entry) == ("table" in entry):
             raise ValueError(f"{where}: give one of 'evals' (a glob of mpg-eval JSON files) and 'table' (a tables.py report)")
         unknown = set(entry) - {"track", "label", "objects", "evals", "table"}

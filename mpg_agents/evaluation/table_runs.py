@@ -30,7 +30,7 @@ from mpg_agents.evaluation.eval_result import EpisodeRecord, EvalResult
 from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
 from mpg_agents.evaluation.evaluate import summarise
 from mpg_agents.evaluation.motion_log import MotionRecord
-from mpg_agents.evaluation.tables import TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
+from mpg_agents.evaluation.tables import TABLE_TRACKS, format_markdown, format_text, paper_json, rows_json, table_rows
 from mpg_envs.settings_fields import read_settings_file
 from mpg_envs.simulation.mujoco_version import MUJOCO_KEY
 
@@ -77,12 +77,12 @@ def run_table(
     """Every cell of ``track`` for ``policies`` at ``objects``: the report as data (``cells``
     holds each cell's full evaluation, ``mpg-eval --json``'s format, keyed ``"label|objects"``),
     the table as text and as Markdown."""
-    if track not in TRACKS:
-        raise ValueError(f"unknown track {track!r}; valid: {', '.join(TRACKS)}")
+    if track not in TABLE_TRACKS:
+        raise ValueError(f"unknown track {track!r}; valid: {', '.join(TABLE_TRACKS)}")
     labels = [p.label for p in policies]
     if len(set(labels)) != len(labels):
         raise ValueError(f"policy labels must differ, got {labels}")
-    spec = TRACKS[track]
+    spec = TABLE_TRACKS[track]
     env_kwargs = tuple(sorted((env_options or {}).items()))
     cells = [(p, n) for p in policies for n in objects]
     jobs = [EvalJob(p.policy, spec.env_id, episodes, seed, n, p.settings, env_kwargs) for p, n in cells]
@@ -140,7 +140,7 @@ def table_from_evals(track: str, cells: Mapping[str, Sequence[str | Path]], obje
     """A table of ``track`` at ``objects`` objects from recorded evaluations: ``cells`` maps a
     row label to the ``mpg-eval --json`` files of its seed blocks. Returns the report, the text
     and the Markdown table, as :func:`run_table` does."""
-    spec = TRACKS[track]
+    spec = TABLE_TRACKS[track]
     results = {(label, objects): merged_result(paths) for label, paths in cells.items()}
     for (label, _), result in results.items():
         if result.env_id != spec.env_id or result.num_objects != objects:

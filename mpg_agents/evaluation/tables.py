@@ -1,6 +1,8 @@
 """The results tables: cells (policy, object count) of measured metrics, per track.
 
-A track (:data:`TRACKS`) is an env and what its table shows. ``table1`` is the paper's
+A table track (:class:`TableTrack`, by name in :data:`TABLE_TRACKS`) is a registered env id (a
+stage's, or a track id of :data:`mpg_envs.tasks.tracks.TRACKS`) and what its table shows; adding
+a track is one entry there (the env id) and one here (the table). ``table1`` is the paper's
 Table I on ``MPG-Occluded-v0``: the paper's rows above the measured ones, task success rate
 per object count, then average motion number per object count. ``hard`` is the strict
 retrieval track ``MPG-OccludedHard-v0`` (target at most 30% visible, a mis-pick fails the
@@ -31,8 +33,9 @@ ENV_ID = "MPG-Occluded-v0"
 
 
 @dataclass(frozen=True)
-class Track:
-    """One results table: the env its cells run on and whether the paper's rows head it."""
+class TableTrack:
+    """One results table: the registered env id its cells run on, whether the paper's rows head it,
+    its columns, what its scenes are, and env keywords beside the id's own."""
 
     name: str
     env_id: str
@@ -42,20 +45,20 @@ class Track:
     env_options: tuple[tuple[str, Any], ...] = ()  # env keywords of the track beside its env id's own
 
 
-TRACKS: dict[str, Track] = {
-    "table1": Track("table1", ENV_ID, paper_rows=True, strict_columns=False, scenes="blocks, Table I's rules"),
-    "hard": Track("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True, scenes="blocks"),
-    "hard-novel": Track(
+TABLE_TRACKS: dict[str, TableTrack] = {
+    "table1": TableTrack("table1", ENV_ID, paper_rows=True, strict_columns=False, scenes="blocks, Table I's rules"),
+    "hard": TableTrack("hard", "MPG-OccludedHard-v0", paper_rows=False, strict_columns=True, scenes="blocks"),
+    "hard-novel": TableTrack(
         "hard-novel", "MPG-OccludedHardNovel-v0", paper_rows=False, strict_columns=True, scenes="unseen shapes"
     ),
-    "hard-camera": Track(
+    "hard-camera": TableTrack(
         "hard-camera", "MPG-OccludedHardCamera-v0", paper_rows=False, strict_columns=True, scenes="camera images of blocks"
     ),
     # Finding the target: the same scenes, the target named by its visible pixels or by an exemplar.
-    "hard-visible": Track(
+    "hard-visible": TableTrack(
         "hard-visible", "MPG-OccludedHardVisible-v0", paper_rows=False, strict_columns=True, scenes="blocks, visible mask"
     ),
-    "hard-novel-visible": Track(
+    "hard-novel-visible": TableTrack(
         "hard-novel-visible",
         "MPG-OccludedHardNovel-v0",
         paper_rows=False,
@@ -63,7 +66,7 @@ TRACKS: dict[str, Track] = {
         scenes="unseen shapes, visible mask",
         env_options=(("target_spec", "visible"),),
     ),
-    "hard-camera-visible": Track(
+    "hard-camera-visible": TableTrack(
         "hard-camera-visible",
         "MPG-OccludedHardCamera-v0",
         paper_rows=False,
@@ -71,17 +74,17 @@ TRACKS: dict[str, Track] = {
         scenes="camera images of blocks, visible mask",
         env_options=(("target_spec", "visible"),),
     ),
-    "hard-exemplar": Track(
+    "hard-exemplar": TableTrack(
         "hard-exemplar", "MPG-OccludedHardExemplar-v0", paper_rows=False, strict_columns=True, scenes="blocks, exemplar"
     ),
-    "hard-novel-exemplar": Track(
+    "hard-novel-exemplar": TableTrack(
         "hard-novel-exemplar",
         "MPG-OccludedHardNovelExemplar-v0",
         paper_rows=False,
         strict_columns=True,
         scenes="unseen shapes, exemplar",
     ),
-    "hard-camera-exemplar": Track(
+    "hard-camera-exemplar": TableTrack(
         "hard-camera-exemplar",
         "MPG-OccludedHardCameraExemplar-v0",
         paper_rows=False,
@@ -89,7 +92,7 @@ TRACKS: dict[str, Track] = {
         scenes="camera images of blocks, exemplar",
     ),
 }
-"""The tracks by name: the paper's Table I, the strict, hidden-target hard track, and the
+"""The table tracks by name: the paper's Table I, the strict, hidden-target hard track, and the
 hard track on unseen objects and on camera observations, and each of those three with the target
 named by its visible pixels (``visible``) or by an exemplar image (``exemplar``)."""
 
@@ -215,7 +218,7 @@ def table_rows(
     policies: Sequence[str],
     objects: Sequence[int],
     cells: Mapping[tuple[str, int], EvalResult],
-    track: Track = TRACKS["table1"],
+    track: TableTrack = TABLE_TRACKS["table1"],
     labels: Mapping[str, str] | None = None,
 ) -> tuple[list[str], list[list[str]], int]:
     """Header, body rows (the paper's first on a track that shows them, then the measured
@@ -256,15 +259,15 @@ def tracks_rows(
     major versions."""
     check_table_mujoco(cells)
     for name in tracks:
-        if name not in TRACKS or not TRACKS[name].strict_columns:
+        if name not in TABLE_TRACKS or not TABLE_TRACKS[name].strict_columns:
             raise ValueError(
                 f"tracks_rows lays out strict tracks only, got {name!r}; "
-                f"valid: {[t for t, s in TRACKS.items() if s.strict_columns]}"
+                f"valid: {[t for t, s in TABLE_TRACKS.items() if s.strict_columns]}"
             )
     header = ["Track", "Method"] + _header(objects, True)
     body = []
     for name in tracks:
-        track = TRACKS[name]
+        track = TABLE_TRACKS[name]
         for policy in policies:
             mine = {n: cells[(name, policy, n)] for n in objects if (name, policy, n) in cells}
             if mine:
@@ -284,7 +287,7 @@ def tracks_success_rows(
     major versions raise :class:`~mpg_envs.simulation.mujoco_version.MuJoCoVersionError`."""
     check_table_mujoco(cells)
     columns = [(name, n) for name in tracks for n in objects if any((name, p, n) in cells for p in policies)]
-    header = ["Method"] + [f"{TRACKS[name].scenes}, {n} obj." for name, n in columns]
+    header = ["Method"] + [f"{TABLE_TRACKS[name].scenes}, {n} obj." for name, n in columns]
     body = []
     for policy in policies:
         row = [_success_motions_text(cells[(name, policy, n)]) if (name, policy, n) in cells else "-" for name, n in columns]

@@ -20,7 +20,16 @@ from typing import Any
 from mpg_agents.evaluation.eval_result import EvalResult
 from mpg_agents.evaluation.evaluate import registered_options
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json
+from mpg_envs.policies.registry import baseline_name
+
+
+def compared_entry(entry: Any) -> Any:
+    """A policy entry as it is compared with another: a scripted baseline's former name read as
+    its name (an entry recorded with ``grasp-only`` is one of ``pixel-heuristic``); anything else as it is."""
+    if not isinstance(entry, dict) or not isinstance(entry.get("policy"), str):
+        return entry
+    return {**entry, "policy": baseline_name(entry["policy"]) or entry["policy"]}
 
 
 class CellMismatchError(ValueError):
@@ -46,7 +55,7 @@ class CellRequest:
 
     @property
     def env_id(self) -> str:
-        return TRACKS[self.track].env_id
+        return TABLE_TRACKS[self.track].env_id
 
     def policy_entry(self) -> dict[str, Any]:
         """The policy-file entry, as a cell file records it."""
@@ -59,7 +68,7 @@ class CellRequest:
     @property
     def all_env_options(self) -> tuple[tuple[str, Any], ...]:
         """The track's env keywords, then the extra ones (an extra one wins)."""
-        return tuple({**dict(TRACKS[self.track].env_options), **dict(self.env_options)}.items())
+        return tuple({**dict(TABLE_TRACKS[self.track].env_options), **dict(self.env_options)}.items())
 
     def check(self, result: EvalResult, source: str) -> None:
         """Raise :class:`CellMismatchError` unless ``result`` is this cell's evaluation (env,
@@ -84,7 +93,7 @@ class CellRequest:
 def read_cell_file(request: CellRequest, path: Path) -> dict[str, Any]:
     """A cell file this module wrote, checked against ``request`` (policy entry included)."""
     data = json.loads(path.read_text())
-    if data.get("table_policy") != request.policy_entry():
+    if compared_entry(data.get("table_policy")) != compared_entry(request.policy_entry()):
         raise CellMismatchError(
             f"{path} ran policy entry {data.get('table_policy')}, the policy file now says {request.policy_entry()}: "
             "delete the file to run the cell again, or restore the entry"

@@ -30,12 +30,13 @@ from mpg_agents.evaluation.eval_runner import EvalJob, evaluate_jobs
 from mpg_agents.evaluation.finding_table import finding_rows
 from mpg_agents.evaluation.reused_cells import ReusedCell
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json, format_markdown, tracks_rows, tracks_success_rows
 from mpg_agents.evaluation.track_cells import (
     CellMismatchError,
     CellRequest,
     block_folder,
     cell_file_name,
+    compared_entry,
     read_cell_file,
     write_cell_file,
 )
@@ -107,7 +108,7 @@ def _run_in_blocks(
             result, wall = _run_seeds(request, request.seed + start, n, workers, ray_address, backend, on_record)
             write_cell_file(request, result, block)
             seconds += wall
-        elif json.loads(block.read_text()).get("table_policy") != request.policy_entry():
+        elif compared_entry(json.loads(block.read_text()).get("table_policy")) != compared_entry(request.policy_entry()):
             raise CellMismatchError(
                 f"{block} ran another policy entry than {request.policy_entry()}: delete {folder} to run the cell again"
             )
@@ -155,9 +156,9 @@ def make_track_table(
     if len(set(labels)) != len(labels):
         raise ValueError(f"policy labels must differ, got {labels}")
     for name in tracks:
-        if name not in TRACKS or not TRACKS[name].strict_columns:
+        if name not in TABLE_TRACKS or not TABLE_TRACKS[name].strict_columns:
             raise ValueError(
-                f"unknown or non-strict track {name!r}; valid: {[t for t, s in TRACKS.items() if s.strict_columns]}"
+                f"unknown or non-strict track {name!r}; valid: {[t for t, s in TABLE_TRACKS.items() if s.strict_columns]}"
             )
     reused = dict(reused or {})
     strangers = sorted({label for _, label, _ in reused} - set(labels))
@@ -196,7 +197,7 @@ def make_track_table(
         rows.setdefault(name, {}).setdefault(label, {})[str(n)] = cell
     mujoco_versions = sorted({recorded_mujoco(cell.get("versions")) for cell in cells.values()})
     report = {
-        "tracks": {name: TRACKS[name].env_id for name in tracks},
+        "tracks": {name: TABLE_TRACKS[name].env_id for name in tracks},
         "objects": list(objects),
         "episodes": episodes,
         "seed": seed,
@@ -226,7 +227,7 @@ def make_track_table(
         markdown += (
             "\n\nNot run yet: "
             + "; ".join(
-                f"{TRACKS[name].scenes} ({TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells"
+                f"{TABLE_TRACKS[name].scenes} ({TABLE_TRACKS[name].env_id}), {k} of {len(specs) * len(objects)} cells"
                 for name, k in counts.items()
                 if k
             )

@@ -248,7 +248,11 @@ class Actor:
     agent, exploration, generator and counters themselves.
 
     Args:
-        env, policy, explorer, rng, stage: what it acts with and in.
+        env: the stage's training env it steps.
+        policy: the agent it decides with.
+        explorer: its exploration.
+        rng: its generator (exploration's draws).
+        stage: the training stage it acts in.
         run_seed: the run's seed (the episodes' env seeds, :func:`~mpg_agents.acting.seeds.episode_seed`).
         counts: where its episode's counters are kept.
         index: which actor (in messages and its steps).

@@ -6,7 +6,7 @@
   pixels for a network that grasps only there), push within 25 pixels (5 cm) of it; with the
   ``max_q`` coordination the primitive is random too;
 - after ``heuristic_after_failed_grasps`` failed grasps in a row the next grasp is the
-  pixel-only heuristic grasp (:mod:`mpg_agents.acting.heuristics`), a training aid of the paper.
+  pixel-only heuristic grasp (:mod:`mpg_envs.policies.pixel_heuristic`), a training aid of the paper.
 
 One seeded generator drives every random choice; its state is saved with the run.
 """
@@ -20,11 +20,11 @@ import numpy as np
 import torch
 
 from mpg_agents.acting.decision import Decision
-from mpg_agents.acting.heuristics import heuristic_grasp
 from mpg_agents.network.regions import footprint_top, grasp_pixels
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH
 from mpg_envs.grid.workspace import NUM_ROTATIONS
+from mpg_envs.policies.pixel_heuristic import heuristic_grasp
 
 PUSH_REACH_PX = 25
 """How far (pixels, 2 mm each) around the target's rectangle an exploratory push may start."""

@@ -15,14 +15,15 @@ import numpy as np
 from gymnasium import spaces
 
 from mpg_envs.grid.primitive_specs import PAPER_PRIMITIVES, registered_primitives
-from mpg_envs.grid.workspace import NUM_ROTATIONS, _is_int
+from mpg_envs.grid.workspace import NUM_ROTATIONS, Workspace, _is_int
 
 PRIMITIVES: tuple[str, ...] = PAPER_PRIMITIVES
 """The paper's three primitives, in the fixed order every action space uses (a primitive
 registered later comes after them: :func:`~mpg_envs.grid.primitive_specs.registered_primitives`)."""
 
-HEIGHTMAP_SIZE = 224
-"""Side of the square heightmap (pixels) of the default workspace."""
+HEIGHTMAP_SIZE: int = Workspace().shape[0]
+"""Side of the square heightmap (pixels) of the default workspace: 224, read from its owner,
+:attr:`~mpg_envs.grid.workspace.Workspace.shape`."""
 
 
 class PixelAction(NamedTuple):

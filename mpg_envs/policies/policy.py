@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from typing import Any, Protocol, runtime_checkable
 
-__all__ = ["Policy"]
+import gymnasium as gym
+
+__all__ = ["Policy", "check_has_mask"]
 
 
 @runtime_checkable
@@ -30,3 +32,13 @@ class Policy(Protocol):
     def act(self, obs: Any) -> int:
         """The flat action index to take for observation ``obs``."""
         ...
+
+
+def check_has_mask(env: gym.Env, policy: str) -> None:
+    """Raise ``ValueError`` when ``env``'s observations have no target ``mask`` (an env that names
+    its target by an exemplar), which ``policy`` needs."""
+    if "mask" not in getattr(env.observation_space, "spaces", {}):
+        raise ValueError(
+            f"{policy} needs the target's mask in the observation; this env names the target by an exemplar "
+            "(target_spec='exemplar'): use target_spec='mask' or 'visible', or the matcher, oracle or random policy"
+        )

@@ -22,6 +22,10 @@ WRONG_GRASP_RULES = ("remove", "fail")
 object leaves the scene and the episode goes on) or ``fail`` (strict retrieval: the episode
 ends as a failure, ``end_reason="wrong_object"``)."""
 
+HARD_VISIBLE_MAX = 0.3
+"""The hard track's bound: its target is at most this fraction visible at reset (``OccludedHard``
+and every track built on it); its test scenes were drawn with it."""
+
 END_REASONS = (
     "target_grasped",
     "table_empty",
@@ -119,7 +123,7 @@ STAGES: dict[str, StageSpec] = {
             start_occluded=True,
             min_objects=5,
             wrong_grasp="fail",
-            visible_range=(0.0, 0.3),
+            visible_range=(0.0, HARD_VISIBLE_MAX),
             test_set="occluded_hard",
         ),
     )

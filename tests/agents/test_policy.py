@@ -36,6 +36,8 @@ def test_resolve_primitives():
     assert resolve_primitives(spaces.Discrete(2 * 16 * 224 * 224)) == ("push", "grasp")
     with pytest.raises(ValueError, match="pass primitives"):
         resolve_primitives(plain)
+    with pytest.raises(ValueError, match=r"Discrete\(802817\) is not P \* 16 \* 224 \* 224 pixel actions"):
+        resolve_primitives(spaces.Discrete(16 * 224 * 224 + 1))
     with pytest.raises(ValueError, match="contradicts"):
         resolve_primitives(PixelActionSpace(("grasp",)), ("move",))
     with pytest.raises(ValueError, match="does not match primitives"):

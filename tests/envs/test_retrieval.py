@@ -154,3 +154,11 @@ def test_a_test_scene_gives_the_same_observation_in_two_processes():
     )
     outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True).stdout for _ in range(2)}
     assert len(outs) == 1 and len(next(iter(outs)).split()) == 2
+
+
+def test_the_hard_track_bound_has_one_owner():
+    from mpg_envs.tasks.stages import HARD_VISIBLE_MAX, STAGES
+
+    assert HARD_VISIBLE_MAX == 0.3  # the shipped hard test scenes were drawn with it
+    assert STAGES["OccludedHard"].visible_range == (0.0, HARD_VISIBLE_MAX)
+    assert gym.spec("MPG-OccludedHardNovel-v0").kwargs.get("visible_range") is None  # the stage's, not a copy

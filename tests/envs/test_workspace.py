@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from mpg_envs.grid.actions import PixelActionSpace, action_space_size, decode_action, encode_action
+from mpg_envs.grid.actions import HEIGHTMAP_SIZE, PixelActionSpace, action_space_size, decode_action, encode_action
 from mpg_envs.grid.workspace import (
     Workspace,
     check_pixel,
@@ -21,6 +21,11 @@ WS = Workspace()
 def test_default_grid_is_224_at_2mm():
     assert WS.shape == (224, 224)
     assert WS.resolution == 0.002
+
+
+def test_the_action_codec_reads_its_grid_side_from_the_workspace():
+    assert HEIGHTMAP_SIZE == WS.shape[0] == 224 and isinstance(HEIGHTMAP_SIZE, int)
+    assert action_space_size(("push", "grasp")) == 2 * 16 * 224 * 224
 
 
 def test_pixel_corners_hand_checked():

@@ -35,7 +35,7 @@ def test_a_case_row_counts_successes_motions_mis_picks_and_grasp_success():
 
 def test_runs_are_seeded_per_case_and_strict_by_default():
     cases = CaseSet("two", load_cases("challenge").cases[:2])
-    result = run_case_set("grasp-only", cases, runs=2, seed=7, env_kwargs={"max_motions": 1})
+    result = run_case_set("pixel-heuristic", cases, runs=2, seed=7, env_kwargs={"max_motions": 1})
     assert [row.case for row in result.rows] == [c.name for c in cases]
     assert [[r.seed for r in result.records[c.name]] for c in cases] == [[7, 8], [7 + CASE_SEED_STRIDE, 8 + CASE_SEED_STRIDE]]
     assert result.env_kwargs == {"wrong_grasp": "fail", "max_motions": 1}
@@ -63,12 +63,12 @@ def test_mpg_eval_cases_rejects_bad_input_in_one_line(argv, message, capsys):
 
 def test_mpg_eval_cases_prints_a_row_per_case_and_writes_json(tmp_path, capsys):
     out = tmp_path / "cases.json"
-    scene = challenge_dir() / "tower.json"  # grasp-only lifts the block on top: each run ends at once
+    scene = challenge_dir() / "tower.json"  # the pixel heuristic (by its former name) lifts the block on top: each run ends at once
     assert eval_main(["--policy", "grasp-only", "--cases", str(scene), "--runs", "2", "--json", str(out), "--quiet"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split() == ["case", "visible", "success", "motions", "mis-picks/run", "grasp", "success"]
     assert lines[1].startswith("tower") and lines[2].startswith("overall")
     data = json.loads(out.read_text())
-    assert data["policy"] == "grasp-only" and data["runs"] == 2 and data["env_kwargs"] == {"wrong_grasp": "fail"}
+    assert data["policy"] == "pixel-heuristic" and data["runs"] == 2 and data["env_kwargs"] == {"wrong_grasp": "fail"}
     assert [r["case"] for r in data["rows"]] == ["tower"] and len(data["records"]["tower"]) == 2
     assert data["overall"]["end_reasons"] == {"wrong_object": 2} and data["overall"]["mis_picks"] == 1.0

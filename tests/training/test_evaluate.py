@@ -116,7 +116,7 @@ def test_summarise_needs_episodes_zero_to_n_once_each():
 # --------------------------------------------------------------------------- mpg-eval
 def test_mpg_eval_writes_json_only_when_asked_and_reports_end_reasons(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
-    argv = ["--policy", "grasp-only", "--env", "MPG-Stage2-v0", "--episodes", "2", "--seed", "7"]
+    argv = ["--policy", "pixel-heuristic", "--env", "MPG-Stage2-v0", "--episodes", "2", "--seed", "7"]
     assert eval_main(argv) == 0
     assert list(tmp_path.iterdir()) == []  # nothing written unasked
     out = capsys.readouterr().out

@@ -32,7 +32,7 @@ def test_the_matcher_is_a_builtin_policy(exemplar_env):
 
 
 @pytest.mark.parametrize(
-    ("name", "who"), [("grasp-only", "grasp-only"), ("shipped", "an MPGNet checkpoint")]
+    ("name", "who"), [("pixel-heuristic", "the pixel heuristic"), ("shipped", "an MPGNet checkpoint")]
 )
 def test_mask_policies_refuse_an_exemplar_env_clearly(exemplar_env, name, who):
     with pytest.raises(

@@ -12,7 +12,7 @@ from mpg_agents.evaluation.eval_result import EpisodeRecord
 from mpg_agents.evaluation.evaluate import summarise
 from mpg_agents.evaluation.finding_table import FINDING_COLUMNS, finding_cells_text, finding_rows
 from mpg_agents.evaluation.table_runs import PolicySpec, merged_result
-from mpg_agents.evaluation.tables import TRACKS, cell_json
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json
 from mpg_agents.evaluation.track_cells import CellRequest
 
 FINDING_TRACKS = {
@@ -42,7 +42,7 @@ def test_the_finding_tracks_are_registered_ids_with_their_keywords():
     import mpg_envs  # noqa: F401  registers the ids
 
     for name, (env_id, options) in FINDING_TRACKS.items():
-        track = TRACKS[name]
+        track = TABLE_TRACKS[name]
         assert (track.env_id, track.env_options, track.strict_columns) == (env_id, options, True)
         assert env_id in gym.registry
 

@@ -373,7 +373,7 @@ def test_plot_writes_exactly_the_path_named_or_refuses_it(tmp_path, capsys):
     (["--episodes", "0"], "--episodes must be >= 1, got 0"),
     (["--episodes", "-1"], "--episodes must be >= 1, got -1"),
     (["--seed", "-1"], "--seed must be >= 0, got -1"),
-    (["--policy", "nope"], "unknown policy 'nope'; valid: oracle, random, grasp-only, shipped, matcher or the path of a .safetensors checkpoint"),
+    (["--policy", "nope"], "unknown policy 'nope'; valid: oracle, random, pixel-heuristic, matcher, shipped or the path of a .safetensors checkpoint"),
     (["--env", "MPG-Nope-v0"], "unknown env id 'MPG-Nope-v0'; valid: MPG-Stage1-v0, "),
 ])
 def test_demo_names_a_bad_input_before_any_work(tmp_path, capsys, argv, message):

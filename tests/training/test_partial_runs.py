@@ -85,7 +85,7 @@ def test_mpg_eval_with_every_episode_failed_says_so_in_one_line(tmp_path, capsys
 # ------------------------------------------------------------------------------ case folders
 @pytest.fixture
 def cases(tmp_path):
-    """A folder of two challenge scenes grasp-only ends at once (the block on top is lifted)."""
+    """A folder of two challenge scenes the pixel heuristic ends at once (the block on top is lifted)."""
     folder = tmp_path / "cases"
     folder.mkdir()
     for name in ("tower", "bridge"):
@@ -94,7 +94,7 @@ def cases(tmp_path):
 
 
 def run_cases(folder, *extra):
-    return eval_main(["--policy", "grasp-only", "--cases", str(folder), "--env-option", "max_motions=1", *extra])
+    return eval_main(["--policy", "pixel-heuristic", "--cases", str(folder), "--env-option", "max_motions=1", *extra])
 
 
 def test_a_bad_scene_in_a_case_folder_is_named_before_any_run(cases, capsys):

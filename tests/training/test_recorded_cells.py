@@ -47,7 +47,7 @@ def replay(path: Path, policy: str, indices: list[int]) -> None:
 
 def test_the_pixel_heuristic_replays_its_table1_episodes():
     # A one-grasp episode of Table I's heuristic cell (15 objects, seed 500005).
-    replay(ROOT / "benchmarks/results/table1/cells/Pixel_heuristic__grasp_at_the_target_mask_15.json", "grasp-only", [5])
+    replay(ROOT / "benchmarks/results/table1/cells/Pixel_heuristic__grasp_at_the_target_mask_15.json", "pixel-heuristic", [5])
 
 
 @pytest.mark.heavy

@@ -88,7 +88,7 @@ def test_table_has_the_papers_rows_then_the_measured_cells_with_intervals():
 
 
 def test_a_table_run_gives_every_cell_with_its_label_settings_and_the_mis_pick_columns(ray_two_cpus, tmp_path):
-    specs = [PolicySpec("Heuristic", "grasp-only"), PolicySpec("Random, 1 motion", "random")]
+    specs = [PolicySpec("Heuristic", "pixel-heuristic"), PolicySpec("Random, 1 motion", "random")]
     report, text, markdown = run_table("hard", specs, [15], 2, 500000, workers=2, env_options={"max_motions": 1})
     assert set(report["rows"]) == {"Heuristic", "Random, 1 motion"} and report["env"] == "MPG-OccludedHard-v0"
     cell = report["rows"]["Heuristic"]["15"]
@@ -116,10 +116,10 @@ def test_a_policy_file_gives_labels_and_settings(tmp_path):
     root = Path(__file__).resolve().parents[2]
     specs = read_policy_specs(root / "benchmarks" / "tables.toml")
     assert len(specs) == 20 and len({s.label for s in specs}) == 20  # the shipped net and the same config on clean heightmaps (seeds 1, 0) among them
-    from mpg_agents.evaluation.policy_zoo import BUILTIN
+    from mpg_agents.evaluation.policy_zoo import is_builtin
 
     # Every row is a built-in policy or a checkpoint that is in the repository.
-    assert all(s.policy in BUILTIN or (root / s.policy).is_file() for s in specs)
+    assert all(is_builtin(s.policy) or (root / s.policy).is_file() for s in specs)
 
 
 def test_mis_picks_and_visibility_bands_are_counted_per_episode():

@@ -13,7 +13,7 @@ from mpg_agents.evaluation.eval_result import EpisodeRecord
 from mpg_agents.evaluation.evaluate import summarise
 from mpg_agents.evaluation.reused_cells import read_reused
 from mpg_agents.evaluation.table_runs import PolicySpec, read_policy_specs
-from mpg_agents.evaluation.tables import TRACKS, cell_json, tracks_rows, tracks_success_rows
+from mpg_agents.evaluation.tables import TABLE_TRACKS, cell_json, tracks_rows, tracks_success_rows
 from mpg_agents.evaluation.track_cells import CellMismatchError, cell_file_name
 from mpg_agents.evaluation.track_table import make_track_table
 
@@ -33,14 +33,14 @@ def _eval_file(path: Path, policy: str, start: int, successes: list[bool], env_i
 
 
 def test_the_tracks_are_registered_ids_with_the_strict_columns():
-    assert {name: TRACKS[name].env_id for name in ("hard", "hard-novel", "hard-camera")} == {
+    assert {name: TABLE_TRACKS[name].env_id for name in ("hard", "hard-novel", "hard-camera")} == {
         "hard": "MPG-OccludedHard-v0", "hard-novel": "MPG-OccludedHardNovel-v0", "hard-camera": "MPG-OccludedHardCamera-v0",
     }
     import gymnasium as gym
 
     import mpg_envs  # noqa: F401  registers the ids
 
-    assert all(TRACKS[name].strict_columns and TRACKS[name].env_id in gym.registry for name in ("hard", "hard-novel", "hard-camera"))
+    assert all(TABLE_TRACKS[name].strict_columns and TABLE_TRACKS[name].env_id in gym.registry for name in ("hard", "hard-novel", "hard-camera"))
 
 
 def test_tracks_rows_show_each_track_and_policy_with_a_cell_and_dash_for_a_cell_not_run():
@@ -170,14 +170,14 @@ def test_a_bad_reuse_file_is_refused_naming_the_entry(tmp_path, text, match):
 
 
 def test_the_repositorys_track_policies_and_reused_blocks_cells_hold(monkeypatch):
-    from mpg_agents.evaluation.policy_zoo import BUILTIN
+    from mpg_agents.evaluation.policy_zoo import is_builtin
 
     specs = read_policy_specs(ROOT / "benchmarks" / "tracks.toml")
     assert [s.policy for s in specs][:6] == [
-        "oracle", "grasp-only", "random", "shipped",
+        "oracle", "pixel-heuristic", "random", "shipped",
         "benchmarks/checkpoints/blocks_rand_s1.safetensors", "benchmarks/checkpoints/uncover_s1.safetensors",
     ] and len(specs) == 10
-    assert all(s.policy in BUILTIN or (ROOT / s.policy).is_file() for s in specs)
+    assert all(is_builtin(s.policy) or (ROOT / s.policy).is_file() for s in specs)
     reused = read_reused(ROOT / "benchmarks" / "results" / "tracks" / "reused.toml")
     # The shipped net's blocks cells and the colour-trunk nets' are cell files in tracks/hard/cells/.
     in_files = {s.label for s in specs[3:6]}
@@ -187,3 +187,15 @@ def test_the_repositorys_track_policies_and_reused_blocks_cells_hold(monkeypatch
     rows = report["rows"]["hard"]
     assert report["missing"] == [] and rows["MPGNet (shipped)"]["15"]["success"] == 0.99 and rows["MPGNet (shipped)"]["30"]["success"] == 0.99
     assert rows[specs[4].label]["15"]["success"] == 1.0 and rows[specs[5].label]["30"]["success"] == 0.98
+
+
+def test_every_table_track_runs_on_a_registered_env_id():
+    import gymnasium as gym
+
+    import mpg_envs
+    from mpg_envs.tasks.tracks import TRACKS
+
+    assert set(TRACKS) <= set(gym.registry)
+    for name, track in TABLE_TRACKS.items():
+        assert track.name == name and track.env_id in gym.registry, name
+        assert track.env_id in TRACKS or track.env_id in mpg_envs.ENV_IDS, name

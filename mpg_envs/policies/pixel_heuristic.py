@@ -1,19 +1,25 @@
-"""Pixel-only heuristics: the paper's fallback grasp after two failed grasps.
+"""The pixel heuristic: a grasp at the target mask's centre across its short side.
 
-They read the observation alone (target mask and depth heightmap), as a real robot could.
+It reads the observation alone (the target mask), as a real robot could, with numpy and OpenCV.
+:func:`heuristic_grasp` is the grasp; :class:`PixelHeuristic` the scripted baseline that takes it
+every step (policy name ``pixel-heuristic``, formerly ``grasp-only``). MPGNet's training takes
+the same grasp after failed grasps (``mpg_agents.learning.exploration``), as the paper does.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import cv2
+import gymnasium as gym
 import numpy as np
 
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.grid.workspace import NUM_ROTATIONS
+from mpg_envs.policies.policy import check_has_mask
 
 
 def heuristic_grasp(obs: Mapping[str, np.ndarray]) -> tuple[int, int, int]:
@@ -43,3 +49,30 @@ def heuristic_grasp_action(obs: Mapping[str, np.ndarray], primitives: Sequence[s
     """:func:`heuristic_grasp` as a flat action index for an env allowing ``primitives``."""
     rotation, row, col = heuristic_grasp(obs)
     return encode_action(primitives, GRASP, rotation, row, col, size=np.asarray(obs["mask"]).shape[0])
+
+
+class PixelHeuristic:
+    """The heuristic grasp at the target every step (a random action when no target shows);
+    a :class:`~mpg_envs.policies.policy.Policy`.
+
+    Raises ``ValueError`` for an env without a target mask (an exemplar env) or one that does
+    not allow grasping.
+    """
+
+    def __init__(self, env: gym.Env):
+        check_has_mask(env, "the pixel heuristic")
+        self.name = "pixel-heuristic"
+        unwrapped: Any = env.unwrapped  # the MPG env (gym.Env does not declare its attributes)
+        self.primitives = tuple(unwrapped.primitives)
+        if GRASP not in self.primitives:
+            raise ValueError(f"the pixel heuristic needs an env that allows grasping; this one allows {self.primitives}")
+        self._space = env.action_space
+
+    def reset(self) -> None:
+        """Nothing to forget between episodes."""
+
+    def act(self, obs: Mapping[str, np.ndarray]) -> int:
+        """The heuristic grasp's flat action, or a sample of the env's action space when the mask is empty."""
+        if not np.asarray(obs["mask"]).any():
+            return int(self._space.sample())  # no target visible: nothing better to do
+        return heuristic_grasp_action(obs, self.primitives)
