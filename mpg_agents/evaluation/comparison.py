@@ -25,8 +25,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
+import mpg_envs  # noqa: F401  (registers the ids same_scenes reads)
 from mpg_agents.evaluation.stats import bootstrap_mean_interval
 from mpg_envs.grid.actions import PRIMITIVES
 from mpg_envs.simulation.mujoco_version import (
@@ -145,18 +147,31 @@ class PairedComparison:
         )
 
 
+def same_scenes(env_a: str, env_b: str) -> bool:
+    """Whether two registered ids give the same episodes' scenes and observations, told apart only
+    by how they name the target (``target_spec``): the hard track and its visible and exemplar
+    versions, say. An id that is not registered matches only itself."""
+    if env_a == env_b:
+        return True
+    if env_a not in gym.registry or env_b not in gym.registry:
+        return False
+    kwargs = [{k: v for k, v in gym.registry[e].kwargs.items() if k != "target_spec"} for e in (env_a, env_b)]
+    return kwargs[0] == kwargs[1]
+
+
 def compare_paired(a: EvalRecords, b: EvalRecords, seed: int = 0, across_mujoco: bool = False) -> PairedComparison:
     """A minus B on the episodes (seeds) both sides played, with 95% paired-bootstrap intervals.
     ``across_mujoco`` allows A and B of different MuJoCo major versions (to measure what the
     MuJoCo version changes: the same policy on both, say).
 
     Raises:
-        ValueError: the two sides ran different envs or object counts, or share fewer than two
+        ValueError: the two sides ran different scenes (envs that differ in more than how they
+            name the target: :func:`same_scenes`) or object counts, or share fewer than two
             episode seeds.
         MuJoCoVersionError: the two sides ran on different MuJoCo major versions and
             ``across_mujoco`` is false.
     """
-    if (a.env_id, a.num_objects) != (b.env_id, b.num_objects):
+    if a.num_objects != b.num_objects or not same_scenes(a.env_id, b.env_id):
         raise ValueError(f"different cells: {a.env_id} with {a.num_objects} objects against {b.env_id} with {b.num_objects}")
     if not across_mujoco:
         try:

@@ -102,3 +102,15 @@ def test_the_motions_difference_splits_by_primitive(tmp_path):
     assert "motions by primitive, difference per episode: move -0.50, push +1.00, grasp +0.50" in result.describe()
     # Records without primitive counts (older files) leave the split out.
     assert compare_paired(a, load_eval_records([write_eval(tmp_path / "c.json", "C", [(0, True, 3), (1, True, 2)])])).primitive_differences == {}
+
+
+def test_envs_that_differ_only_in_naming_the_target_pair_and_others_do_not():
+    from mpg_agents.evaluation.comparison import same_scenes
+
+    assert same_scenes("MPG-OccludedHard-v0", "MPG-OccludedHardVisible-v0")
+    assert same_scenes("MPG-OccludedHardExemplar-v0", "MPG-OccludedHard-v0")
+    assert same_scenes("MPG-OccludedHardCameraExemplar-v0", "MPG-OccludedHardCamera-v0")
+    assert same_scenes("MPG-OccludedHardNovelExemplar-v0", "MPG-OccludedHardNovel-v0")
+    assert not same_scenes("MPG-OccludedHard-v0", "MPG-OccludedHardNovel-v0")  # other objects
+    assert not same_scenes("MPG-OccludedHardCameraExemplar-v0", "MPG-OccludedHard-v0")  # camera images
+    assert not same_scenes("MPG-OccludedHard-v0", "MPG-Nowhere-v0") and same_scenes("MPG-Nowhere-v0", "MPG-Nowhere-v0")
