@@ -1,5 +1,6 @@
-"""The headline figures of README.md and the docs home are the track table's file's
-(``benchmarks/results/tracks/tracks.json``), written by ``docs/make_headline.py``."""
+"""The headline figures of README.md and the docs home, and the Results page's track and finding
+tables, are the results files' (``benchmarks/results/tracks/tracks.json``,
+``benchmarks/results/finding/tracks.json``), written by ``docs/make_headline.py``."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 TRACKS_JSON = ROOT / "benchmarks" / "results" / "tracks" / "tracks.json"
+FINDING_JSON = ROOT / "benchmarks" / "results" / "finding" / "tracks.json"
 PAGES = [ROOT / "README.md", ROOT / "docs" / "index.md"]
 RESULTS = ROOT / "docs" / "results.md"
 CELL = re.compile(r"^(\d+)% \[(\d+), (\d+)\] in (\d+\.\d\d)$")
@@ -56,14 +58,20 @@ def test_a_page_without_its_markers_is_refused(headline):
 
 @pytest.mark.parametrize("page", PAGES, ids=lambda p: p.name)
 def test_the_pages_headline_figures_are_the_files(page, headline):
-    report = json.loads(TRACKS_JSON.read_text())
+    report, finding = json.loads(TRACKS_JSON.read_text()), json.loads(FINDING_JSON.read_text())
     rows = table_rows(page.read_text())
     assert list(rows) == list(headline.ROWS), f"{page.name}: the headline's rows are not {list(headline.ROWS)}"
     for shown, label in headline.ROWS.items():
         cells = rows[shown]
-        expected = [report["rows"][track][label][str(n)] for track in headline.TRACKS for n in report["objects"]]
+        expected = []
+        for track in headline.TRACKS:
+            for source, name in ((report, track), (finding, headline.EXEMPLAR[track])):
+                expected += [source["rows"].get(name, {}).get(label, {}).get(str(n)) for n in report["objects"]]
         assert len(cells) == len(expected), (page.name, shown)
         for text, cell in zip(cells, expected):
+            if cell is None:
+                assert text == "-", (page.name, shown, text)
+                continue
             match = CELL.match(text)
             assert match, f"{page.name}: {shown}: {text!r} is not 'S% [LO, HI] in M'"
             success, lo, hi, motions = int(match[1]), int(match[2]), int(match[3]), float(match[4])
@@ -74,14 +82,34 @@ def test_the_pages_headline_figures_are_the_files(page, headline):
                 text,
             )
             assert abs(motions - cell["motions"]) <= 0.005, (page.name, shown, text)
+    # the matcher has its cells on every exemplar track, and none where it cannot run; the learned nets none there
+    assert all(c != "-" for c in rows["Exemplar matcher (colour and shape)"][2::4] + rows["Exemplar matcher (colour and shape)"][3::4])
+    assert rows["**MPGNet (shipped)**"][2] == "-" and rows["Exemplar matcher (colour and shape)"][0] == "-"
 
 
 def test_the_pages_blocks_are_what_the_script_writes(headline):
-    texts = headline.blocks(json.loads(TRACKS_JSON.read_text()))
+    texts = headline.blocks(json.loads(TRACKS_JSON.read_text()), json.loads(FINDING_JSON.read_text()))
     assert set(headline.PAGES) == {*PAGES, RESULTS}
-    for page, name in headline.PAGES.items():
+    for page, names in headline.PAGES.items():
         text = page.read_text()
-        assert headline.rewrite(text, texts[name], page.name, name) == text, f"{page.name}: run python docs/make_headline.py"
+        for name in names:
+            assert headline.rewrite(text, texts[name], page.name, name) == text, f"{page.name}: run python docs/make_headline.py"
+
+
+def test_the_results_pages_finding_table_is_the_files(headline):
+    finding = json.loads(FINDING_JSON.read_text())
+    block = RESULTS.read_text().split("<!-- finding:start -->")[1].split("<!-- finding:end -->")[0]
+    for family, tracks in headline.FAMILIES.items():
+        section = block.split(f"**{family.capitalize()}**")[1].split("\n\n**")[0]
+        rows = {}
+        for line in section.splitlines():
+            if line.startswith("| ") and not line.startswith("| Method"):
+                cells = [c.strip() for c in line.strip().strip("|").split("|")]
+                rows[cells[0]] = cells[1:]
+        assert list(rows) == list(finding["policies"]), family
+        for label, cells in rows.items():
+            expected = [finding["rows"].get(t, {}).get(label, {}).get(str(n)) for t in tracks for n in finding["objects"]]
+            assert cells == ["-" if c is None else headline.cell_text(c) for c in expected], (family, label)
 
 
 def test_the_results_pages_track_table_is_the_files(headline):
