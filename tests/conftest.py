@@ -114,18 +114,27 @@ def pytest_collection_modifyitems(config, items):
         raise pytest.UsageError(f"tests/heavy.txt lists tests that do not exist (renamed or removed?): {missing}")
 
 
+def _load_script(folder: str, name: str, monkeypatch: pytest.MonkeyPatch):
+    """``<folder>/<name>.py`` of the repository as a module under a test-only name, registered
+    for the calling test alone."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / folder / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"{name}_under_test", path)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
 @pytest.fixture()
 def benchmark_script(monkeypatch):
     """A loader of a script of ``benchmarks/`` as a module: ``benchmark_script("keep_stages")``
     imports ``benchmarks/keep_stages.py`` under a test-only name, registered for this test alone."""
-    import importlib.util
+    return lambda name: _load_script("benchmarks", name, monkeypatch)
 
-    def load(name: str):
-        path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
-        spec = importlib.util.spec_from_file_location(f"{name}_under_test", path)
-        module = importlib.util.module_from_spec(spec)
-        monkeypatch.setitem(sys.modules, spec.name, module)
-        spec.loader.exec_module(module)
-        return module
 
-    return load
+@pytest.fixture()
+def docs_script(monkeypatch):
+    """The same loader for the scripts of ``docs/``: ``docs_script("make_headline")``."""
+    return lambda name: _load_script("docs", name, monkeypatch)

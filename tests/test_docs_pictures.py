@@ -3,8 +3,6 @@ and are each shown by a page."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,15 +14,10 @@ IMAGES = ROOT / "docs" / "images"
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
 
-@pytest.fixture(scope="module")
-def pictures():
+@pytest.fixture()
+def pictures(docs_script):
     """``docs/make_pictures.py`` as a module."""
-    spec = importlib.util.spec_from_file_location("make_pictures_under_test", ROOT / "docs" / "make_pictures.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    yield module
-    del sys.modules[spec.name]
+    return docs_script("make_pictures")
 
 
 def test_each_picture_is_at_most_200_kb_and_all_at_most_2_mb():

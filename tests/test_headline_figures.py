@@ -4,10 +4,8 @@ tables, are the results files' (``benchmarks/results/tracks/tracks.json``,
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
-import sys
 from pathlib import Path
 
 import pytest
@@ -20,15 +18,10 @@ RESULTS = ROOT / "docs" / "results.md"
 CELL = re.compile(r"^(\d+)% \[(\d+), (\d+)\] in (\d+\.\d\d)$")
 
 
-@pytest.fixture(scope="module")
-def headline():
+@pytest.fixture()
+def headline(docs_script):
     """``docs/make_headline.py`` as a module."""
-    spec = importlib.util.spec_from_file_location("make_headline_under_test", ROOT / "docs" / "make_headline.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    yield module
-    del sys.modules[spec.name]
+    return docs_script("make_headline")
 
 
 def table_rows(text: str, name: str = "headline") -> dict[str, list[str]]:
