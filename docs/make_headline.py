@@ -173,11 +173,7 @@ def track_table(report: dict[str, Any]) -> str:
         "|---|" + "---:|" * (len(tracks) * len(objects)),
     ]
     for label in report["rows"][tracks[0]]:
-        cells = [
-            cell_text(report["rows"][t][label][n]) if n in report["rows"][t].get(label, {}) else "-"
-            for t in tracks
-            for n in objects
-        ]
+        cells = [_cell(report, t, label, n) for t in tracks for n in objects]
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
