@@ -38,12 +38,20 @@ BaselineFactory = Callable[..., Policy]
 
 @dataclass(frozen=True)
 class ScriptedBaseline:
-    """One scripted baseline: its name, how to build it, what it does in a line, its former names."""
+    """One scripted baseline: its name, how to build it, what it does in a line, its former names,
+    and whether its actions depend on how the env names the target (``target_spec``).
+
+    ``reads_target_spec=False`` is a promise: the baseline reads the simulator's target (the
+    oracle) or nothing (random), so on two envs that differ only in ``target_spec`` it plays
+    the same episodes action for action (tested in ``tests/envs/test_target_blind_baselines.py``)
+    and a table may reuse its mask-track cells for the visible track
+    (:mod:`mpg_agents.evaluation.reused_cells`, ``scenes_of``)."""
 
     name: str
     factory: BaselineFactory
     description: str
     old_names: tuple[str, ...] = ()
+    reads_target_spec: bool = True
 
 
 SCRIPTED_BASELINES: dict[str, ScriptedBaseline] = {}
@@ -53,14 +61,19 @@ _WARNED: set[str] = set()
 
 
 def register_baseline(
-    name: str, factory: BaselineFactory, description: str, old_names: tuple[str, ...] = ()
+    name: str,
+    factory: BaselineFactory,
+    description: str,
+    old_names: tuple[str, ...] = (),
+    reads_target_spec: bool = True,
 ) -> ScriptedBaseline:
     """Register a scripted baseline under ``name`` (and its former ``old_names``); raises
-    ``ValueError`` for a name, or former name, already taken."""
+    ``ValueError`` for a name, or former name, already taken. ``reads_target_spec``: see
+    :class:`ScriptedBaseline`."""
     for taken in (name, *old_names):
         if taken in SCRIPTED_BASELINES or taken in _OLD_NAMES:
             raise ValueError(f"the baseline name {taken!r} is already registered")
-    baseline = ScriptedBaseline(name, factory, description, tuple(old_names))
+    baseline = ScriptedBaseline(name, factory, description, tuple(old_names), reads_target_spec)
     SCRIPTED_BASELINES[name] = baseline
     for old in old_names:
         _OLD_NAMES[old] = name
@@ -110,8 +123,10 @@ def _matcher(env: gym.Env, seed: int) -> Policy:
     return ExemplarMatcher(env)
 
 
-register_baseline("oracle", _oracle, "reads the simulator and tries actions in a copy (upper baseline)")
-register_baseline("random", _random, "uniform over the whole action space (seeded)")
+register_baseline(
+    "oracle", _oracle, "reads the simulator and tries actions in a copy (upper baseline)", reads_target_spec=False
+)
+register_baseline("random", _random, "uniform over the whole action space (seeded)", reads_target_spec=False)
 register_baseline(
     "pixel-heuristic",
     _pixel_heuristic,

@@ -25,12 +25,25 @@ FINDING_TRACKS = {
 }
 
 
-def _records(first_sights: list[int | None], lookalikes: list[int | None], wrong: list[int] | None = None) -> list[EpisodeRecord]:
+def _records(
+    first_sights: list[int | None], lookalikes: list[int | None], wrong: list[int] | None = None
+) -> list[EpisodeRecord]:
     wrong = wrong or [0] * len(first_sights)
     return [
         EpisodeRecord(
-            i, 500000 + i, True, 3, "target_grasped", {"move": 1, "push": 1, "grasp": 1}, 1 + w, 1, w, 14,
-            visible_fraction=0.4 if sight == 0 else 0.0, first_sight=sight, lookalike_grasps=look,
+            i,
+            500000 + i,
+            True,
+            3,
+            "target_grasped",
+            {"move": 1, "push": 1, "grasp": 1},
+            1 + w,
+            1,
+            w,
+            14,
+            visible_fraction=0.4 if sight == 0 else 0.0,
+            first_sight=sight,
+            lookalike_grasps=look,
         )
         for i, (sight, look, w) in enumerate(zip(first_sights, lookalikes, wrong))
     ]
@@ -63,9 +76,13 @@ def test_finding_columns_by_hand():
     records = _records([0, 2, None, 0], [1, 0, 0, 1], wrong=[1, 2, 0, 1])
     result = json.loads(json.dumps(cell_json(summarise(records, "matcher", "MPG-OccludedHardExemplar-v0", 15, 500000, 1.0))))
     assert finding_cells_text(result["finding"]) == ["2 of 4", "3 of 4", "0.67", "0.50", "0.50"]
-    header, body = finding_rows(["hard-exemplar", "hard"], ["Matcher", "Oracle"], [15, 30], {("hard-exemplar", "Matcher", 15): result})
+    header, body = finding_rows(
+        ["hard-exemplar", "hard"], ["Matcher", "Oracle"], [15, 30], {("hard-exemplar", "Matcher", 15): result}
+    )
     assert header == ["Track", "Method", "objects", *FINDING_COLUMNS]
-    assert body == [["blocks, exemplar (MPG-OccludedHardExemplar-v0)", "Matcher", "15", "2 of 4", "3 of 4", "0.67", "0.50", "0.50"]]
+    assert body == [
+        ["blocks, exemplar (MPG-OccludedHardExemplar-v0)", "Matcher", "15", "2 of 4", "3 of 4", "0.67", "0.50", "0.50"]
+    ]
     with pytest.raises(ValueError, match="unknown tracks"):
         finding_rows(["hard-nowhere"], ["Matcher"], [15], {})
 
@@ -104,3 +121,34 @@ def test_another_tables_cell_files_are_reused_by_the_policy_entry_they_ran(tmp_p
     assert reused.load(asked)["success"] == 1.0  # the file's own name is the checkpoint's: its entry says shipped
     with pytest.raises(CellMismatchError, match="not 'random'"):
         reused.load(CellRequest("hard", PolicySpec("MPGNet, mask", "random", ()), 15, 2, 500000))
+
+
+def test_a_blind_baselines_mask_cell_is_its_visible_twins_and_no_one_elses(tmp_path: Path):
+    from mpg_agents.evaluation.reused_cells import ReusedCell, read_reused
+    from mpg_agents.evaluation.track_cells import CellMismatchError, write_cell_file
+
+    oracle = PolicySpec("Oracle", "oracle", ())
+    for track, env_id in (("hard", "MPG-OccludedHard-v0"), ("hard-novel", "MPG-OccludedHardNovel-v0")):
+        ran = CellRequest(track, oracle, 15, 2, 500000)
+        records = _records([0, 1], [None, None])
+        result = summarise(records, "oracle", env_id, 15, 500000, 1.0, env_options=ran.recorded_env_options())
+        write_cell_file(ran, result, tmp_path / f"{track}.json")
+    blocks = ReusedCell("hard-visible", "Oracle", 15, evals=str(tmp_path / "hard.json"), scenes_of="hard")
+    assert blocks.load(CellRequest("hard-visible", oracle, 15, 2, 500000))["success"] == 1.0
+    assert "the hard track's episodes" in blocks.source()
+    novel = ReusedCell("hard-novel-visible", "Oracle", 15, evals=str(tmp_path / "hard-novel.json"), scenes_of="hard-novel")
+    assert novel.load(CellRequest("hard-novel-visible", oracle, 15, 2, 500000))["success"] == 1.0
+    with pytest.raises(CellMismatchError, match="may act on how the target is named"):  # the net reads the mask
+        blocks.load(CellRequest("hard-visible", PolicySpec("Oracle", "shipped", ()), 15, 2, 500000))
+    with pytest.raises(CellMismatchError, match="differ in more than how they name the target"):  # other scenes
+        ReusedCell("hard-camera-visible", "Oracle", 15, evals=str(tmp_path / "hard.json"), scenes_of="hard").load(
+            CellRequest("hard-camera-visible", oracle, 15, 2, 500000)
+        )
+    with pytest.raises(CellMismatchError, match="not the cell"):  # the files must be the named track's cell
+        ReusedCell("hard-visible", "Oracle", 15, evals=str(tmp_path / "hard-novel.json"), scenes_of="hard").load(
+            CellRequest("hard-visible", oracle, 15, 2, 500000)
+        )
+    bad = tmp_path / "reuse.toml"
+    bad.write_text('[[cell]]\ntrack = "hard-visible"\nlabel = "Oracle"\nobjects = 15\nscenes_of = "nope"\nevals = "x"\n')
+    with pytest.raises(ValueError, match="unknown scenes_of track 'nope'"):
+        read_reused(bad)
