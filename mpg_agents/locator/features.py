@@ -1,0 +1,68 @@
+"""The locator's inputs from an exemplar-mode observation: pure numpy, unit-tested by hand.
+
+The scene is the colour and depth heightmaps; the exemplar is ``query_color`` and
+``query_depth`` (the target alone on an empty table, at the scene's scale). Besides the raw
+images the network gets two cues a small network would spend capacity learning: per scene
+pixel, how far its colour is from the exemplar's mean colour (:func:`colour_distance`), and a
+few numbers that describe the exemplar whatever its yaw (:func:`query_descriptor`: its area,
+its height and its mean colour).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+DEPTH_SCALE = 10.0
+"""Heights (m) are multiplied by this: 0.1 m of height reads 1.0."""
+QUERY_MIN_HEIGHT = 0.002
+"""A query pixel higher than this (m) shows the exemplar's object (the rest is bare table)."""
+SCENE_CHANNELS = 5
+"""colour (3), height (1), distance to the exemplar's colour (1)."""
+QUERY_CHANNELS = 4
+"""colour (3), height (1)."""
+DESCRIPTOR_SIZE = 6
+"""area, max height, mean height, mean colour (3) of the exemplar."""
+
+
+def query_pixels(query_depth: np.ndarray) -> np.ndarray:
+    """Boolean map of the query pixels that show the object (height above :data:`QUERY_MIN_HEIGHT`)."""
+    return np.asarray(query_depth) > QUERY_MIN_HEIGHT
+
+
+def query_descriptor(query_color: np.ndarray, query_depth: np.ndarray) -> np.ndarray:
+    """``[area, max height, mean height, mean r, g, b]`` of the exemplar (float32): area as the
+    share of the image, heights times :data:`DEPTH_SCALE`, colours in [0, 1]. All zeros for an
+    empty query (nothing above the table)."""
+    shown = query_pixels(query_depth)
+    if not shown.any():
+        return np.zeros(DESCRIPTOR_SIZE, np.float32)
+    heights = np.asarray(query_depth, np.float64)[shown] * DEPTH_SCALE
+    colour = np.asarray(query_color, np.float64)[shown].mean(axis=0) / 255.0
+    return np.array([shown.mean(), heights.max(), heights.mean(), *colour], np.float32)
+
+
+def colour_distance(color: np.ndarray, mean_colour: np.ndarray) -> np.ndarray:
+    """Per pixel, the Euclidean distance of ``color`` (H x W x 3, uint8) to ``mean_colour`` (3
+    values in [0, 1]), in [0, 1] units of colour (black to white is sqrt(3))."""
+    scaled = np.asarray(color, np.float32) / 255.0
+    return np.linalg.norm(scaled - np.asarray(mean_colour, np.float32), axis=-1).astype(np.float32)
+
+
+def scene_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The scene's channels (:data:`SCENE_CHANNELS` x H x W, float32) of an exemplar-mode
+    observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour."""
+    descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
+    color = np.asarray(obs["color"], np.float32).transpose(2, 0, 1) / 255.0
+    depth = np.asarray(obs["depth"], np.float32)[None] * DEPTH_SCALE
+    distance = colour_distance(obs["color"], descriptor[3:6])[None]
+    return np.concatenate([color, depth, distance]).astype(np.float32)
+
+
+def query_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The exemplar's channels (:data:`QUERY_CHANNELS` x H x W, float32): colour in [0, 1]
+    and scaled height."""
+    color = np.asarray(obs["query_color"], np.float32).transpose(2, 0, 1) / 255.0
+    depth = np.asarray(obs["query_depth"], np.float32)[None] * DEPTH_SCALE
+    return np.concatenate([color, depth]).astype(np.float32)

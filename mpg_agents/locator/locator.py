@@ -1,0 +1,105 @@
+"""The trained locator as a policy uses it: a weights file, its thresholds, ``locate(obs)``.
+
+The weights file is safetensors with one JSON header (``mpg_locator``): the network's
+config, the pixel threshold, the "seen" threshold calibrated on tuning samples, and the
+training record the model card is written from. Nothing is unpickled.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from safetensors import safe_open
+from safetensors.torch import load_file, save
+
+from mpg_agents.locator.features import query_descriptor, query_input, scene_input
+from mpg_agents.locator.net import LocatorConfig, LocatorNet
+from mpg_envs.files import write_bytes_whole
+
+HEADER_KEY = "mpg_locator"
+SHIPPED_LOCATOR = Path(__file__).resolve().parent.parent / "checkpoints" / "locator.safetensors"
+"""The shipped locator's weights (trained by ``mpg-train-locator``; model card beside it)."""
+
+
+@dataclass(frozen=True)
+class Location:
+    """Where the exemplar's object shows: ``probability`` per pixel (H x W, float32), ``mask``
+    (its pixels above the threshold, uint8), ``seen`` (whether it shows at all) and the
+    ``seen_probability`` that decided it."""
+
+    probability: np.ndarray
+    mask: np.ndarray
+    seen: bool
+    seen_probability: float
+
+
+def save_locator(
+    net: LocatorNet, path: str | Path, threshold: float, seen_threshold: float, record: Mapping[str, Any]
+) -> None:
+    """Write ``net`` with its thresholds and training ``record`` to ``path`` (whole or not at all)."""
+    header = {
+        "config": net.config.to_dict(),
+        "threshold": float(threshold),
+        "seen_threshold": float(seen_threshold),
+        "record": dict(record),
+    }
+    tensors = {k: v.detach().contiguous().float() for k, v in net.state_dict().items()}
+    for name, value in tensors.items():
+        if not torch.isfinite(value).all():
+            raise ValueError(f"locator tensor {name!r} holds NaN or infinite values: not saved")
+    write_bytes_whole(Path(path), save(tensors, metadata={HEADER_KEY: json.dumps(header)}))
+
+
+def read_locator_header(path: str | Path) -> dict[str, Any]:
+    """The header of a locator weights file; ``ValueError`` when ``path`` is not one."""
+    with safe_open(str(path), framework="pt") as handle:
+        metadata = handle.metadata() or {}
+    if HEADER_KEY not in metadata:
+        raise ValueError(f"{path} is not a locator weights file (no {HEADER_KEY!r} header)")
+    return json.loads(metadata[HEADER_KEY])
+
+
+class TargetLocator:
+    """A trained locator: ``locate(obs)`` for an exemplar-mode observation (one thread's worth
+    of work: a few tens of milliseconds on one CPU core)."""
+
+    def __init__(
+        self, net: LocatorNet, threshold: float = 0.5, seen_threshold: float = 0.5, record: Mapping[str, Any] | None = None
+    ):
+        self.net = net.eval()
+        self.threshold = float(threshold)
+        self.seen_threshold = float(seen_threshold)
+        self.record = dict(record or {})
+
+    @classmethod
+    def load(cls, path: str | Path = SHIPPED_LOCATOR) -> TargetLocator:
+        """The locator saved at ``path`` (the shipped one by default)."""
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"no locator weights at {path}: train them with mpg-train-locator")
+        header = read_locator_header(path)
+        net = LocatorNet(LocatorConfig(**header["config"]))
+        net.load_state_dict(load_file(str(path)))
+        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"))
+
+    def locate(self, obs: Mapping[str, np.ndarray]) -> Location:
+        """Where the object of ``obs``' exemplar (``query_color``, ``query_depth``) shows in its
+        heightmaps (``color``, ``depth``). Raises ``KeyError`` naming a missing entry."""
+        missing = [k for k in ("color", "depth", "query_color", "query_depth") if k not in obs]
+        if missing:
+            raise KeyError(f"the locator needs an exemplar-mode observation; missing {missing}")
+        scene = torch.from_numpy(scene_input(obs))[None]
+        query = torch.from_numpy(query_input(obs))[None]
+        descriptor = torch.from_numpy(query_descriptor(obs["query_color"], obs["query_depth"]))[None]
+        with torch.no_grad():
+            pixels, seen = self.net(scene, query, descriptor)
+        probability = torch.sigmoid(pixels[0]).numpy().astype(np.float32)
+        seen_probability = float(torch.sigmoid(seen[0]))
+        shown = seen_probability >= self.seen_threshold
+        mask = (probability >= self.threshold).astype(np.uint8) if shown else np.zeros(probability.shape, np.uint8)
+        return Location(probability, mask, shown, seen_probability)
