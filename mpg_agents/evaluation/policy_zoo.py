@@ -205,17 +205,32 @@ def net_suffix(used: Sequence[str], allowed: Sequence[str]) -> str:
     return f" ({used[0]}-only net)" if len(used) == 1 else f" ({'+'.join(used)} net)"
 
 
-def make_policy(name: str, env: gym.Env, seed: int = 0, **kwargs: Any):
+def make_policy(name: str, env: gym.Env, seed: int = 0, locator: str | Path | None = None, **kwargs: Any):
     """A policy by name (see the module docstring) for ``env``; ``seed`` seeds a scripted baseline,
-    ``kwargs`` are a network policy's settings (:class:`NetworkPolicy`)."""
+    ``kwargs`` are a network policy's settings (:class:`NetworkPolicy`). On an env that names
+    its target by an exemplar, a network policy acts on what a target locator finds
+    (``locator``: its weights file; the shipped locator by default)."""
     if baseline_name(name) is not None:  # the scripted baselines take no network settings
         return make_baseline(name, env, seed)
     if name == "shipped":
-        return NetworkPolicy(shipped_checkpoint(), env, name="shipped:" + SHIPPED_CHECKPOINT, **kwargs)
+        return _located(shipped_checkpoint(), env, "shipped:" + SHIPPED_CHECKPOINT, locator, kwargs)
     path = Path(name)
     if path.suffix == ".safetensors" or path.exists():
-        return NetworkPolicy(path, env, **kwargs)
+        return _located(path, env, None, locator, kwargs)
     raise ValueError(f"unknown policy {name!r}: use one of {BUILTIN} or the path of a .safetensors checkpoint")
+
+
+def _located(path: Path, env: gym.Env, name: str | None, locator: str | Path | None, kwargs: dict[str, Any]):
+    """A :class:`NetworkPolicy`; on an env that names its target by an exemplar, run on what the
+    target locator at ``locator`` (the shipped one by default) finds
+    (:class:`mpg_agents.locator.finding_policy.FindingPolicy`)."""
+    if getattr(env.unwrapped, "target_spec", "mask") != "exemplar":
+        return NetworkPolicy(path, env, name=name, **kwargs)
+    from mpg_agents.locator.finding_policy import FindingPolicy, MaskedView  # noqa: PLC0415 - it loads torch
+    from mpg_agents.locator.locator import SHIPPED_LOCATOR, TargetLocator  # noqa: PLC0415
+
+    found = TargetLocator.load(SHIPPED_LOCATOR if locator is None else locator)
+    return FindingPolicy(NetworkPolicy(path, MaskedView(env), name=name, **kwargs), found)
 
 
 def make_network_policy(name: str, env: gym.Env, **kwargs: Any) -> NetworkPolicy:

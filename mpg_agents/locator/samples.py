@@ -5,8 +5,7 @@ the exemplar's) with the simulator's label: the pixels where the target is the t
 (:meth:`~mpg_envs.tasks.episode_sim.EpisodeSim.top_mask`, empty while it is hidden) and its
 visible fraction. Episodes come from :data:`SOURCES` (data: the stage 4 and 5 scenes and the hard
 track's, ray-cast and through the cameras, with visual randomization) on the training object
-families and the blocks (:func:`~mpg_agents.learning.training_objects.training_object_set`;
-held-out sets are refused there), at seeds of the run's own (below 500000): never a test seed
+families and the blocks (:func:`training_objects`), at seeds of the run's own (below 500000): never a test seed
 or the unseen-shape test split. Each episode gives its reset and the states after a few
 disturbing motions (moves and pushes at objects, half of them over the target's footprint,
 so the target is uncovered, covered again, or knocked about), so visibility spans hidden to
@@ -28,9 +27,10 @@ import gymnasium as gym
 import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the ids)
-from mpg_agents.learning.training_objects import training_object_set
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.workspace import NUM_ROTATIONS
+from mpg_envs.simulation.families import FAMILY_SEED_RANGES
+from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 
 ARRAYS = ("color", "depth", "query_color", "query_depth", "label", "visible_fraction", "source", "seed")
 """What a shard holds, one row per sample."""
@@ -61,8 +61,16 @@ SOURCES: tuple[SampleSource, ...] = (
 )
 """The training recipe: which episodes the samples come from, and in what shares."""
 
-TRAINING_OBJECTS = ("blocks", "procedural:{set_seed}")
-"""The object sets of a shard: the blocks and the procedural families drawn with the shard's set seed."""
+
+def training_objects(set_seed: int) -> list[ObjectAsset]:
+    """The objects of a shard: the blocks and the procedural training families drawn with
+    ``set_seed`` (a seed of the families' training split; ``ValueError`` otherwise)."""
+    if set_seed not in FAMILY_SEED_RANGES["train"]:
+        train = FAMILY_SEED_RANGES["train"]
+        raise ValueError(
+            f"set seed must lie in the families' training split [{train.start}, {train.stop - 1}], got {set_seed}"
+        )
+    return [*load_object_set("blocks"), *load_object_set("procedural", seed=set_seed)]
 
 
 def disturbing_action(primitives: Sequence[str], depth: np.ndarray, footprint: np.ndarray, rng: np.random.Generator) -> int:
@@ -119,9 +127,10 @@ def episode_samples(env: gym.Env, source: SampleSource, seed: int) -> list[dict[
     return samples
 
 
-def source_env(source: SampleSource, objects: Sequence[Any], num_objects: int) -> gym.Env:
-    """``source``'s env in exemplar mode on ``objects`` (assets) with ``num_objects`` objects."""
-    return gym.make(source.env_id, target_spec="exemplar", object_set=list(objects), num_objects=num_objects, **source.kwargs)
+def source_env(source: SampleSource, objects: str | Sequence[Any], num_objects: int) -> gym.Env:
+    """``source``'s env in exemplar mode on ``objects`` (a set's name or assets) with ``num_objects`` objects."""
+    object_set = objects if isinstance(objects, str) else list(objects)
+    return gym.make(source.env_id, target_spec="exemplar", object_set=object_set, num_objects=num_objects, **source.kwargs)
 
 
 TUNING_SEEDS = range(700000, 1000000)
@@ -166,12 +175,12 @@ def write_shard(path: Path, samples: Sequence[Mapping[str, Any]], source_index: 
 
 def collect_shard(folder: Path, shard: int, source: SampleSource, seeds: Sequence[int], set_seed: int) -> Path:
     """Collect one shard into ``folder`` (skipped when its file is there) and return its path;
-    its objects are :data:`TRAINING_OBJECTS` with ``set_seed``, its object count drawn from
+    its objects are :func:`training_objects` with ``set_seed``, its object count drawn from
     ``source.objects`` by the shard's index."""
     path = folder / f"shard_{shard:04d}.npz"
     if path.is_file():
         return path
-    objects = training_object_set([name.format(set_seed=set_seed) for name in TRAINING_OBJECTS])
+    objects = training_objects(set_seed)
     num_objects = int(np.random.default_rng([shard, set_seed]).choice(source.objects))
     env = source_env(source, objects, num_objects)
     try:

@@ -31,15 +31,29 @@ def test_the_matcher_is_a_builtin_policy(exemplar_env):
     )
 
 
-@pytest.mark.parametrize(
-    ("name", "who"), [("pixel-heuristic", "the pixel heuristic"), ("shipped", "an MPGNet checkpoint")]
-)
-def test_mask_policies_refuse_an_exemplar_env_clearly(exemplar_env, name, who):
+def test_the_pixel_heuristic_refuses_an_exemplar_env_clearly(exemplar_env):
     with pytest.raises(
         ValueError,
-        match=f"{who} needs the target's mask in the observation; .*target_spec='exemplar'",
+        match="the pixel heuristic needs the target's mask in the observation; .*target_spec='exemplar'",
     ):
-        make_policy(name, exemplar_env)
+        make_policy("pixel-heuristic", exemplar_env)
+
+
+def test_a_net_acts_on_an_exemplar_env_through_a_locator(exemplar_env, tmp_path):
+    from mpg_agents.locator.finding_policy import FindingPolicy
+    from mpg_agents.locator.locator import save_locator
+    from mpg_agents.locator.net import LocatorConfig, LocatorNet
+
+    path = tmp_path / "locator.safetensors"
+    save_locator(LocatorNet(LocatorConfig(8, 8, 16)), path, 0.5, 0.5, {})
+    policy = make_policy("shipped", exemplar_env, locator=path, device="cpu")
+    assert isinstance(policy, FindingPolicy) and policy.name.endswith("+ locator")
+    obs, _ = exemplar_env.reset(seed=500000)
+    policy.reset()
+    assert exemplar_env.action_space.contains(policy.act(obs))
+    assert policy.last_location is not None and policy.last_location.probability.shape == obs["depth"].shape
+    located = policy.located_observation(obs)
+    assert set(located) == {"color", "depth", "mask", "occluded"} and located["mask"].shape == obs["depth"].shape
 
 
 def test_the_shipped_net_acts_on_the_visible_mask():

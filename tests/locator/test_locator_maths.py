@@ -1,0 +1,118 @@
+"""The locator's pure parts by hand: inputs, figures, the loss, the learning-rate schedule,
+the seen threshold's calibration and the sample plan's seeds."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from mpg_agents.locator.features import (
+    DEPTH_SCALE,
+    colour_distance,
+    query_descriptor,
+    query_input,
+    scene_input,
+)
+from mpg_agents.locator.metrics import band_name, in_band, iou, locator_figures
+from mpg_agents.locator.run import calibrate_seen
+from mpg_agents.locator.samples import TUNING_SEEDS, disturbing_action, shard_plan
+from mpg_agents.locator.training import learning_rate_factor, locator_loss, symmetry
+from mpg_envs.grid.actions import decode_action
+
+
+def _query(size: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    color = np.zeros((size, size, 3), np.uint8)
+    depth = np.zeros((size, size), np.float32)
+    color[2:4, 2:6] = (255, 0, 0)  # 8 red pixels, 4 of them 5 cm tall, 4 of them 3 cm
+    depth[2:3, 2:6], depth[3:4, 2:6] = 0.05, 0.03
+    return color, depth
+
+
+def test_the_query_descriptor_by_hand():
+    area, top, mean, r, g, b = query_descriptor(*_query())
+    assert area == pytest.approx(8 / 64) and top == pytest.approx(0.5) and mean == pytest.approx(0.4)
+    assert (r, g, b) == pytest.approx((1.0, 0.0, 0.0))
+    assert not query_descriptor(np.zeros((4, 4, 3), np.uint8), np.zeros((4, 4), np.float32)).any()
+
+
+def test_colour_distance_and_the_input_channels_by_hand():
+    color = np.array([[[255, 0, 0], [0, 0, 0]], [[255, 255, 255], [0, 255, 0]]], np.uint8)
+    distance = colour_distance(color, np.array([1.0, 0.0, 0.0]))
+    assert distance == pytest.approx(np.array([[0.0, 1.0], [math.sqrt(2), math.sqrt(2)]]), abs=1e-6)
+    query_color, query_depth = _query(2)
+    obs = {"color": color, "depth": np.full((2, 2), 0.02, np.float32), "query_color": query_color, "query_depth": query_depth}
+    scene = scene_input(obs)
+    assert scene.shape == (5, 2, 2) and scene[3] == pytest.approx(np.full((2, 2), 0.02 * DEPTH_SCALE))
+    assert scene[0, 0, 0] == 1.0 and scene[4, 0, 0] == pytest.approx(1.0)  # the empty query's colour is black
+    assert query_input(obs).shape == (4, 2, 2)
+
+
+def test_iou_and_the_bands_by_hand():
+    a = np.zeros((4, 4), bool)
+    b = np.zeros((4, 4), bool)
+    a[0, :2], b[0, 1:3] = True, True
+    assert iou(a, b) == pytest.approx(1 / 3) and iou(b * 0, a * 0) == 1.0 and iou(a, b * 0) == 0.0
+    assert in_band(0.0, (0.0, 0.0)) and not in_band(0.01, (0.0, 0.0)) and in_band(0.3, (0.1, 0.3))
+    assert not in_band(0.1, (0.1, 0.3)) and band_name((0.0, 0.0)) == "hidden" and band_name((0.6, 1.01)) == "60-100%"
+    figures = locator_figures([a, a, b * 0], [True, True, True], [b, a, b * 0], [0.5, 0.7, 0.0])
+    assert figures["hidden"] == {"samples": 1.0, "seen_rate": 1.0}  # a false claim
+    assert figures["at least 30%"]["iou"] == pytest.approx((1 / 3 + 1) / 2)
+
+
+def test_the_loss_by_hand():
+    labels = torch.zeros(1, 2, 2)
+    labels[0, 0, 0] = 1
+    logits = torch.zeros(1, 2, 2)
+    total, parts = locator_loss(logits, torch.zeros(1), labels)
+    # BCE at p = 0.5 is ln 2 per pixel; the target pixel weighs 4: (4 + 3) ln 2 / 4 pixels.
+    assert parts["pixel"] == pytest.approx(7 * math.log(2) / 4, rel=1e-5)
+    assert parts["dice"] == 0.0  # one target pixel: below the 10 that count as seen, no Dice term
+    assert parts["seen"] == pytest.approx(math.log(2), rel=1e-5)  # "not seen" at p = 0.5
+    assert float(total) == pytest.approx(parts["pixel"] + parts["seen"], rel=1e-5)
+
+
+def test_the_learning_rate_warms_up_then_decays_to_zero():
+    assert learning_rate_factor(0, 100) == pytest.approx(0.2)  # 5 warm-up steps
+    assert learning_rate_factor(5, 100) == pytest.approx(1.0)
+    assert learning_rate_factor(100, 100) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_symmetry_turns_and_mirrors():
+    a = np.arange(4).reshape(2, 2)
+    assert symmetry(a, 1, False).tolist() == [[1, 3], [0, 2]]
+    assert symmetry(a, 0, True).tolist() == [[1, 0], [3, 2]]
+
+
+def test_the_seen_threshold_claims_at_most_the_allowed_share_of_hidden_targets():
+    hidden = [0.1 * k for k in range(10)]  # 0.0 .. 0.9
+    seen = hidden + [0.95]
+    visible = [0.0] * 10 + [0.5]
+    threshold = calibrate_seen(seen, visible, false_claims=0.1)  # one of ten may be claimed
+    assert 0.8 < threshold <= 0.9 + 1e-5 and sum(s >= threshold for s in hidden) == 1
+    assert calibrate_seen([0.2], [0.0], false_claims=0.0) == 0.5  # never below 0.5
+    assert calibrate_seen([0.9], [0.4]) == 0.5  # no hidden sample
+
+
+def test_sample_seeds_are_the_runs_own_or_the_tuning_seeds():
+    plan = shard_plan(10, 3, 1)
+    seeds = [s for _, _, shard in plan for s in shard]
+    assert len(set(seeds)) == 30 and min(seeds) == 1_000_003
+    tuning = [s for _, _, shard in shard_plan(4, 2, 1, tuning=True) for s in shard]
+    assert tuning == list(range(TUNING_SEEDS.start, TUNING_SEEDS.start + 8))
+    assert [s for _, _, shard in shard_plan(2, 2, 0) for s in shard] == [0, 1, 2, 3]
+    with pytest.raises(ValueError, match="meet the test and tuning seeds"):
+        shard_plan(10, 60000, 0)
+
+
+def test_a_disturbing_action_is_a_move_or_push_at_an_object():
+    depth = np.zeros((224, 224), np.float32)
+    depth[100:110, 50:60] = 0.05
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        action = decode_action(("move", "push", "grasp"), disturbing_action(("move", "push", "grasp"), depth, depth > 0, rng))
+        assert action.primitive in ("move", "push") and 100 <= action.row < 110 and 50 <= action.col < 60
+    only_push = decode_action(("push", "grasp"), disturbing_action(("push", "grasp"), depth, depth > 0, rng))
+    assert only_push.primitive == "push"

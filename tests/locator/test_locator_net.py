@@ -1,0 +1,87 @@
+"""The locator's network and weights file: shapes, a decision alone is the decision in a batch,
+a saved locator loads and locates the same, bad input is named; and one simulated episode's
+samples are labelled by the simulator."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from mpg_agents.locator.locator import TargetLocator, read_locator_header, save_locator
+from mpg_agents.locator.net import LocatorConfig, LocatorNet
+
+SMALL = LocatorConfig(8, 8, 16)
+
+
+def _obs(rng: np.random.Generator, size: int = 64) -> dict[str, np.ndarray]:
+    return {
+        "color": rng.integers(0, 256, (size, size, 3), dtype=np.uint8),
+        "depth": rng.uniform(0, 0.1, (size, size)).astype(np.float32),
+        "query_color": rng.integers(0, 256, (size, size, 3), dtype=np.uint8),
+        "query_depth": rng.uniform(0, 0.05, (size, size)).astype(np.float32),
+    }
+
+
+def test_shapes_and_a_decision_alone_is_the_decision_in_a_batch():
+    torch.manual_seed(0)
+    net = LocatorNet(SMALL).eval()
+    scene, query, descriptor = torch.rand(3, 5, 64, 64), torch.rand(3, 4, 64, 64), torch.rand(3, 6)
+    with torch.no_grad():
+        pixels, seen = net(scene, query, descriptor)
+        alone, alone_seen = net(scene[1:2], query[1:2], descriptor[1:2])
+    assert pixels.shape == (3, 64, 64) and seen.shape == (3,)
+    assert torch.allclose(alone[0], pixels[1], atol=1e-5) and torch.allclose(alone_seen[0], seen[1], atol=1e-5)
+    assert float(torch.sigmoid(pixels).mean()) < 0.1  # starts near "not the target"
+
+
+def test_a_saved_locator_loads_and_locates_the_same(tmp_path: Path):
+    torch.manual_seed(1)
+    net = LocatorNet(SMALL)
+    path = tmp_path / "locator.safetensors"
+    save_locator(net, path, 0.5, 0.7, {"steps": 3})
+    header = read_locator_header(path)
+    assert header["seen_threshold"] == 0.7 and header["record"] == {"steps": 3} and header["config"] == SMALL.to_dict()
+    obs = _obs(np.random.default_rng(0))
+    a, b = TargetLocator(net, 0.5, 0.7).locate(obs), TargetLocator.load(path).locate(obs)
+    assert np.allclose(a.probability, b.probability, atol=1e-6) and a.seen == b.seen
+    assert a.probability.shape == (64, 64) and a.mask.dtype == np.uint8
+    if not a.seen:
+        assert not a.mask.any()  # nothing is located where the target is not seen
+
+
+def test_bad_input_is_named(tmp_path: Path):
+    with pytest.raises(KeyError, match="query_color"):
+        TargetLocator(LocatorNet(SMALL)).locate({"color": np.zeros((8, 8, 3)), "depth": np.zeros((8, 8))})
+    with pytest.raises(FileNotFoundError, match="mpg-train-locator"):
+        TargetLocator.load(tmp_path / "none.safetensors")
+    other = tmp_path / "other.safetensors"
+    from safetensors.torch import save_file
+
+    save_file({"w": torch.zeros(1)}, str(other))
+    with pytest.raises(ValueError, match="not a locator weights file"):
+        read_locator_header(other)
+    net = LocatorNet(SMALL)
+    with torch.no_grad():
+        net.seen_bias.fill_(float("nan"))
+    with pytest.raises(ValueError, match="NaN"):
+        save_locator(net, tmp_path / "nan.safetensors", 0.5, 0.5, {})
+
+
+def test_one_episodes_samples_are_labelled_by_the_simulator():
+    from mpg_agents.locator.samples import SOURCES, episode_samples, source_env
+
+    source = next(s for s in SOURCES if s.name == "stage4")
+    env = source_env(source, "blocks", 8)
+    try:
+        samples = episode_samples(env, source, 12)
+    finally:
+        env.close()
+    assert 1 <= len(samples) <= source.motions + 1
+    for sample in samples:
+        label, visible = sample["label"], float(sample["visible_fraction"])
+        assert label.shape == (224, 224) and set(np.unique(label)) <= {0, 1}
+        assert (label.sum() > 0) == (visible > 0)
+        assert np.all(sample["query_depth"][label > 0] >= 0) and sample["color"].dtype == np.uint8
