@@ -68,6 +68,12 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--device", choices=DEVICES, help="network policies: auto (default: CUDA when available), cpu or cuda")
     parser.add_argument(
+        "--locator",
+        metavar="PATH",
+        help="network policies on an env that names its target by an exemplar: the target locator's "
+        "weights (mpg-train-locator's locator.safetensors; default: the shipped locator)",
+    )
+    parser.add_argument(
         "--workers",
         type=int,
         help="worker processes on Ray; default 1 (in this process, no Ray), or "
@@ -131,6 +137,12 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
             extra += (("q_star", args.q_star),)
         if args.device is not None:
             extra += (("device", args.device),)
+        if args.locator is not None:
+            if is_builtin(args.policy) and args.policy != "shipped":
+                raise UsageError(f"--locator goes with a network policy (shipped or a checkpoint), not {args.policy!r}")
+            if not Path(args.locator).is_file():
+                raise UsageError(f"--locator: no file at {args.locator!r}")
+            extra += (("locator", str(args.locator)),)
         env_options = parse_env_options(args.env_option)
         check_env_options(args.env, env_options)
         if args.cases is not None:
