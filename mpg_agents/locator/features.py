@@ -50,6 +50,26 @@ def colour_distance(color: np.ndarray, mean_colour: np.ndarray) -> np.ndarray:
     return np.linalg.norm(scaled - np.asarray(mean_colour, np.float32), axis=-1).astype(np.float32)
 
 
+def centred_query(color: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An exemplar as the exemplar envs show it, from heightmaps of the object alone on the
+    empty table (a photo of it through :func:`~mpg_envs.perception.rgbd.heightmap_from_rgbd`,
+    say): the heightmaps shifted so the middle of the object's pixels' extent is at the grid's
+    centre (the table around it comes round from the other side). ``ValueError`` when no pixel
+    stands above the table (:data:`QUERY_MIN_HEIGHT`)."""
+    shown = query_pixels(depth)
+    if not shown.any():
+        raise ValueError(f"no pixel of the object's heightmap stands above the table (higher than {QUERY_MIN_HEIGHT} m)")
+    rows, cols = np.nonzero(shown)
+    shift = (
+        shown.shape[0] // 2 - (int(rows.min()) + int(rows.max()) + 1) // 2,
+        shown.shape[1] // 2 - (int(cols.min()) + int(cols.max()) + 1) // 2,
+    )
+    return (
+        np.roll(np.asarray(color), shift, axis=(0, 1)).astype(np.uint8),
+        np.roll(np.asarray(depth, np.float32), shift, axis=(0, 1)),
+    )
+
+
 def scene_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     """The scene's channels (:data:`SCENE_CHANNELS` x H x W, float32) of an exemplar-mode
     observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour."""

@@ -116,3 +116,17 @@ def test_a_disturbing_action_is_a_move_or_push_at_an_object():
         assert action.primitive in ("move", "push") and 100 <= action.row < 110 and 50 <= action.col < 60
     only_push = decode_action(("push", "grasp"), disturbing_action(("push", "grasp"), depth, depth > 0, rng))
     assert only_push.primitive == "push"
+
+
+def test_a_photo_of_the_object_is_centred_as_the_envs_show_the_exemplar():
+    from mpg_agents.locator.features import centred_query
+
+    color = np.zeros((10, 10, 3), np.uint8)
+    depth = np.zeros((10, 10), np.float32)
+    depth[0:2, 7:10], color[0:2, 7:10] = 0.04, 200  # rows 0-1, cols 7-9: middle at (1, 8)
+    query_color, query_depth = centred_query(color, depth)
+    rows, cols = np.nonzero(query_depth > 0)
+    assert (rows.min(), rows.max(), cols.min(), cols.max()) == (4, 5, 4, 6)
+    assert query_color[4, 4].tolist() == [200, 200, 200] and query_depth.dtype == np.float32
+    with pytest.raises(ValueError, match="no pixel of the object's heightmap"):
+        centred_query(color, np.zeros((10, 10), np.float32))
