@@ -11,7 +11,9 @@ episode (every branch's Q map at that decision, the chosen action drawn and name
 By default it runs the shipped MPGNet on the hard track (``MPG-OccludedHard-v0``: the target
 at most 30% visible, strict retrieval) from a held-out scene where the net first moves the
 occluder aside, then grasps the target; ``--env MPG-Occluded-v0`` shows the paper's test scenes,
-``--env MPG-OccludedHardNovel-v0 --seed 500001`` a scene of shapes no training used.
+``--env MPG-OccludedHardNovel-v0 --seed 500001`` a scene of shapes no training used. On an
+exemplar track (``--env MPG-OccludedHardExemplar-v0``) the net acts through the target locator,
+and ``scene.png`` adds the exemplar and the locator's map, the located target outlined.
 """
 
 from __future__ import annotations
@@ -53,11 +55,13 @@ def titled(image: np.ndarray, title: str) -> np.ndarray:
     return np.concatenate([bar, image], axis=0)
 
 
-def heightmap_panels(obs: dict[str, np.ndarray]) -> list[np.ndarray]:
-    """The colour heightmap with the target outlined, and the depth heightmap, titled (RGB)."""
+def heightmap_panels(obs: dict[str, np.ndarray], outline: np.ndarray | None = None) -> list[np.ndarray]:
+    """The colour heightmap with the target outlined (``outline``, else the observation's
+    mask; none in exemplar mode without it), and the depth heightmap, titled (RGB)."""
     size = (PANEL_PX, PANEL_PX)
     color = cv2.resize(obs["color"], size, interpolation=cv2.INTER_NEAREST)
-    mask = cv2.resize(obs["mask"].astype(np.uint8), size, interpolation=cv2.INTER_NEAREST)
+    target = outline if outline is not None else obs.get("mask", np.zeros(obs["color"].shape[:2], np.uint8))
+    mask = cv2.resize(np.asarray(target).astype(np.uint8), size, interpolation=cv2.INTER_NEAREST)
     contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     cv2.drawContours(color, contours, -1, (255, 255, 255), 2)
     depth = np.asarray(obs["depth"], np.float32).reshape(obs["color"].shape[:2])
@@ -70,9 +74,30 @@ def heightmap_panels(obs: dict[str, np.ndarray]) -> list[np.ndarray]:
     ]
 
 
-def scene_picture(env: gym.Env, obs: dict[str, np.ndarray]) -> np.ndarray:
-    """The heightmap panels beside the rendered scene (``env.render()``) when OpenGL works."""
-    panels = heightmap_panels(obs)
+def exemplar_panels(obs: dict[str, np.ndarray], locator: Any) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Exemplar mode: the target as ``locator`` finds it (its mask, to outline) and the panels of
+    the exemplar's colour heightmap and the locator's probability map, titled (RGB)."""
+    size = (PANEL_PX, PANEL_PX)
+    location = locator.locate(obs)
+    query = cv2.resize(obs["query_color"], size, interpolation=cv2.INTER_NEAREST)
+    heat = cv2.applyColorMap((np.clip(location.probability, 0.0, 1.0) * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
+    heat = cv2.resize(cv2.cvtColor(heat, cv2.COLOR_BGR2RGB), size, interpolation=cv2.INTER_NEAREST)
+    seen = f"seen, p = {location.seen_probability:.2f}" if location.seen else f"not seen, p = {location.seen_probability:.2f}"
+    return location.mask, [titled(query, "the exemplar (query_color)"), titled(heat, f"the locator's map ({seen})")]
+
+
+def scene_picture(env: gym.Env, obs: dict[str, np.ndarray], locator: Any = None) -> np.ndarray:
+    """The heightmap panels beside the rendered scene (``env.render()``) when OpenGL works; in
+    exemplar mode with a ``locator`` also the exemplar and the locator's map, the located
+    target outlined."""
+    extra: list[np.ndarray] = []
+    outline = None
+    if "query_color" in obs and locator is not None:
+        outline, extra = exemplar_panels(obs, locator)
+    panels = heightmap_panels(obs, outline)
+    if "query_color" in obs and locator is None:
+        extra = [titled(cv2.resize(obs["query_color"], (PANEL_PX, PANEL_PX), interpolation=cv2.INTER_NEAREST), "the exemplar")]
+    panels += extra
     try:
         view: Any = env.render()  # an RGB array (render_mode="rgb_array")
     except RenderUnavailableError as exc:
@@ -202,9 +227,11 @@ def main(argv: list[str] | None = None) -> int:
         f"from seed {args.seed}, {threads} torch threads, {device}"
     )
 
+    locator = getattr(policy, "locator", None)  # a net on an exemplar env finds the target with one
+
     def on_reset(episode: int, obs: dict[str, np.ndarray]) -> None:
         if episode == 0:
-            write_bytes_whole(out / "scene.png", png_bytes(scene_picture(env, obs)))
+            write_bytes_whole(out / "scene.png", png_bytes(scene_picture(env, obs, locator)))
 
     def on_step(episode: int, reward: float, info: dict) -> None:
         print(

@@ -85,3 +85,19 @@ def test_one_episodes_samples_are_labelled_by_the_simulator():
         assert label.shape == (224, 224) and set(np.unique(label)) <= {0, 1}
         assert (label.sum() > 0) == (visible > 0)
         assert np.all(sample["query_depth"][label > 0] >= 0) and sample["color"].dtype == np.uint8
+
+
+def test_the_demo_shows_the_exemplar_and_the_locators_map():
+    import gymnasium as gym
+
+    from mpg_agents.demo import PANEL_PX, exemplar_panels, heightmap_panels
+
+    env = gym.make("MPG-OccludedHardExemplar-v0")
+    try:
+        obs, _ = env.reset(seed=500052)
+    finally:
+        env.close()
+    mask, panels = exemplar_panels(obs, TargetLocator(LocatorNet(SMALL)))
+    assert mask.shape == obs["depth"].shape and len(panels) == 2
+    assert all(panel.shape[1] == PANEL_PX for panel in panels)
+    assert len(heightmap_panels(obs, mask)) == 2 and len(heightmap_panels(obs)) == 2  # no mask in exemplar mode: no outline
