@@ -51,7 +51,9 @@ def _collect(job: tuple[str, int, str, list[int], int]) -> str:
     source = next(s for s in SOURCES if s.name == name)
     started = time.perf_counter()
     path = collect_shard(Path(folder), shard, source, seeds, set_seed)
-    return f"{path.name} ({name}, {len(seeds)} episodes) in {time.perf_counter() - started:.0f} s"
+    skipped = np.load(path)["skipped_seeds"].tolist()
+    note = f", seeds without a valid scene: {skipped}" if skipped else ""
+    return f"{path.name} ({name}, {len(seeds)} episodes{note}) in {time.perf_counter() - started:.0f} s"
 
 
 def collect(folder: Path, shards: int, episodes: int, seed: int, tuning: bool, workers: int, log) -> list[Path]:

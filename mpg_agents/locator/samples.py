@@ -29,6 +29,7 @@ import numpy as np
 import mpg_envs  # noqa: F401  (registers the ids)
 from mpg_envs.grid.actions import encode_action
 from mpg_envs.grid.workspace import NUM_ROTATIONS
+from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.simulation.families import FAMILY_SEED_RANGES
 from mpg_envs.simulation.objects import ObjectAsset, load_object_set
 
@@ -50,12 +51,10 @@ class SampleSource:
 
 
 SOURCES: tuple[SampleSource, ...] = (
-    SampleSource("stage4", "MPG-Stage4-v0", (10, 15, 20, 25), 3, 0.25, {"visual_randomization": True}),
+    SampleSource("stage4", "MPG-Stage4-v0", (10, 15, 20), 3, 0.25, {"visual_randomization": True}),
     SampleSource("stage5", "MPG-Stage5-v0", (10, 15), 4, 0.3, {"visual_randomization": True}),
     SampleSource("hard", "MPG-OccludedHard-v0", (15,), 6, 0.15, {"visual_randomization": True}),
-    SampleSource(
-        "stage4-camera", "MPG-Stage4-v0", (10, 15, 20, 25), 3, 0.1, {"obs_mode": "camera", "visual_randomization": True}
-    ),
+    SampleSource("stage4-camera", "MPG-Stage4-v0", (10, 15, 20), 3, 0.1, {"obs_mode": "camera", "visual_randomization": True}),
     SampleSource("stage5-camera", "MPG-Stage5-v0", (10, 15), 4, 0.1, {"obs_mode": "camera", "visual_randomization": True}),
     SampleSource("hard-camera", "MPG-OccludedHard-v0", (15,), 6, 0.1, {"obs_mode": "camera", "visual_randomization": True}),
 )
@@ -164,17 +163,21 @@ def shard_plan(
     return plan
 
 
-def write_shard(path: Path, samples: Sequence[Mapping[str, Any]], source_index: int) -> None:
-    """``samples`` as one compressed ``.npz`` at ``path``, written whole."""
+def write_shard(path: Path, samples: Sequence[Mapping[str, Any]], source_index: int, skipped: Sequence[int] = ()) -> None:
+    """``samples`` as one compressed ``.npz`` at ``path``, written whole, with the ``skipped_seeds``
+    whose scene could not be made."""
     arrays = {key: np.stack([s[key] for s in samples]) for key in ARRAYS if key != "source"}
     arrays["source"] = np.full(len(samples), source_index, np.int16)
+    arrays["skipped_seeds"] = np.asarray(skipped, np.int64)
     tmp = path.with_name(path.name + ".tmp.npz")
     np.savez_compressed(tmp, allow_pickle=False, **arrays)
     os.replace(tmp, path)
 
 
 def collect_shard(folder: Path, shard: int, source: SampleSource, seeds: Sequence[int], set_seed: int) -> Path:
-    """Collect one shard into ``folder`` (skipped when its file is there) and return its path;
+    """Collect one shard into ``folder`` (skipped when its file is there) and return its path; a
+    seed whose scene the generator cannot make is left out and named in the shard's
+    ``skipped_seeds``;
     its objects are :func:`training_objects` with ``set_seed``, its object count drawn from
     ``source.objects`` by the shard's index."""
     path = folder / f"shard_{shard:04d}.npz"
@@ -183,11 +186,18 @@ def collect_shard(folder: Path, shard: int, source: SampleSource, seeds: Sequenc
     objects = training_objects(set_seed)
     num_objects = int(np.random.default_rng([shard, set_seed]).choice(source.objects))
     env = source_env(source, objects, num_objects)
+    samples, skipped = [], []
     try:
-        samples = [s for seed in seeds for s in episode_samples(env, source, seed)]
+        for seed in seeds:
+            try:
+                samples.extend(episode_samples(env, source, seed))
+            except InvalidSceneError:  # the generator found no valid scene for this seed: kept on record
+                skipped.append(seed)
     finally:
         env.close()
-    write_shard(path, samples, SOURCES.index(source))
+    if not samples:
+        raise RuntimeError(f"shard {shard} ({source.name}): no seed of {list(seeds)} gave a valid scene")
+    write_shard(path, samples, SOURCES.index(source), skipped)
     return path
 
 
