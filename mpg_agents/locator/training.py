@@ -37,7 +37,7 @@ SEEN_MIN_PIXELS = 10
 class TrainSettings:
     """The loop's settings (the run's seed orders the batches and the augmentation)."""
 
-    steps: int = 3000
+    steps: int = 2000
     batch_size: int = 16
     learning_rate: float = 1e-3
     weight_decay: float = 1e-5
