@@ -7,6 +7,10 @@ from __future__ import annotations
 import json
 import math
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -18,7 +22,7 @@ from safetensors.torch import load_file
 minari = __import__("minari") if os.environ.get("CI") else pytest.importorskip("minari")
 
 from mpg_agents.acting.weights import read_checkpoint_header  # noqa: E402
-from mpg_agents.cli import train_main  # noqa: E402
+from mpg_agents.cli import eval_main, train_main  # noqa: E402
 from mpg_agents.demos.cli import main as demos_main  # noqa: E402
 from mpg_agents.demos.dataset import dataset_digest, load_demos  # noqa: E402
 from mpg_agents.evaluation.evaluate import evaluate  # noqa: E402
@@ -81,13 +85,18 @@ def test_a_few_steps_lower_the_loss_and_the_checkpoint_plays_an_episode(demos, t
     assert card["dataset"]["digest"] == dataset_digest(demos) and card["demo_episodes"] == 3
     assert card["steps"] == 4 and card["wall_time_s"] > 0 and summary["steps"] == 4
     assert header["config"]["rough_mask"] is False and header["primitives"] == ["grasp"]
-    # The checkpoint acts as any MPGNet checkpoint does.
+    # The checkpoint acts as any MPGNet checkpoint does: through make_policy, and mpg-eval.
     env = gym.make("MPG-Stage2-v0", num_objects=2)
     policy = make_policy(str(run / WEIGHTS), env)
+    assert policy.policy.coordination == "max_q" and policy.primitives == ("grasp",)
     result = evaluate(policy, env, episodes=1, seed=900000)
     env.close()
     record = result.records[0]
     assert len(result.records) == 1 and record.motions >= 1 and len(record.actions) == record.motions
+    evaluated = tmp_path / "eval.json"
+    eval_command = ["--policy", str(run / WEIGHTS), "--env", "MPG-Stage2-v0", "--num-objects", "2", "--episodes", "1"]
+    assert eval_main([*eval_command, "--seed", "900000", "--quiet", "--json", str(evaluated)]) == 0
+    assert json.loads(evaluated.read_text())["records"][0]["actions"] == list(record.actions)
     # The same command on the finished run changes nothing.
     before = load_file(str(run / WEIGHTS))
     assert train_main(command) == 0
@@ -112,6 +121,32 @@ def test_a_stopped_run_resumes_as_if_it_had_not_stopped(demos, tmp_path):
         train_bc(BCConfig(steps=4, **{**settings, "learning_rate": 1e-2}), demos, stopped)
     with pytest.raises(ValueError, match="demo_episodes: saved 3, asked 2"):
         train_bc(BCConfig(steps=4, demo_episodes=2, **settings), demos, stopped)
+
+
+def test_a_run_killed_with_sigkill_resumes_to_the_weights_of_an_unkilled_one(demos, tmp_path):
+    settings = {"batch_size": 2, "save_every": 1, "learning_rate": 1e-3, "seed": 3}
+    straight = tmp_path / "straight"
+    train_bc(BCConfig(steps=4, **settings), demos, straight)
+    config = tmp_path / "bc.toml"
+    config.write_text("batch_size = 2\nsave_every = 1\nlearning_rate = 0.001\nseed = 3\n")
+    killed = tmp_path / "killed"
+    command = [sys.executable, "-m", "mpg_agents.cli", "--baseline", "bc", "--demos", str(demos), "--out", str(killed)]
+    command += ["--steps", "4", "--config", str(config)]
+    env = {**os.environ, "MPG_NUM_THREADS": "1"}  # as this process: one thread, the same sums
+    run = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    while run.poll() is None and time.monotonic() < deadline:
+        if (killed / PROGRESS).is_file() and len(progress(killed)) >= 2:
+            run.send_signal(signal.SIGKILL)  # somewhere in step 3 or its save
+            break
+        time.sleep(0.05)
+    run.wait(timeout=60)
+    assert run.returncode == -signal.SIGKILL, "the run ended before it could be killed"
+    assert subprocess.run(command, env=env, capture_output=True, timeout=600).returncode == 0
+    a, b = load_file(str(straight / WEIGHTS)), load_file(str(killed / WEIGHTS))
+    assert all(np.array_equal(a[k].numpy(), b[k].numpy()) for k in a)
+    assert [r["step"] for r in progress(killed)] == ["1", "2", "3", "4"]
+    assert [r["loss"] for r in progress(killed)] == [r["loss"] for r in progress(straight)]
 
 
 def test_bad_input_is_one_line_naming_what_is_valid(tmp_path, capsys):
