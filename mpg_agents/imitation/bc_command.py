@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from typing import Any
 
 from mpg_agents.cli_input import UsageError, check_thread_setting, fail, read_config
@@ -74,7 +75,7 @@ def bc_settings(args: argparse.Namespace) -> BCConfig:
         raise UsageError(f"{exc} (behaviour-cloning settings: {', '.join(BC_FIELDS)})") from None
 
 
-def print_step(every: int, steps: int) -> Any:
+def print_step(every: int, steps: int) -> Callable[[StepRecord], None]:
     """A progress printer: a line every ``every`` steps and at the last."""
 
     def show(record: StepRecord) -> None:

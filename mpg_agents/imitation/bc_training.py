@@ -152,7 +152,12 @@ def check_bc_resume(out: Path, saved: Mapping[str, Any], asked: Mapping[str, Any
 
 
 def save_bc_state(
-    out: Path, net: MPGNet, optimizer: torch.optim.Optimizer, rng: np.random.Generator, counters: dict, record: dict
+    out: Path,
+    net: MPGNet,
+    optimizer: torch.optim.Optimizer,
+    rng: np.random.Generator,
+    counters: dict[str, Any],
+    record: dict[str, Any],
 ) -> None:
     """The run's state, swapped in whole."""
 
