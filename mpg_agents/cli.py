@@ -67,9 +67,11 @@ def training_settings(path: str | None) -> tuple[Any, tuple[Any, ...]]:
 # ---------------------------------------------------------------------------- train
 def train_main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="mpg-train", description="Train MPGNet: one stage (--env) or the five-stage pipeline (--pipeline)."
+        prog="mpg-train",
+        description="Train MPGNet: one stage (--env) or the five-stage pipeline (--pipeline); "
+        "or clone the actions of a dataset recorded by mpg-demos (--baseline bc --demos DIR).",
     )
-    what = parser.add_mutually_exclusive_group(required=True)
+    what = parser.add_mutually_exclusive_group()  # one of them is required, except for --baseline bc (checked below)
     what.add_argument("--env", help="one stage, by its env id, e.g. MPG-Stage4-v0")
     what.add_argument("--pipeline", action="store_true", help="run Stages I-V in order (with Q*_g calibration after II)")
     parser.add_argument("--init", help="start from this MPGNet checkpoint (safetensors)")
@@ -110,8 +112,13 @@ def train_main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-alternating", action="store_true", help="pipeline ablation: Stage V by max Q, all nets at once")
     parser.add_argument(
         "--baseline",
-        choices=("grasp-only", "to-vpg", "push-grasp"),
-        help="pipeline: train a learned baseline of Table I at the same total iterations instead of MPGNet",
+        choices=("grasp-only", "to-vpg", "push-grasp", "bc"),
+        help="pipeline: train a learned baseline of Table I at the same total iterations instead of MPGNet; "
+        "bc: behaviour cloning of the actions recorded in --demos (no --env or --pipeline: the dataset's env)",
+    )
+    parser.add_argument("--demos", help="--baseline bc: a dataset folder recorded by mpg-demos")
+    parser.add_argument(
+        "--demo-episodes", type=int, help="--baseline bc: imitate the dataset's first N episodes (default: all)"
     )
     parser.add_argument(
         "--resume-anyway",
@@ -119,6 +126,14 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         help="resume a saved run even though settings differ from its own (they are listed; the record keeps the new ones)",
     )
     args = parser.parse_args(argv)
+    if args.baseline == "bc":
+        from mpg_agents.imitation.bc_command import bc_main  # noqa: PLC0415  (start-up time: torch, Minari)
+
+        return bc_main(args)
+    if args.demos is not None or args.demo_episodes is not None:
+        parser.error("--demos and --demo-episodes go with --baseline bc")
+    if args.env is None and not args.pipeline:
+        parser.error("one of the arguments --env --pipeline is required (or --baseline bc with --demos)")
     try:
         from mpg_agents.acting.grasp_threshold import as_record  # noqa: PLC0415
         from mpg_agents.learning import training_stages as ts  # noqa: PLC0415

@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 LAYERS = {
     "mpg_envs": ("_version", "threads", "settings_fields", "files", "grid", "perception", "simulation", "scenes", "tasks", "policies", "integrations"),
-    "mpg_agents": ("network", "acting", "locator", "evaluation", "learning", "sb3", "cli_input", "cli_net_settings", "cli_eval", "cli", "demo", "demos"),
+    "mpg_agents": ("network", "acting", "locator", "evaluation", "learning", "sb3", "cli_input", "cli_net_settings", "cli_eval", "demos", "imitation", "cli", "demo"),
 }
 """Each package's layers, lowest first: a subpackage, or a module at the package's top."""
 

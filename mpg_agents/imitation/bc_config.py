@@ -1,0 +1,113 @@
+"""The settings of a behaviour-cloning run (``mpg-train --baseline bc``): how many demonstrations,
+how many gradient steps on what batches, and which MPGNet.
+
+The net is MPGNet's (:class:`~mpg_agents.network.mpgnet_config.MPGNetConfig`) with the branches
+the dataset's env acts with, every pixel a class: no rough target mask and no finger masks, so
+the policy acts where its softmax puts the most mass (:func:`bc_net_config`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, fields
+from numbers import Integral, Real
+from typing import Any
+
+from mpg_agents.acting.device import DEVICES
+from mpg_agents.acting.seeds import check_seed
+from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_envs.settings_fields import check_known_fields
+
+DEMO_BUDGETS: tuple[int, ...] = (10, 100, 1000)
+"""The numbers of demonstrations behaviour cloning is reported with."""
+
+
+@dataclass(frozen=True)
+class BCConfig:
+    """Behaviour cloning's settings, each checked when made.
+
+    Attributes:
+        demo_episodes: train on the dataset's first this many episodes (``None``: all of them).
+        steps: gradient steps (Adam) in all, counted across resumes.
+        batch_size: recorded (observation, action) samples per gradient step, drawn without
+            replacement from the seeded generator (with replacement when the samples are fewer).
+        learning_rate: Adam's step size.
+        seed: seeds the sample draws and the net's initial weights.
+        variant: MobileNetV3 trunks, ``"small"`` (stride 8, as the shipped checkpoint) or ``"large"``.
+        color_input: the nets read the colour heightmap too. Off by default, as in the shipped
+            checkpoint: each branch then runs a depth trunk beside the shared mask trunk, half the
+            cost of a step (the target is named by its mask).
+        save_every: steps between saved run states (and ``weights.safetensors``); the last step
+            always saves.
+        device: ``auto`` (CUDA when available), ``cpu`` or ``cuda``.
+    """
+
+    demo_episodes: int | None = None
+    steps: int = 1000
+    batch_size: int = 4
+    learning_rate: float = 1e-4
+    seed: int = 0
+    variant: str = "small"
+    color_input: bool = False
+    save_every: int = 25
+    device: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.demo_episodes is not None:
+            _positive_int(self.demo_episodes, "demo_episodes (--demo-episodes)")
+        _positive_int(self.steps, "steps (--steps)")
+        _positive_int(self.batch_size, "batch_size")
+        _positive_int(self.save_every, "save_every")
+        if isinstance(self.learning_rate, bool) or not isinstance(self.learning_rate, Real) or not self.learning_rate > 0:
+            raise ValueError(f"learning_rate must be a number > 0, got {self.learning_rate!r}")
+        check_seed(self.seed, "seed (--seed)")
+        if self.variant not in ("small", "large"):
+            raise ValueError(f"variant must be 'small' or 'large', got {self.variant!r}")
+        if not isinstance(self.color_input, bool):
+            raise ValueError(f"color_input must be true or false, got {self.color_input!r}")
+        if self.device not in DEVICES and not (self.device.startswith("cuda:") and self.device[5:].isdigit()):
+            raise ValueError(f"device must be one of {DEVICES} (or cuda:N), got {self.device!r}")
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> BCConfig:
+        """The settings a mapping (a ``--config`` file) names.
+
+        Raises:
+            ValueError: a key is not a field (names the valid ones), or a value is out of range.
+        """
+        check_known_fields(cls, data, "behaviour-cloning settings")
+        return cls(**dict(data))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready settings."""
+        return asdict(self)
+
+    def run_record(self) -> dict[str, Any]:
+        """The settings a resumed run must share with its saved state: all but where it runs,
+        how often it saves and the number of steps (a resume may run longer)."""
+        return {k: v for k, v in self.to_dict().items() if k not in ("device", "save_every", "steps")}
+
+
+def _positive_int(value: Any, what: str) -> None:
+    if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+        raise ValueError(f"{what} must be an integer >= 1, got {value!r}")
+
+
+def bc_net_config(config: BCConfig, primitives: Sequence[str]) -> MPGNetConfig:
+    """The MPGNet a behaviour-cloning run trains: ``config``'s variant and colour input, one branch
+    per primitive of the dataset's env, its last layer zero at the start (every action equally
+    likely: the first loss is ``log`` of the number of actions), and its maps unmasked (every
+    primitive, rotation and pixel is a class of the softmax, and the policy acts at their argmax)."""
+    return MPGNetConfig.for_variant(
+        config.variant,
+        primitives=tuple(primitives),
+        color_input=config.color_input,
+        head_init="zero",
+        rough_mask=False,
+        grasp_fingers="any",
+        move_fingers="any",
+    )
+
+
+BC_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(BCConfig))
+"""The fields a ``--config`` file of ``mpg-train --baseline bc`` may set."""

@@ -1,0 +1,80 @@
+"""Behaviour cloning's loss and settings, checked by hand."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from mpg_agents.imitation.bc_config import BCConfig, bc_net_config
+from mpg_agents.imitation.bc_loss import imitation_loss, top1_accuracy
+from mpg_agents.network.mpgnet import MPGNet, flat_q
+
+
+def test_the_loss_is_the_cross_entropy_of_the_recorded_action_computed_by_hand():
+    # Row 0: logits log 1, log 2, log 3 -> softmax 1/6, 2/6, 3/6; the recorded action 1 costs -log(2/6) = log 3.
+    # Row 1: four equal logits -> 1/4 each; action 3 costs log 4.
+    logits = torch.tensor([[0.0, math.log(2), math.log(3), -math.inf], [5.0, 5.0, 5.0, 5.0]])
+    loss = imitation_loss(logits, torch.tensor([1, 3]))
+    assert loss.item() == pytest.approx((math.log(3) + math.log(4)) / 2, abs=1e-6)
+    # One row, the recorded action the certain one: no loss.
+    assert imitation_loss(torch.tensor([[0.0, -math.inf]]), torch.tensor([0])).item() == pytest.approx(0.0, abs=1e-7)
+
+
+def test_the_gradient_is_the_softmax_less_the_recorded_one_hot():
+    logits = torch.tensor([[0.0, math.log(2), math.log(3)]], requires_grad=True)
+    imitation_loss(logits, torch.tensor([2])).backward()
+    assert logits.grad is not None
+    assert torch.allclose(logits.grad, torch.tensor([[1 / 6, 2 / 6, 3 / 6 - 1]]), atol=1e-6)
+
+
+def test_top1_accuracy_counts_the_rows_whose_argmax_is_the_recorded_action():
+    logits = torch.tensor([[0.0, 1.0, 0.5], [2.0, 1.0, 0.0], [0.0, 0.0, 3.0], [1.0, 0.0, 0.0]])
+    assert top1_accuracy(logits, torch.tensor([1, 0, 0, 2])) == pytest.approx(0.5)
+
+
+def test_bad_logits_or_actions_are_named():
+    with pytest.raises(ValueError, match=r"logits must be \(batch, actions\)"):
+        imitation_loss(torch.zeros(3), torch.tensor([0]))
+    with pytest.raises(ValueError, match="2 rows of logits but 1 actions"):
+        imitation_loss(torch.zeros(2, 4), torch.tensor([0]))
+    with pytest.raises(ValueError, match=r"actions must lie in 0\.\.3"):
+        imitation_loss(torch.zeros(2, 4), torch.tensor([0, 4]))
+    with pytest.raises(ValueError, match=r"actions must lie in 0\.\.3"):
+        top1_accuracy(torch.zeros(1, 4), torch.tensor([-1]))
+
+
+def test_settings_are_checked_by_name_and_range():
+    assert BCConfig.from_dict({"steps": 5, "batch_size": 2}).steps == 5
+    cases = [
+        ({"steps": 0}, "steps \\(--steps\\) must be an integer >= 1"),
+        ({"demo_episodes": 0}, "demo_episodes \\(--demo-episodes\\) must be an integer >= 1"),
+        ({"batch_size": 1.5}, "batch_size must be an integer >= 1"),
+        ({"learning_rate": 0}, "learning_rate must be a number > 0"),
+        ({"seed": -1}, "seed \\(--seed\\) must be >= 0"),
+        ({"variant": "tiny"}, "variant must be 'small' or 'large'"),
+        ({"color_input": "yes"}, "color_input must be true or false"),
+        ({"device": "tpu"}, "device must be one of"),
+        ({"epochs": 3}, r"unknown BCConfig fields \['epochs'\]; valid: \[.*'batch_size'"),
+    ]
+    for settings, says in cases:
+        with pytest.raises(ValueError, match=says):
+            BCConfig.from_dict(settings)
+    # What a resume must share leaves out where it runs, how often it saves and how long.
+    assert set(BCConfig().run_record()) == {"demo_episodes", "batch_size", "learning_rate", "seed", "variant", "color_input"}
+
+
+def test_the_untrained_net_gives_every_action_the_same_probability():
+    """The last layer starts at zero: the first loss is log of the number of actions, whatever is recorded."""
+    torch.manual_seed(0)
+    net = MPGNet(bc_net_config(BCConfig(), ("grasp",)))
+    assert net.primitives == ("grasp",) and not net.config.rough_mask and not net.config.color_input
+    net.train()
+    obs = {"color": torch.zeros(1, 224, 224, 3, dtype=torch.uint8), "depth": torch.rand(1, 224, 224) * 0.05}
+    obs["mask"] = (obs["depth"] > 0.04).to(torch.uint8)
+    with torch.no_grad():
+        maps = net(obs)
+    logits = flat_q(maps, ("grasp",))
+    assert logits.shape == (1, 16 * 224 * 224)
+    assert imitation_loss(logits, torch.tensor([12345])).item() == pytest.approx(math.log(16 * 224 * 224), abs=1e-5)
