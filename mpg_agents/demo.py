@@ -12,8 +12,9 @@ By default it runs the shipped MPGNet on the hard track (``MPG-OccludedHard-v0``
 at most 30% visible, strict retrieval) from a held-out scene where the net first moves the
 occluder aside, then grasps the target; ``--env MPG-Occluded-v0`` shows the paper's test scenes,
 ``--env MPG-OccludedHardNovel-v0 --seed 500001`` a scene of shapes no training used. On an
-exemplar track (``--env MPG-OccludedHardExemplar-v0``) the net acts through the target locator,
-and ``scene.png`` adds the exemplar and the locator's map, the located target outlined.
+exemplar track (``--env MPG-OccludedHardExemplar-v0 --locator PATH``) the net acts through a
+target locator, and ``scene.png`` adds the exemplar and the locator's map, the located target
+outlined.
 """
 
 from __future__ import annotations
@@ -197,6 +198,11 @@ def main(argv: list[str] | None = None) -> int:
         default=DEMO_SEED,
         help=f"episode i is reset with seed + i (default {DEMO_SEED}, a held-out test seed)",
     )
+    parser.add_argument(
+        "--locator",
+        metavar="PATH",
+        help="exemplar tracks: the target locator's weights (mpg-train-locator's locator.safetensors)",
+    )
     parser.add_argument("--out", default="demo_out", help="folder for scene.png and qmaps_<k>.png (default demo_out)")
     parser.add_argument(
         "--device",
@@ -218,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     env = gym.make(args.env, render_mode="rgb_array")
     try:
-        policy = make_policy(args.policy, env, device=str(device))
+        policy = make_policy(args.policy, env, device=str(device), **({"locator": args.locator} if args.locator else {}))
     except ValueError as exc:  # a checkpoint of another architecture or action space
         env.close()
         return fail(exc)

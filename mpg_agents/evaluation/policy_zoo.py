@@ -222,13 +222,24 @@ def make_policy(name: str, env: gym.Env, seed: int = 0, locator: str | Path | No
 
 def _located(path: Path, env: gym.Env, name: str | None, locator: str | Path | None, kwargs: dict[str, Any]):
     """A :class:`NetworkPolicy`; on an env that names its target by an exemplar, run on what the
-    target locator at ``locator`` (the shipped one by default) finds
-    (:class:`mpg_agents.locator.finding_policy.FindingPolicy`)."""
+    target locator at ``locator`` (the shipped one when there is one) finds
+    (:class:`mpg_agents.locator.finding_policy.FindingPolicy`).
+
+    Raises:
+        ValueError: an exemplar env, no ``locator`` given and none shipped with this installation.
+    """
     if getattr(env.unwrapped, "target_spec", "mask") != "exemplar":
         return NetworkPolicy(path, env, name=name, **kwargs)
     from mpg_agents.locator.finding_policy import FindingPolicy, MaskedView  # noqa: PLC0415 - it loads torch
     from mpg_agents.locator.locator import SHIPPED_LOCATOR, TargetLocator  # noqa: PLC0415
 
+    if locator is None and not SHIPPED_LOCATOR.is_file():
+        raise ValueError(
+            "an MPGNet checkpoint needs the target's mask in the observation; this env names the target by an "
+            "exemplar (target_spec='exemplar'), so the net acts through a target locator, and none ships with this "
+            "installation: give one (make_policy(..., locator=PATH), mpg-eval --locator PATH; mpg-train-locator "
+            "trains one), or use the matcher, oracle or random policy"
+        )
     found = TargetLocator.load(SHIPPED_LOCATOR if locator is None else locator)
     return FindingPolicy(NetworkPolicy(path, MaskedView(env), name=name, **kwargs), found)
 

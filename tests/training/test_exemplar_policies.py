@@ -39,6 +39,15 @@ def test_the_pixel_heuristic_refuses_an_exemplar_env_clearly(exemplar_env):
         make_policy("pixel-heuristic", exemplar_env)
 
 
+def test_a_net_on_an_exemplar_env_needs_a_locator(exemplar_env):
+    from mpg_agents.locator.locator import SHIPPED_LOCATOR
+
+    if SHIPPED_LOCATOR.is_file():
+        pytest.skip("a locator ships with this installation")
+    with pytest.raises(ValueError, match="acts through a target locator, and none ships.*mpg-train-locator"):
+        make_policy("shipped", exemplar_env)
+
+
 def test_a_net_acts_on_an_exemplar_env_through_a_locator(exemplar_env, tmp_path):
     from mpg_agents.locator.finding_policy import FindingPolicy
     from mpg_agents.locator.locator import save_locator
