@@ -28,6 +28,7 @@ import numpy as np
 
 import mpg_envs  # noqa: F401  (registers the ids)
 from mpg_envs.grid.actions import encode_action
+from mpg_envs.grid.primitive_specs import MOVE, PUSH
 from mpg_envs.grid.workspace import NUM_ROTATIONS
 from mpg_envs.scenes.generators import InvalidSceneError
 from mpg_envs.simulation.families import FAMILY_SEED_RANGES
@@ -84,7 +85,7 @@ def disturbing_action(primitives: Sequence[str], depth: np.ndarray, footprint: n
         pool = np.ones_like(tall)
     rows, cols = np.nonzero(pool)
     k = int(rng.integers(len(rows)))
-    allowed = [p for p in ("move", "push") if p in primitives]
+    allowed = [p for p in (MOVE, PUSH) if p in primitives]
     primitive = allowed[0] if len(allowed) == 1 or rng.random() < 0.6 else allowed[1]
     return encode_action(primitives, primitive, int(rng.integers(NUM_ROTATIONS)), int(rows[k]), int(cols[k]))
 

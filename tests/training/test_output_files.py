@@ -305,7 +305,7 @@ def test_a_demo_that_cannot_write_its_pictures_fails(full_disk, capsys, monkeypa
     import mpg_agents.demo as demo
 
     noise = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)  # a PNG of 12 kB: no room for it
-    monkeypatch.setattr(demo, "scene_picture", lambda env, obs: noise)  # and no rendering
+    monkeypatch.setattr(demo, "scene_picture", lambda env, obs, locator=None: noise)  # and no rendering
     full_disk.fill()
     assert demo_main(["--policy", "random", "--env", "MPG-Stage1-v0", "--episodes", "1", "--out", str(full_disk.folder)]) == 2
     captured = capsys.readouterr()
