@@ -41,11 +41,12 @@ class ScriptedBaseline:
     """One scripted baseline: its name, how to build it, what it does in a line, its former names,
     and whether its actions depend on how the env names the target (``target_spec``).
 
-    ``reads_target_spec=False`` is a promise: the baseline reads the simulator's target (the
-    oracle) or nothing (random), so on two envs that differ only in ``target_spec`` it plays
-    the same episodes action for action (tested in ``tests/envs/test_target_blind_baselines.py``)
-    and a table may reuse its mask-track cells for the visible track
-    (:mod:`mpg_agents.evaluation.reused_cells`, ``scenes_of``)."""
+    ``reads_target_spec=False`` is a promise: the baseline reads the simulator's target and
+    geometry (the oracle) or nothing (random), not the colours or the mask the env shows, so on
+    two envs that differ only in ``target_spec`` (the visible mask; the exemplar, which recolours
+    the scene) it plays the same episodes action for action (tested in
+    ``tests/envs/test_target_blind_baselines.py``) and a table may reuse its mask-track cells for
+    those tracks (:mod:`mpg_agents.evaluation.reused_cells`, ``scenes_of``)."""
 
     name: str
     factory: BaselineFactory
