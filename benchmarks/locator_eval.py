@@ -24,13 +24,12 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
-import numpy as np
 import torch
 
 import mpg_envs  # noqa: F401  (registers the ids)
 from mpg_agents.locator.locator import SHIPPED_LOCATOR, TargetLocator
 from mpg_agents.locator.metrics import locator_figures
-from mpg_agents.locator.samples import SampleSource, episode_samples
+from mpg_agents.locator.samples import SampleSource, episode_samples, sample_observation
 from mpg_envs.files import write_text_whole
 
 
@@ -46,7 +45,13 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     locator = TargetLocator.load(args.locator)
-    report: dict = {"locator": args.locator, "seed": args.seed, "episodes": args.episodes, "motions": args.motions, "cells": {}}
+    report: dict = {
+        "locator": args.locator,
+        "seed": args.seed,
+        "episodes": args.episodes,
+        "motions": args.motions,
+        "cells": {},
+    }
     pooled: dict[str, list] = {"masks": [], "seen": [], "labels": [], "visible": []}
     seconds: list[float] = []
     for track in args.tracks:
@@ -57,9 +62,7 @@ def main() -> None:
             try:
                 for seed in range(args.seed, args.seed + args.episodes):
                     for sample in episode_samples(env, source, seed):
-                        obs = {k: np.asarray(sample[k]) for k in ("color", "depth", "query_color", "query_depth")}
-                        obs["depth"] = obs["depth"].astype(np.float32)
-                        obs["query_depth"] = obs["query_depth"].astype(np.float32)
+                        obs = sample_observation(sample)
                         started = time.perf_counter()
                         location = locator.locate(obs)
                         seconds.append(time.perf_counter() - started)

@@ -71,7 +71,7 @@ def eval_main(argv: Sequence[str] | None = None) -> int:
         "--locator",
         metavar="PATH",
         help="network policies on an env that names its target by an exemplar: the target locator's "
-        "weights (mpg-train-locator's locator.safetensors; default: the shipped locator)",
+        "weights (mpg-train-locator's locator.safetensors; needed while no locator ships with the package)",
     )
     parser.add_argument(
         "--workers",

@@ -75,30 +75,27 @@ def heightmap_panels(obs: dict[str, np.ndarray], outline: np.ndarray | None = No
     ]
 
 
-def exemplar_panels(obs: dict[str, np.ndarray], locator: Any) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Exemplar mode: the target as ``locator`` finds it (its mask, to outline) and the panels of
-    the exemplar's colour heightmap and the locator's probability map, titled (RGB)."""
+def exemplar_panels(obs: dict[str, np.ndarray], locator: Any = None) -> tuple[np.ndarray | None, list[np.ndarray]]:
+    """Exemplar mode: the panel of the exemplar's colour heightmap, titled (RGB); with a
+    ``locator`` also the target as it finds it (its mask, to outline; else ``None``) and the
+    panel of its probability map."""
     size = (PANEL_PX, PANEL_PX)
+    query = titled(cv2.resize(obs["query_color"], size, interpolation=cv2.INTER_NEAREST), "the exemplar (query_color)")
+    if locator is None:
+        return None, [query]
     location = locator.locate(obs)
-    query = cv2.resize(obs["query_color"], size, interpolation=cv2.INTER_NEAREST)
     heat = cv2.applyColorMap((np.clip(location.probability, 0.0, 1.0) * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
     heat = cv2.resize(cv2.cvtColor(heat, cv2.COLOR_BGR2RGB), size, interpolation=cv2.INTER_NEAREST)
     seen = f"seen, p = {location.seen_probability:.2f}" if location.seen else f"not seen, p = {location.seen_probability:.2f}"
-    return location.mask, [titled(query, "the exemplar (query_color)"), titled(heat, f"the locator's map ({seen})")]
+    return location.mask, [query, titled(heat, f"the locator's map ({seen})")]
 
 
 def scene_picture(env: gym.Env, obs: dict[str, np.ndarray], locator: Any = None) -> np.ndarray:
     """The heightmap panels beside the rendered scene (``env.render()``) when OpenGL works; in
-    exemplar mode with a ``locator`` also the exemplar and the locator's map, the located
-    target outlined."""
-    extra: list[np.ndarray] = []
-    outline = None
-    if "query_color" in obs and locator is not None:
-        outline, extra = exemplar_panels(obs, locator)
-    panels = heightmap_panels(obs, outline)
-    if "query_color" in obs and locator is None:
-        extra = [titled(cv2.resize(obs["query_color"], (PANEL_PX, PANEL_PX), interpolation=cv2.INTER_NEAREST), "the exemplar")]
-    panels += extra
+    exemplar mode also the exemplar and, with a ``locator``, its map, the located target
+    outlined."""
+    outline, extra = exemplar_panels(obs, locator) if "query_color" in obs else (None, [])
+    panels = heightmap_panels(obs, outline) + extra
     try:
         view: Any = env.render()  # an RGB array (render_mode="rgb_array")
     except RenderUnavailableError as exc:

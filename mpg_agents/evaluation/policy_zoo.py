@@ -209,7 +209,7 @@ def make_policy(name: str, env: gym.Env, seed: int = 0, locator: str | Path | No
     """A policy by name (see the module docstring) for ``env``; ``seed`` seeds a scripted baseline,
     ``kwargs`` are a network policy's settings (:class:`NetworkPolicy`). On an env that names
     its target by an exemplar, a network policy acts on what a target locator finds
-    (``locator``: its weights file; the shipped locator by default)."""
+    (``locator``: its weights file; the shipped one when a locator ships)."""
     if baseline_name(name) is not None:  # the scripted baselines take no network settings
         return make_baseline(name, env, seed)
     if name == "shipped":

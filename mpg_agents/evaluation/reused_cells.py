@@ -16,9 +16,9 @@ under the label. Anything else raises
 :class:`~mpg_agents.evaluation.track_cells.CellMismatchError`.
 
 ``scenes_of`` reuses another track's cell for a track that differs from it only in how the
-target is named (``target_spec``: the hard track and its visible version play the same
-scenes and observations step for step), and only for a scripted baseline whose actions do not
-depend on that (:attr:`~mpg_envs.policies.registry.ScriptedBaseline.reads_target_spec` false: the
+target is named (``target_spec``: the hard track and its visible and exemplar versions play the
+same scenes step for step, the exemplar's recoloured), and only for a scripted baseline whose
+actions do not depend on that (:attr:`~mpg_envs.policies.registry.ScriptedBaseline.reads_target_spec` false: the
 oracle, random), so the two cells are the same episodes; the files are checked as that
 track's cell. Any other track or policy raises
 :class:`~mpg_agents.evaluation.track_cells.CellMismatchError`.

@@ -70,10 +70,12 @@ def centred_query(color: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.
     )
 
 
-def scene_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
+def scene_input(obs: Mapping[str, np.ndarray], descriptor: np.ndarray | None = None) -> np.ndarray:
     """The scene's channels (:data:`SCENE_CHANNELS` x H x W, float32) of an exemplar-mode
-    observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour."""
-    descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
+    observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour (from
+    ``descriptor``, the exemplar's :func:`query_descriptor`, computed when not given)."""
+    if descriptor is None:
+        descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
     color = np.asarray(obs["color"], np.float32).transpose(2, 0, 1) / 255.0
     depth = np.asarray(obs["depth"], np.float32)[None] * DEPTH_SCALE
     distance = colour_distance(obs["color"], descriptor[3:6])[None]
@@ -86,3 +88,11 @@ def query_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     color = np.asarray(obs["query_color"], np.float32).transpose(2, 0, 1) / 255.0
     depth = np.asarray(obs["query_depth"], np.float32)[None] * DEPTH_SCALE
     return np.concatenate([color, depth]).astype(np.float32)
+
+
+def net_inputs(obs: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(scene, query, descriptor)``: the network's three inputs of one exemplar-mode
+    observation (:func:`scene_input`, :func:`query_input`, :func:`query_descriptor`), the
+    descriptor computed once."""
+    descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
+    return scene_input(obs, descriptor), query_input(obs), descriptor

@@ -18,7 +18,7 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import load_file, save
 
-from mpg_agents.locator.features import query_descriptor, query_input, scene_input
+from mpg_agents.locator.features import net_inputs
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_envs.files import write_bytes_whole
 
@@ -93,9 +93,7 @@ class TargetLocator:
         missing = [k for k in ("color", "depth", "query_color", "query_depth") if k not in obs]
         if missing:
             raise KeyError(f"the locator needs an exemplar-mode observation; missing {missing}")
-        scene = torch.from_numpy(scene_input(obs))[None]
-        query = torch.from_numpy(query_input(obs))[None]
-        descriptor = torch.from_numpy(query_descriptor(obs["query_color"], obs["query_depth"]))[None]
+        scene, query, descriptor = (torch.from_numpy(array)[None] for array in net_inputs(obs))
         with torch.no_grad():
             pixels, seen = self.net(scene, query, descriptor)
         probability = torch.sigmoid(pixels[0]).numpy().astype(np.float32)

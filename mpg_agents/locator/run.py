@@ -32,7 +32,7 @@ import torch
 from mpg_agents.locator.locator import TargetLocator, save_locator
 from mpg_agents.locator.metrics import locator_figures
 from mpg_agents.locator.net import LocatorNet
-from mpg_agents.locator.samples import SOURCES, collect_shard, read_shards, shard_plan
+from mpg_agents.locator.samples import SOURCES, collect_shard, read_shards, sample_observation, shard_plan
 from mpg_agents.locator.training import TrainSettings, train_locator
 
 FALSE_CLAIMS = 0.02
@@ -78,9 +78,7 @@ def predictions(locator: TargetLocator, data: dict[str, np.ndarray]) -> tuple[li
     """The locator's probability maps and seen probabilities on ``data``'s samples."""
     maps, seen = [], []
     for i in range(len(data["label"])):
-        obs = {k: np.asarray(data[k][i]) for k in ("color", "depth", "query_color", "query_depth")}
-        obs["depth"], obs["query_depth"] = obs["depth"].astype(np.float32), obs["query_depth"].astype(np.float32)
-        location = locator.locate(obs)
+        location = locator.locate(sample_observation({key: array[i] for key, array in data.items()}))
         maps.append(location.probability)
         seen.append(location.seen_probability)
     return maps, seen
@@ -168,7 +166,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     torch.set_num_threads(args.torch_threads)
     torch.manual_seed(args.seed)
     data = read_shards(train)
-    log(f"{len(data['label'])} training samples")
+    train_samples = len(data["label"])
+    log(f"{train_samples} training samples")
     settings = TrainSettings(args.steps, args.batch_size, args.learning_rate, seed=args.seed)
     net = LocatorNet()
     trained = train_locator(net, data, settings, args.out, log)
@@ -184,7 +183,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "command": "mpg-train-locator " + " ".join(sys.argv[1:] if argv is None else argv),
         "seed": args.seed,
         "train_shards": len(train),
-        "train_samples": int(sum(np.load(p)["label"].shape[0] for p in train)),
+        "train_samples": train_samples,
         "tuning_samples": len(visible),
         "steps": trained["steps"],
         "batch_size": args.batch_size,

@@ -202,6 +202,17 @@ def collect_shard(folder: Path, shard: int, source: SampleSource, seeds: Sequenc
     return path
 
 
+def sample_observation(sample: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """One sample's arrays (a record of :func:`episode_samples`, or a row of the shards' arrays)
+    as the exemplar-mode observation it was recorded from (heights back to float32)."""
+    return {
+        "color": np.asarray(sample["color"]),
+        "depth": np.asarray(sample["depth"], np.float32),
+        "query_color": np.asarray(sample["query_color"]),
+        "query_depth": np.asarray(sample["query_depth"], np.float32),
+    }
+
+
 def read_shards(paths: Sequence[Path]) -> dict[str, np.ndarray]:
     """The samples of ``paths`` concatenated (arrays of :data:`ARRAYS`)."""
     loaded = [dict(np.load(p)) for p in paths]

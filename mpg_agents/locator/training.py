@@ -24,8 +24,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from mpg_agents.locator.features import query_descriptor, query_input, scene_input
+from mpg_agents.locator.features import net_inputs
 from mpg_agents.locator.net import LocatorNet
+from mpg_agents.locator.samples import sample_observation
 
 POSITIVE_WEIGHT = 4.0
 """Weight of a target pixel in the per-pixel cross-entropy (a target covers a few % of the map)."""
@@ -86,8 +87,7 @@ def batch_tensors(
     each sample's scene (with its label) and exemplar get their own random symmetry."""
     scenes, queries, descriptors, labels = [], [], [], []
     for i in indices:
-        obs = {key: np.asarray(data[key][i]) for key in ("color", "depth", "query_color", "query_depth")}
-        obs["depth"], obs["query_depth"] = obs["depth"].astype(np.float32), obs["query_depth"].astype(np.float32)
+        obs = sample_observation({key: array[i] for key, array in data.items()})
         label = np.asarray(data["label"][i])
         if rng is not None:
             turns, mirror = int(rng.integers(4)), bool(rng.integers(2))
@@ -96,9 +96,10 @@ def batch_tensors(
             turns, mirror = int(rng.integers(4)), bool(rng.integers(2))
             obs["query_color"] = symmetry(obs["query_color"], turns, mirror)
             obs["query_depth"] = symmetry(obs["query_depth"], turns, mirror)
-        scenes.append(scene_input(obs))
-        queries.append(query_input(obs))
-        descriptors.append(query_descriptor(obs["query_color"], obs["query_depth"]))
+        scene, query, descriptor = net_inputs(obs)
+        scenes.append(scene)
+        queries.append(query)
+        descriptors.append(descriptor)
         labels.append(label)
     return (
         torch.from_numpy(np.stack(scenes)),
