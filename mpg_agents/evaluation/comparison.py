@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -147,15 +147,21 @@ class PairedComparison:
         )
 
 
-def same_scenes(env_a: str, env_b: str) -> bool:
-    """Whether two registered ids give the same episodes' scenes and observations, told apart only
-    by how they name the target (``target_spec``): the hard track and its visible and exemplar
-    versions, say. An id that is not registered matches only itself."""
-    if env_a == env_b:
-        return True
+def same_scenes(
+    env_a: str, env_b: str, options_a: Mapping[str, Any] | None = None, options_b: Mapping[str, Any] | None = None
+) -> bool:
+    """Whether two registered ids, each with extra env keywords (``options_a``, ``options_b``; an
+    extra one wins over the id's own), give the same episodes' scenes and observations, told
+    apart only by how they name the target (``target_spec``): the hard track and its visible and
+    exemplar versions, say. An id that is not registered matches only itself, with the same
+    options."""
+    own = [dict(options_a or {}), dict(options_b or {})]
     if env_a not in gym.registry or env_b not in gym.registry:
-        return False
-    kwargs = [{k: v for k, v in gym.registry[e].kwargs.items() if k != "target_spec"} for e in (env_a, env_b)]
+        return env_a == env_b and own[0] == own[1]
+    kwargs = [
+        {k: v for k, v in {**gym.registry[e].kwargs, **extra}.items() if k != "target_spec"}
+        for e, extra in zip((env_a, env_b), own)
+    ]
     return kwargs[0] == kwargs[1]
 
 

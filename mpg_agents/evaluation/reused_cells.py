@@ -103,8 +103,7 @@ class ReusedCell:
         the request's policy; else :class:`CellMismatchError` saying why not."""
         twin = dataclasses.replace(request, track=str(self.scenes_of))
         where = f"reused cell ({self.track}, {self.label!r}, {self.objects}) from the {self.scenes_of} track"
-        options = [{k: v for k, v in r.all_env_options if k != "target_spec"} for r in (request, twin)]
-        if not same_scenes(request.env_id, twin.env_id) or options[0] != options[1]:
+        if not same_scenes(request.env_id, twin.env_id, dict(request.all_env_options), dict(twin.all_env_options)):
             raise CellMismatchError(f"{where}: the two tracks differ in more than how they name the target")
         baseline = SCRIPTED_BASELINES.get(baseline_name(request.spec.policy) or "")
         if baseline is None or baseline.reads_target_spec or request.spec.settings:
