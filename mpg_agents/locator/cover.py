@@ -5,29 +5,51 @@ MPGNet reads the target's mask and the "occluded" flag the simulator gives in ma
 a camera there is no simulator: :func:`estimate_occluded` says the target is covered when
 little of it shows (less than :attr:`CoverRule.area_share` of the exemplar's top-view area)
 and something next to the part that shows stands higher than it (an object lying on it).
-While the target is not seen at all, :func:`search_mask` names where it may hide: the largest
-region of the heap standing high enough to cover the exemplar's object; moving what stands
-there uncovers it, or shows it is not there.
+While the target is not seen at all, :func:`search_mask` names where it may hide, by one of
+:data:`SEARCHES` (the rule's ``search``): ``"heap"``, the largest region of the heap standing
+high enough to cover the exemplar's object (moving what stands there uncovers it, or shows it is
+not there); ``"empty"``, nothing, as the visible track shows a hidden target (an empty mask
+flagged covered, on which MPGNet moves and pushes the heap itself). Which, and the settings, are
+chosen on tuning seeds and travel with the locator's weights.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import cv2
 import numpy as np
 
 from mpg_agents.locator.features import query_pixels
 
+SEARCHES = ("heap", "empty")
+"""What :func:`search_mask` names while the target is not seen (see the module docstring)."""
+
 
 @dataclass(frozen=True)
 class CoverRule:
-    """The settings of :func:`estimate_occluded` and :func:`search_mask` (metres, pixels)."""
+    """The settings of :func:`estimate_occluded` and :func:`search_mask` (metres, pixels).
+
+    Raises:
+        ValueError: ``search`` is not one of :data:`SEARCHES`, or a setting is negative.
+    """
 
     area_share: float = 0.8  # less of the exemplar's top-view area than this shows: maybe covered
     ring_px: int = 4  # the neighbourhood of the visible part that is looked at
     higher_by: float = 0.01  # a neighbour this much higher than the visible top lies on the target
     cover_margin: float = 0.005  # a heap covers the object where it stands this much above the object's height
+    search: str = "heap"  # one of SEARCHES
+
+    def __post_init__(self) -> None:
+        if self.search not in SEARCHES:
+            raise ValueError(f"CoverRule.search must be one of {SEARCHES}, got {self.search!r}")
+        for name in ("area_share", "ring_px", "higher_by", "cover_margin"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"CoverRule.{name} must not be negative, got {getattr(self, name)}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
 
 
 def estimate_occluded(depth: np.ndarray, mask: np.ndarray, query_depth: np.ndarray, rule: CoverRule = CoverRule()) -> bool:
@@ -47,9 +69,12 @@ def estimate_occluded(depth: np.ndarray, mask: np.ndarray, query_depth: np.ndarr
 
 
 def search_mask(depth: np.ndarray, query_depth: np.ndarray, rule: CoverRule = CoverRule()) -> np.ndarray:
-    """Where a hidden target may lie (uint8 map): the largest connected region of ``depth``
-    standing at least the exemplar's height (its top in ``query_depth``) plus
-    ``rule.cover_margin``; empty when nothing stands that high."""
+    """Where a hidden target may lie (uint8 map): by the ``"heap"`` search, the largest
+    connected region of ``depth`` standing at least the exemplar's height (its top in
+    ``query_depth``) plus ``rule.cover_margin``, empty when nothing stands that high; by the
+    ``"empty"`` search, nothing."""
+    if rule.search == "empty":
+        return np.zeros(np.shape(depth), np.uint8)
     shown = query_pixels(query_depth)
     height = float(np.asarray(query_depth)[shown].max()) if shown.any() else 0.0
     tall = (np.asarray(depth) >= height + rule.cover_margin).astype(np.uint8)

@@ -2,10 +2,14 @@
 
 The scene is the colour and depth heightmaps; the exemplar is ``query_color`` and
 ``query_depth`` (the target alone on an empty table, at the scene's scale). Besides the raw
-images the network gets two cues a small network would spend capacity learning: per scene
-pixel, how far its colour is from the exemplar's mean colour (:func:`colour_distance`), and a
-few numbers that describe the exemplar whatever its yaw (:func:`query_descriptor`: its area,
-its height and its mean colour).
+images the network gets cues a small network would spend much capacity and many samples
+learning: per scene pixel, how far its colour is from the exemplar's mean colour
+(:func:`colour_distance`); the colour-and-shape match of the exemplar matcher's perception
+(:func:`match_cues`: the CIELAB distance to the exemplar's colour, and the shape score of the
+blob of that colour each pixel belongs to, with whether that blob is covered); and a few
+numbers that describe the exemplar whatever its yaw (:func:`query_descriptor`: its area, its
+height and its mean colour). The network learns when to trust the matcher's blobs and when
+not (lighting in camera images, look-alikes of the same footprint, blobs split by cover).
 """
 
 from __future__ import annotations
@@ -14,12 +18,21 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from mpg_envs.grid.workspace import Workspace
+from mpg_envs.perception.exemplar_match import MatchSettings, find_blobs, lab_colours, query_model
+
 DEPTH_SCALE = 10.0
 """Heights (m) are multiplied by this: 0.1 m of height reads 1.0."""
 QUERY_MIN_HEIGHT = 0.002
 """A query pixel higher than this (m) shows the exemplar's object (the rest is bare table)."""
-SCENE_CHANNELS = 5
-"""colour (3), height (1), distance to the exemplar's colour (1)."""
+CUE_CHANNELS = 3
+"""The matcher's cues (:func:`match_cues`): CIELAB distance, blob shape score, blob covered."""
+SCENE_CHANNELS = 5 + CUE_CHANNELS
+"""colour (3), height (1), distance to the exemplar's colour (1), the matcher's cues."""
+LAB_SCALE = 100.0
+"""CIELAB distances (8-bit units, lightness halved) are divided by this."""
+RESOLUTION = Workspace().resolution
+"""Metres per heightmap pixel the locator is trained at (the default workspace's)."""
 QUERY_CHANNELS = 4
 """colour (3), height (1)."""
 DESCRIPTOR_SIZE = 6
@@ -70,16 +83,42 @@ def centred_query(color: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.
     )
 
 
+def match_cues(
+    obs: Mapping[str, np.ndarray], resolution: float = RESOLUTION, settings: MatchSettings | None = None
+) -> np.ndarray:
+    """The exemplar matcher's view of an exemplar-mode observation (:data:`CUE_CHANNELS` x H x
+    W, float32): per pixel, the CIELAB distance of its colour to the exemplar's (divided by
+    :data:`LAB_SCALE`); the shape score of the blob of the exemplar's colour it belongs to
+    (:func:`~mpg_envs.perception.exemplar_match.find_blobs`, 0 off every blob); 1 where that
+    blob is covered (``settings``: the matcher's, default :class:`MatchSettings`). An exemplar
+    showing no object gives distance 1 everywhere and no blob."""
+    settings = MatchSettings() if settings is None else settings
+    color = np.asarray(obs["color"])
+    cues = np.zeros((CUE_CHANNELS, *color.shape[:2]), np.float32)
+    try:
+        reference, _ = query_model(obs["query_color"], obs["query_depth"], resolution, settings)
+    except ValueError:  # nothing above the table in the exemplar: nothing can match it
+        cues[0] = 1.0
+        return cues
+    cues[0] = np.linalg.norm(lab_colours(color) - reference, axis=-1) / LAB_SCALE
+    blobs = find_blobs(color, obs["depth"], obs["query_color"], obs["query_depth"], resolution, settings)
+    for blob in reversed(blobs):  # best last: where blobs share a pixel, the best one's score stays
+        cues[1][blob.pixels] = blob.score
+        cues[2][blob.pixels] = float(blob.covered)
+    return cues
+
+
 def scene_input(obs: Mapping[str, np.ndarray], descriptor: np.ndarray | None = None) -> np.ndarray:
     """The scene's channels (:data:`SCENE_CHANNELS` x H x W, float32) of an exemplar-mode
     observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour (from
-    ``descriptor``, the exemplar's :func:`query_descriptor`, computed when not given)."""
+    ``descriptor``, the exemplar's :func:`query_descriptor`, computed when not given) and the
+    matcher's cues (:func:`match_cues`)."""
     if descriptor is None:
         descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
     color = np.asarray(obs["color"], np.float32).transpose(2, 0, 1) / 255.0
     depth = np.asarray(obs["depth"], np.float32)[None] * DEPTH_SCALE
     distance = colour_distance(obs["color"], descriptor[3:6])[None]
-    return np.concatenate([color, depth, distance]).astype(np.float32)
+    return np.concatenate([color, depth, distance, match_cues(obs)]).astype(np.float32)
 
 
 def query_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:

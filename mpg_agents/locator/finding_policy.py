@@ -36,14 +36,15 @@ class MaskedView(gym.ObservationWrapper):
 
 
 class FindingPolicy:
-    """``inner`` (a policy reading ``mask`` and ``occluded``) acting on what ``locator`` finds;
-    ``last_location`` is the last exemplar-mode decision's :class:`Location` (``None`` in the
-    other modes), ``searching`` whether that decision searched."""
+    """``inner`` (a policy reading ``mask`` and ``occluded``) acting on what ``locator`` finds,
+    judging cover and searching by ``rule`` (default: the locator's); ``last_location`` is the
+    last exemplar-mode decision's :class:`Location` (``None`` in the other modes), ``searching``
+    whether that decision searched."""
 
     def __init__(self, inner: Any, locator: TargetLocator, rule: CoverRule | None = None):
         self.inner = inner
         self.locator = locator
-        self.rule = rule or CoverRule()
+        self.rule = locator.rule if rule is None else rule
         self.name = f"{inner.name} + locator"
         self.primitives = getattr(inner, "primitives", ())
         self.last_location: Location | None = None

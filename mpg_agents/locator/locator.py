@@ -1,7 +1,8 @@
 """The trained locator as a policy uses it: a weights file, its thresholds, ``locate(obs)``.
 
 The weights file is safetensors with one JSON header (``mpg_locator``): the network's
-config, the pixel threshold, the "seen" threshold calibrated on tuning samples, and the
+config, the pixel threshold, the "seen" threshold calibrated on tuning samples, the search
+rule chosen on tuning episodes (:class:`~mpg_agents.locator.cover.CoverRule`) and the
 training record the model card is written from. Nothing is unpickled.
 """
 
@@ -18,6 +19,7 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import load_file, save
 
+from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import net_inputs
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_envs.files import write_bytes_whole
@@ -40,13 +42,20 @@ class Location:
 
 
 def save_locator(
-    net: LocatorNet, path: str | Path, threshold: float, seen_threshold: float, record: Mapping[str, Any]
+    net: LocatorNet,
+    path: str | Path,
+    threshold: float,
+    seen_threshold: float,
+    record: Mapping[str, Any],
+    rule: CoverRule | None = None,
 ) -> None:
-    """Write ``net`` with its thresholds and training ``record`` to ``path`` (whole or not at all)."""
+    """Write ``net`` with its thresholds, search ``rule`` and training ``record`` to ``path``
+    (whole or not at all)."""
     header = {
         "config": net.config.to_dict(),
         "threshold": float(threshold),
         "seen_threshold": float(seen_threshold),
+        "rule": (CoverRule() if rule is None else rule).to_dict(),
         "record": dict(record),
     }
     tensors = {k: v.detach().contiguous().float() for k, v in net.state_dict().items()}
@@ -67,15 +76,26 @@ def read_locator_header(path: str | Path) -> dict[str, Any]:
 
 class TargetLocator:
     """A trained locator: ``locate(obs)`` for an exemplar-mode observation (one thread's worth
-    of work: a few tens of milliseconds on one CPU core)."""
+    of work: a few tens of milliseconds on one CPU core); ``rule`` is how a policy using it
+    judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`)."""
 
     def __init__(
-        self, net: LocatorNet, threshold: float = 0.5, seen_threshold: float = 0.5, record: Mapping[str, Any] | None = None
+        self,
+        net: LocatorNet,
+        threshold: float = 0.5,
+        seen_threshold: float = 0.5,
+        record: Mapping[str, Any] | None = None,
+        rule: CoverRule | None = None,
     ):
         self.net = net.eval()
         self.threshold = float(threshold)
         self.seen_threshold = float(seen_threshold)
         self.record = dict(record or {})
+        self.rule = CoverRule() if rule is None else rule
+
+    def save(self, path: str | Path) -> None:
+        """Write this locator (weights, thresholds, rule, record) to ``path``."""
+        save_locator(self.net, path, self.threshold, self.seen_threshold, self.record, self.rule)
 
     @classmethod
     def load(cls, path: str | Path = SHIPPED_LOCATOR) -> TargetLocator:
@@ -85,7 +105,8 @@ class TargetLocator:
         header = read_locator_header(path)
         net = LocatorNet(LocatorConfig(**header["config"]))
         net.load_state_dict(load_file(str(path)))
-        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"))
+        rule = CoverRule(**header["rule"]) if "rule" in header else CoverRule()
+        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule)
 
     def locate(self, obs: Mapping[str, np.ndarray]) -> Location:
         """Where the object of ``obs``' exemplar (``query_color``, ``query_depth``) shows in its

@@ -153,12 +153,11 @@ def train_locator(
             schedule.step()
             step += 1
             elapsed = seconds + time.perf_counter() - started
-            writer.writerow(
-                [step, f"{float(loss):.5f}", *(f"{parts[k]:.5f}" for k in ("pixel", "dice", "seen")), f"{elapsed:.1f}"]
-            )
+            value = float(loss.detach())
+            writer.writerow([step, f"{value:.5f}", *(f"{parts[k]:.5f}" for k in ("pixel", "dice", "seen")), f"{elapsed:.1f}"])
             if step % 50 == 0:
                 handle.flush()
-                log(f"step {step}/{settings.steps}: loss {float(loss):.4f} ({json.dumps(parts)}), {elapsed:.0f} s")
+                log(f"step {step}/{settings.steps}: loss {value:.4f} ({json.dumps(parts)}), {elapsed:.0f} s")
             if step % settings.checkpoint_every == 0 or step == settings.steps:
                 state = {
                     "net": net.state_dict(),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from mpg_agents.locator.cover import CoverRule, estimate_occluded, search_mask
 
@@ -45,3 +46,12 @@ def test_the_search_region_is_the_largest_heap_high_enough_to_hide_the_object():
     region = search_mask(depth, _query(5, 0.03))
     assert region.sum() == 36 and region[22, 22] == 1 and region.dtype == np.uint8
     assert not search_mask(np.zeros((40, 40), np.float32), _query(5)).any()
+    empty = search_mask(depth, _query(5, 0.03), CoverRule(search="empty"))  # as the visible track shows it
+    assert empty.shape == (40, 40) and empty.dtype == np.uint8 and not empty.any()
+
+
+def test_a_bad_rule_is_named():
+    with pytest.raises(ValueError, match="search must be one of"):
+        CoverRule(search="everywhere")
+    with pytest.raises(ValueError, match="area_share must not be negative"):
+        CoverRule(area_share=-0.1)

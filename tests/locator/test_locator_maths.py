@@ -11,7 +11,10 @@ import torch
 
 from mpg_agents.locator.features import (
     DEPTH_SCALE,
+    LAB_SCALE,
+    SCENE_CHANNELS,
     colour_distance,
+    match_cues,
     query_descriptor,
     query_input,
     scene_input,
@@ -45,9 +48,32 @@ def test_colour_distance_and_the_input_channels_by_hand():
     query_color, query_depth = _query(2)
     obs = {"color": color, "depth": np.full((2, 2), 0.02, np.float32), "query_color": query_color, "query_depth": query_depth}
     scene = scene_input(obs)
-    assert scene.shape == (5, 2, 2) and scene[3] == pytest.approx(np.full((2, 2), 0.02 * DEPTH_SCALE))
+    assert scene.shape == (SCENE_CHANNELS, 2, 2) and scene[3] == pytest.approx(np.full((2, 2), 0.02 * DEPTH_SCALE))
     assert scene[0, 0, 0] == 1.0 and scene[4, 0, 0] == pytest.approx(1.0)  # the empty query's colour is black
     assert query_input(obs).shape == (4, 2, 2)
+    assert scene[5] == pytest.approx(np.ones((2, 2))) and not scene[6:].any()  # an empty query: nothing matches
+
+
+def test_the_matchers_cues_by_hand():
+    """A 4 x 4 red block 2 cm tall is asked for; the scene holds it, a red 8 x 2 block as tall
+    with a grey wall along one long side, and a blue 4 x 4 block (2 mm pixels)."""
+    red, blue, grey = (255, 0, 0), (0, 0, 255), (128, 128, 128)
+    query_color, query_depth = np.zeros((24, 24, 3), np.uint8), np.zeros((24, 24), np.float32)
+    query_color[10:14, 10:14], query_depth[10:14, 10:14] = red, 0.02
+    color, depth = np.zeros((24, 24, 3), np.uint8), np.zeros((24, 24), np.float32)
+    color[2:6, 2:6], depth[2:6, 2:6] = red, 0.02  # the target
+    color[12:20, 4:6], depth[12:20, 4:6] = red, 0.02  # same colour, another shape
+    color[12:20, 6:9], depth[12:20, 6:9] = grey, 0.05  # higher, along its rim: it is covered
+    color[2:6, 16:20], depth[2:6, 16:20] = blue, 0.02  # same shape, another colour
+    cues = match_cues({"color": color, "depth": depth, "query_color": query_color, "query_depth": query_depth})
+    assert cues[0][2:6, 2:6] == pytest.approx(np.zeros((4, 4)), abs=1e-6)
+    assert cues[0, 3, 17] > 100 / LAB_SCALE  # blue is far from red in CIELAB
+    # The target: height 2 cm is the query's, its 8 x 8 mm footprint fits and shows whole: score 1.
+    assert cues[1][2:6, 2:6] == pytest.approx(np.ones((4, 4)), abs=1e-3) and not cues[2][2:6, 2:6].any()
+    # The 16 x 4 mm blob, covered (so its footprint is not asked to show whole): the long side
+    # is 8 mm over the query's, one extent tolerance (8 mm): exp(-1/2).
+    assert cues[1][12:20, 4:6] == pytest.approx(np.full((8, 2), math.exp(-0.5)), abs=1e-3)
+    assert cues[2][12:20, 4:6].all() and not cues[1:, 2:6, 16:20].any() and not cues[1:, 12:20, 6:9].any()
 
 
 def test_iou_and_the_bands_by_hand():

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import torch
 
+from mpg_agents.locator.cover import CoverRule
+from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS
 from mpg_agents.locator.locator import TargetLocator, read_locator_header, save_locator
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 
@@ -28,7 +30,7 @@ def _obs(rng: np.random.Generator, size: int = 64) -> dict[str, np.ndarray]:
 def test_shapes_and_a_decision_alone_is_the_decision_in_a_batch():
     torch.manual_seed(0)
     net = LocatorNet(SMALL).eval()
-    scene, query, descriptor = torch.rand(3, 5, 64, 64), torch.rand(3, 4, 64, 64), torch.rand(3, 6)
+    scene, query, descriptor = torch.rand(3, SCENE_CHANNELS, 64, 64), torch.rand(3, QUERY_CHANNELS, 64, 64), torch.rand(3, 6)
     with torch.no_grad():
         pixels, seen = net(scene, query, descriptor)
         alone, alone_seen = net(scene[1:2], query[1:2], descriptor[1:2])
@@ -41,9 +43,11 @@ def test_a_saved_locator_loads_and_locates_the_same(tmp_path: Path):
     torch.manual_seed(1)
     net = LocatorNet(SMALL)
     path = tmp_path / "locator.safetensors"
-    save_locator(net, path, 0.5, 0.7, {"steps": 3})
+    rule = CoverRule(search="empty", area_share=0.6)
+    save_locator(net, path, 0.5, 0.7, {"steps": 3}, rule)
     header = read_locator_header(path)
     assert header["seen_threshold"] == 0.7 and header["record"] == {"steps": 3} and header["config"] == SMALL.to_dict()
+    assert TargetLocator.load(path).rule == rule  # the search rule travels with the weights
     obs = _obs(np.random.default_rng(0))
     a, b = TargetLocator(net, 0.5, 0.7).locate(obs), TargetLocator.load(path).locate(obs)
     assert np.allclose(a.probability, b.probability, atol=1e-6) and a.seen == b.seen
