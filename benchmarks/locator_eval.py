@@ -29,6 +29,7 @@ import torch
 import mpg_envs  # noqa: F401  (registers the ids)
 from mpg_agents.locator.locator import SHIPPED_LOCATOR, TargetLocator
 from mpg_agents.locator.metrics import locator_figures
+from mpg_agents.locator.run import model_card
 from mpg_agents.locator.samples import SampleSource, episode_samples, sample_observation
 from mpg_envs.files import write_text_whole
 
@@ -42,6 +43,12 @@ def main() -> None:
     parser.add_argument("--motions", type=int, default=4, help="disturbing motions after each reset")
     parser.add_argument("--seed", type=int, default=500000)
     parser.add_argument("--json", type=Path)
+    parser.add_argument(
+        "--record",
+        action="store_true",
+        help="also keep the figures in the locator's training record and write its model card again "
+        "(after every choice is made: never choose by held-out figures)",
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     locator = TargetLocator.load(args.locator)
@@ -75,14 +82,22 @@ def main() -> None:
             figures = locator_figures(masks, seen, labels, visible)
             report["cells"][f"{track} {n}"] = figures
             print(f"{track}, {n} objects: {json.dumps(figures)}", flush=True)
-            for key, values in zip(("masks", "seen", "labels", "visible"), (masks, seen, labels, visible)):
-                pooled[key].extend(values)
+            pooled["masks"].extend(masks)
+            pooled["seen"].extend(seen)
+            pooled["labels"].extend(labels)
+            pooled["visible"].extend(visible)
     report["pooled"] = locator_figures(pooled["masks"], pooled["seen"], pooled["labels"], pooled["visible"])
     report["median_decision_s"] = statistics.median(seconds)
     print(f"pooled: {json.dumps(report['pooled'])}")
     print(f"median seconds per locator decision (one thread): {report['median_decision_s']:.4f}")
     if args.json is not None:
         write_text_whole(args.json, json.dumps(report, indent=2) + "\n")
+    if args.record:
+        locator.record["heldout"] = {**report, "cells": list(report["cells"])}
+        locator.save(args.locator)
+        card = Path(args.locator).with_suffix(".md")
+        write_text_whole(card, model_card(locator.record, locator.rule.to_dict()))
+        print(f"kept the figures in {args.locator} and wrote {card}")
 
 
 if __name__ == "__main__":

@@ -33,19 +33,22 @@ from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_agents.evaluation.stats import bootstrap_mean_interval
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.locator import TargetLocator
+from mpg_agents.locator.run import model_card
 
 TUNING_SEED = 700000
 """The first tuning seed: test seeds (500000 on) are never played here."""
 
 
-def _play(job: tuple[str, str, int, dict[str, Any], int]) -> tuple[int, int, dict[str, Any]]:
-    """Worker: one episode of one rule (``locator, env id, objects, rule, seed``), one thread."""
+def _play(job: tuple[str, str, int, dict[str, Any], int, str | None]) -> tuple[int, int, dict[str, Any]]:
+    """Worker: one episode of one rule (``locator, env id, objects, rule, seed, snap``), one thread."""
     torch.set_num_threads(1)
-    locator, env_id, objects, rule, seed = job
+    locator, env_id, objects, rule, seed, snap = job
     env = gym.make(env_id, num_objects=objects)
     try:
         policy = make_policy("shipped", env, locator=locator)
         policy.rule = CoverRule(**rule)
+        if snap is not None:
+            policy.locator.snap = snap == "yes"
         record = run_episode(policy, env, 0, seed)
     finally:
         env.close()
@@ -62,6 +65,7 @@ def main() -> None:
     parser.add_argument(
         "--rules", nargs="+", default=['{"search": "heap"}', '{"search": "empty"}'], help="CoverRule fields as JSON"
     )
+    parser.add_argument("--snap", choices=("yes", "no"), help="snap the masks to the matcher's blobs (default: as saved)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--write", action="store_true", help="save the best rule into the locator's weights")
     args = parser.parse_args()
@@ -69,7 +73,9 @@ def main() -> None:
         parser.error(f"--seed must be a tuning seed ({TUNING_SEED} or more), got {args.seed}")
     rules = [CoverRule(**json.loads(text)) for text in args.rules]
     seeds = range(args.seed, args.seed + args.episodes)
-    jobs = [(str(args.locator), args.env, n, rule.to_dict(), s) for rule in rules for n in args.objects for s in seeds]
+    jobs = [
+        (str(args.locator), args.env, n, rule.to_dict(), s, args.snap) for rule in rules for n in args.objects for s in seeds
+    ]
     with multiprocessing.get_context("spawn").Pool(args.workers) as pool:
         results = pool.map(_play, jobs, chunksize=1)
     per_rule = len(args.objects) * args.episodes
@@ -95,15 +101,19 @@ def main() -> None:
     if args.write:
         locator = TargetLocator.load(args.locator)
         locator.rule = best
+        if args.snap is not None:
+            locator.snap = args.snap == "yes"
         locator.record["rule_tuning"] = {
             "env": args.env,
             "objects": args.objects,
             "episodes": args.episodes,
             "seed": args.seed,
             "rules": [r.to_dict() for r in rules],
+            "snap": locator.snap,
         }
         locator.save(args.locator)
-        print(f"written the rule into {args.locator}")
+        args.locator.with_suffix(".md").write_text(model_card(locator.record, best.to_dict()))
+        print(f"written the rule into {args.locator} and its model card")
 
 
 if __name__ == "__main__":

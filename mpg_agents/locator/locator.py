@@ -20,9 +20,10 @@ from safetensors import safe_open
 from safetensors.torch import load_file, save
 
 from mpg_agents.locator.cover import CoverRule
-from mpg_agents.locator.features import net_inputs
+from mpg_agents.locator.features import RESOLUTION, net_inputs
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_envs.files import write_bytes_whole
+from mpg_envs.perception.exemplar_match import find_blobs
 
 HEADER_KEY = "mpg_locator"
 SHIPPED_LOCATOR = Path(__file__).resolve().parent.parent / "checkpoints" / "locator.safetensors"
@@ -41,6 +42,17 @@ class Location:
     seen_probability: float
 
 
+def snap_to_blob(probability: np.ndarray, blobs: list[np.ndarray], threshold: float) -> np.ndarray | None:
+    """Of ``blobs`` (bool images: the exemplar matcher's blobs of the exemplar's colour), the one
+    whose pixels' mean ``probability`` is highest, when that mean reaches ``threshold`` (uint8);
+    else ``None``. The network chooses the object, the blob gives its outline."""
+    if not blobs:
+        return None
+    means = [float(np.asarray(probability)[b].mean()) if b.any() else 0.0 for b in blobs]
+    best = int(np.argmax(means))
+    return blobs[best].astype(np.uint8) if means[best] >= threshold else None
+
+
 def save_locator(
     net: LocatorNet,
     path: str | Path,
@@ -48,13 +60,15 @@ def save_locator(
     seen_threshold: float,
     record: Mapping[str, Any],
     rule: CoverRule | None = None,
+    snap: bool = False,
 ) -> None:
-    """Write ``net`` with its thresholds, search ``rule`` and training ``record`` to ``path``
-    (whole or not at all)."""
+    """Write ``net`` with its thresholds, search ``rule``, whether it snaps to blobs and training
+    ``record`` to ``path`` (whole or not at all)."""
     header = {
         "config": net.config.to_dict(),
         "threshold": float(threshold),
         "seen_threshold": float(seen_threshold),
+        "snap": bool(snap),
         "rule": (CoverRule() if rule is None else rule).to_dict(),
         "record": dict(record),
     }
@@ -77,7 +91,9 @@ def read_locator_header(path: str | Path) -> dict[str, Any]:
 class TargetLocator:
     """A trained locator: ``locate(obs)`` for an exemplar-mode observation (one thread's worth
     of work: a few tens of milliseconds on one CPU core); ``rule`` is how a policy using it
-    judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`)."""
+    judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`); with ``snap``
+    the mask is the matcher's blob the network's probability favours (:func:`snap_to_blob`),
+    where there is one."""
 
     def __init__(
         self,
@@ -86,8 +102,10 @@ class TargetLocator:
         seen_threshold: float = 0.5,
         record: Mapping[str, Any] | None = None,
         rule: CoverRule | None = None,
+        snap: bool = False,
     ):
         self.net = net.eval()
+        self.snap = bool(snap)
         self.threshold = float(threshold)
         self.seen_threshold = float(seen_threshold)
         self.record = dict(record or {})
@@ -95,7 +113,7 @@ class TargetLocator:
 
     def save(self, path: str | Path) -> None:
         """Write this locator (weights, thresholds, rule, record) to ``path``."""
-        save_locator(self.net, path, self.threshold, self.seen_threshold, self.record, self.rule)
+        save_locator(self.net, path, self.threshold, self.seen_threshold, self.record, self.rule, self.snap)
 
     @classmethod
     def load(cls, path: str | Path = SHIPPED_LOCATOR) -> TargetLocator:
@@ -106,7 +124,7 @@ class TargetLocator:
         net = LocatorNet(LocatorConfig(**header["config"]))
         net.load_state_dict(load_file(str(path)))
         rule = CoverRule(**header["rule"]) if "rule" in header else CoverRule()
-        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule)
+        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, header.get("snap", False))
 
     def locate(self, obs: Mapping[str, np.ndarray]) -> Location:
         """Where the object of ``obs``' exemplar (``query_color``, ``query_depth``) shows in its
@@ -120,5 +138,12 @@ class TargetLocator:
         probability = torch.sigmoid(pixels[0]).numpy().astype(np.float32)
         seen_probability = float(torch.sigmoid(seen[0]))
         shown = seen_probability >= self.seen_threshold
-        mask = (probability >= self.threshold).astype(np.uint8) if shown else np.zeros(probability.shape, np.uint8)
-        return Location(probability, mask, shown, seen_probability)
+        if not shown:
+            return Location(probability, np.zeros(probability.shape, np.uint8), False, seen_probability)
+        mask = None
+        if self.snap:
+            blobs = find_blobs(obs["color"], obs["depth"], obs["query_color"], obs["query_depth"], RESOLUTION)
+            mask = snap_to_blob(probability, [b.pixels for b in blobs], self.threshold)
+        if mask is None:
+            mask = (probability >= self.threshold).astype(np.uint8)
+        return Location(probability, mask, True, seen_probability)

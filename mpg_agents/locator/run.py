@@ -95,20 +95,24 @@ def calibrate_seen(seen: Sequence[float], visible: Sequence[float], false_claims
     return float(max(0.5, threshold))
 
 
-def model_card(record: dict[str, Any]) -> str:
-    """The model card's Markdown, from the training record."""
-    figures = record["tuning_figures"]
-    rows = "\n".join(
+def _band_rows(figures: dict[str, Any]) -> str:
+    return "\n".join(
         f"| {band} | {int(f['samples'])} | {f['iou']:.3f} | {f['seen_rate']:.1%} |"
         if "iou" in f
         else f"| {band} | {int(f['samples'])} | - | {f['seen_rate']:.1%} (false claims) |"
         for band, f in figures.items()
     )
-    return f"""# Target locator (`locator.safetensors`)
+
+
+def model_card(record: dict[str, Any], rule: dict[str, Any] | None = None) -> str:
+    """The model card's Markdown, from the training record (and, once chosen, the search
+    ``rule`` and the held-out figures the record then holds)."""
+    card = f"""# Target locator (`locator.safetensors`)
 
 Finds the exemplar's object in the colour and depth heightmaps: a per-pixel probability that
 the pixel shows it (its top surface) and whether it shows at all. The network is
-`mpg_agents.locator.net.LocatorNet` ({record["parameters"]:,} parameters).
+`mpg_agents.locator.net.LocatorNet` ({record["parameters"]:,} parameters); besides the images it
+reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features.match_cues`).
 
 ## Training
 - Command: `{record["command"]}`
@@ -128,10 +132,34 @@ the pixel shows it (its top surface) and whether it shows at all. The network is
 
 | target visible | samples | IoU | "seen" claimed |
 |---|---:|---:|---:|
-{rows}
-
-Held-out figures on the benchmark's exemplar tracks: `benchmarks/locator_eval.py`.
+{_band_rows(record["tuning_figures"])}
 """
+    tuning = record.get("rule_tuning")
+    if rule is not None and tuning is not None:
+        card += f"""
+## Cover and search rule
+
+`{json.dumps(rule)}` (`mpg_agents.locator.cover.CoverRule`), chosen among
+{len(tuning["rules"])} candidates on {tuning["episodes"]} tuning episodes per object count
+({", ".join(str(n) for n in tuning["objects"])} objects) of `{tuning["env"]}`, seeds {tuning["seed"]} on, by
+`benchmarks/locator_search_tuning.py`.
+"""
+    heldout = record.get("heldout")
+    if heldout is not None:
+        card += f"""
+## Held-out figures (the exemplar tracks' test scenes, seeds {heldout["seed"]} on)
+
+{heldout["episodes"]} episodes per cell ({", ".join(heldout["cells"])}), each state after the reset and
+{heldout["motions"]} disturbing motions located; `benchmarks/locator_eval.py`. Median
+{1000 * heldout["median_decision_s"]:.1f} ms per decision on one thread.
+
+| target visible | samples | IoU | "seen" claimed |
+|---|---:|---:|---:|
+{_band_rows(heldout["pooled"])}
+"""
+    else:
+        card += "\nHeld-out figures on the benchmark's exemplar tracks: `benchmarks/locator_eval.py`.\n"
+    return card
 
 
 def main(argv: Sequence[str] | None = None) -> int:

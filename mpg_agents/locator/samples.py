@@ -17,9 +17,11 @@ rename): a stopped collection resumes at its first missing shard.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -58,8 +60,14 @@ SOURCES: tuple[SampleSource, ...] = (
     SampleSource("stage4-camera", "MPG-Stage4-v0", (10, 15, 20), 3, 0.1, {"obs_mode": "camera", "visual_randomization": True}),
     SampleSource("stage5-camera", "MPG-Stage5-v0", (10, 15), 4, 0.1, {"obs_mode": "camera", "visual_randomization": True}),
     SampleSource("hard-camera", "MPG-OccludedHard-v0", (15,), 6, 0.1, {"obs_mode": "camera", "visual_randomization": True}),
+    # The ray-cast exemplar tracks show the palette's clean colours: the same recipe without randomization.
+    SampleSource("stage4-clean", "MPG-Stage4-v0", (10, 15, 20), 3, 0.15),
+    SampleSource("stage5-clean", "MPG-Stage5-v0", (10, 15), 4, 0.2),
+    SampleSource("hard-clean", "MPG-OccludedHard-v0", (15, 30), 6, 0.15),
 )
-"""The training recipe: which episodes the samples come from, and in what shares."""
+"""The training recipe: which episodes the samples come from, and in what shares. Sources are
+only ever appended, with shares that keep the earlier sources' shard counts (80 shards of the
+first six are the first 80 of 120), so an earlier run's shards stay valid."""
 
 
 def training_objects(set_seed: int) -> list[ObjectAsset]:
@@ -153,9 +161,9 @@ def shard_plan(
             f"run seed {run_seed} gives training seeds {first}..{last}, which meet the test and tuning seeds "
             "(500000-999999): use a run seed of 1 or more, or fewer samples"
         )
-    weights = np.array([s.share for s in SOURCES])
-    counts = np.floor(weights / weights.sum() * shards).astype(int)
-    counts[np.argmax(weights)] += shards - counts.sum()
+    weights = [Fraction(str(s.share)) for s in SOURCES]  # exact: no share loses a shard to rounding
+    counts = [math.floor(w * shards / sum(weights)) for w in weights]
+    counts[weights.index(max(weights))] += shards - sum(counts)
     plan, index = [], 0
     for source, count in zip(SOURCES, counts):
         for _ in range(count):

@@ -156,3 +156,33 @@ def test_a_photo_of_the_object_is_centred_as_the_envs_show_the_exemplar():
     assert query_color[4, 4].tolist() == [200, 200, 200] and query_depth.dtype == np.float32
     with pytest.raises(ValueError, match="no pixel of the object's heightmap"):
         centred_query(color, np.zeros((10, 10), np.float32))
+
+
+def test_the_model_card_names_the_rule_and_the_heldout_figures():
+    from mpg_agents.locator.run import model_card  # noqa: PLC0415 - beside the card's test only
+
+    band = {"30-60%": {"samples": 4, "iou": 0.85, "seen_rate": 1.0}, "hidden": {"samples": 2, "seen_rate": 0.0}}
+    record = {
+        "parameters": 10,
+        "command": "mpg-train-locator --out x",
+        "train_samples": 5,
+        "train_shards": 1,
+        "seed": 1,
+        "steps": 2,
+        "batch_size": 2,
+        "learning_rate": 0.001,
+        "train_seconds": 60.0,
+        "machine": "2 CPU cores",
+        "collect_seconds": 120.0,
+        "threshold": 0.5,
+        "seen_threshold": 0.9,
+        "tuning_samples": 6,
+        "tuning_figures": band,
+    }
+    plain = model_card(record)
+    assert "| 30-60% | 4 | 0.850 | 100.0% |" in plain and "Cover and search rule" not in plain
+    record["rule_tuning"] = {"env": "E", "objects": [15], "episodes": 3, "seed": 700000, "rules": [{}, {}]}
+    record["heldout"] = {"seed": 500000, "episodes": 2, "cells": ["E 15"], "motions": 4, "median_decision_s": 0.012, "pooled": band}
+    card = model_card(record, {"search": "empty"})
+    assert '`{"search": "empty"}`' in card and "among\n2 candidates on 3 tuning episodes" in card
+    assert "seeds 500000 on" in card and "12.0 ms per decision" in card and "| hidden | 2 | - | 0.0% (false claims) |" in card

@@ -12,7 +12,7 @@ import torch
 
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS
-from mpg_agents.locator.locator import TargetLocator, read_locator_header, save_locator
+from mpg_agents.locator.locator import TargetLocator, read_locator_header, save_locator, snap_to_blob
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 
 SMALL = LocatorConfig(8, 8, 16)
@@ -44,10 +44,12 @@ def test_a_saved_locator_loads_and_locates_the_same(tmp_path: Path):
     net = LocatorNet(SMALL)
     path = tmp_path / "locator.safetensors"
     rule = CoverRule(search="empty", area_share=0.6)
-    save_locator(net, path, 0.5, 0.7, {"steps": 3}, rule)
+    save_locator(net, path, 0.5, 0.7, {"steps": 3}, rule, snap=True)
     header = read_locator_header(path)
     assert header["seen_threshold"] == 0.7 and header["record"] == {"steps": 3} and header["config"] == SMALL.to_dict()
-    assert TargetLocator.load(path).rule == rule  # the search rule travels with the weights
+    loaded = TargetLocator.load(path)
+    assert loaded.rule == rule and loaded.snap  # the search rule and the snapping travel with the weights
+    save_locator(net, path, 0.5, 0.7, {"steps": 3})
     obs = _obs(np.random.default_rng(0))
     a, b = TargetLocator(net, 0.5, 0.7).locate(obs), TargetLocator.load(path).locate(obs)
     assert np.allclose(a.probability, b.probability, atol=1e-6) and a.seen == b.seen
@@ -105,3 +107,15 @@ def test_the_demo_shows_the_exemplar_and_the_locators_map():
     assert mask.shape == obs["depth"].shape and len(panels) == 2
     assert all(panel.shape[1] == PANEL_PX for panel in panels)
     assert len(heightmap_panels(obs, mask)) == 2 and len(heightmap_panels(obs)) == 2  # no mask in exemplar mode: no outline
+
+
+def test_the_mask_snaps_to_the_blob_the_network_favours():
+    probability = np.zeros((6, 6), np.float32)
+    probability[0:2, 0:2], probability[4:6, 4:6] = 0.9, 0.5
+    a, b = np.zeros((6, 6), bool), np.zeros((6, 6), bool)
+    a[0:3, 0:3], b[4:6, 3:6] = True, True  # means 4 x 0.9 / 9 = 0.4 and 4 x 0.5 / 6 = 0.33
+    snapped = snap_to_blob(probability, [a, b], 0.3)
+    assert snapped is not None and snapped.dtype == np.uint8 and np.array_equal(snapped, a)
+    probability[4:6, 3:6] = 0.6  # b's mean is now 0.6
+    assert np.array_equal(snap_to_blob(probability, [a, b], 0.5), b)
+    assert snap_to_blob(probability, [a, b], 0.7) is None and snap_to_blob(probability, [], 0.1) is None

@@ -39,13 +39,18 @@ def test_the_pixel_heuristic_refuses_an_exemplar_env_clearly(exemplar_env):
         make_policy("pixel-heuristic", exemplar_env)
 
 
-def test_a_net_on_an_exemplar_env_needs_a_locator(exemplar_env):
-    from mpg_agents.locator.locator import SHIPPED_LOCATOR
+def test_a_net_on_an_exemplar_env_acts_through_the_shipped_locator_or_says_it_needs_one(exemplar_env):
+    from mpg_agents.locator.finding_policy import FindingPolicy
+    from mpg_agents.locator.locator import SHIPPED_LOCATOR, read_locator_header
 
     if SHIPPED_LOCATOR.is_file():
-        pytest.skip("a locator ships with this installation")
-    with pytest.raises(ValueError, match="acts through a target locator, and none ships.*mpg-train-locator"):
-        make_policy("shipped", exemplar_env)
+        policy = make_policy("shipped", exemplar_env, device="cpu")
+        assert isinstance(policy, FindingPolicy)
+        header = read_locator_header(SHIPPED_LOCATOR)
+        assert policy.rule.to_dict() == header["rule"] and policy.locator.seen_threshold == header["seen_threshold"]
+    else:
+        with pytest.raises(ValueError, match="acts through a target locator, and none ships.*mpg-train-locator"):
+            make_policy("shipped", exemplar_env)
 
 
 def test_a_net_acts_on_an_exemplar_env_through_a_locator(exemplar_env, tmp_path):
