@@ -32,7 +32,7 @@ from mpg_agents.evaluation.evaluate import run_episode
 from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_agents.evaluation.stats import bootstrap_mean_interval
 from mpg_agents.locator.cover import CoverRule
-from mpg_agents.locator.locator import TargetLocator
+from mpg_agents.locator.locator import SNAPS, TargetLocator
 from mpg_agents.locator.run import model_card
 
 TUNING_SEED = 700000
@@ -48,7 +48,7 @@ def _play(job: tuple[str, str, int, dict[str, Any], int, str | None]) -> tuple[i
         policy = make_policy("shipped", env, locator=locator)
         policy.rule = CoverRule(**rule)
         if snap is not None:
-            policy.locator.snap = snap == "yes"
+            policy.locator.snap = snap
         record = run_episode(policy, env, 0, seed)
     finally:
         env.close()
@@ -65,7 +65,7 @@ def main() -> None:
     parser.add_argument(
         "--rules", nargs="+", default=['{"search": "heap"}', '{"search": "empty"}'], help="CoverRule fields as JSON"
     )
-    parser.add_argument("--snap", choices=("yes", "no"), help="snap the masks to the matcher's blobs (default: as saved)")
+    parser.add_argument("--snap", choices=SNAPS, help="how masks snap to the matcher's blobs (default: as saved)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--write", action="store_true", help="save the best rule into the locator's weights")
     args = parser.parse_args()
@@ -102,7 +102,7 @@ def main() -> None:
         locator = TargetLocator.load(args.locator)
         locator.rule = best
         if args.snap is not None:
-            locator.snap = args.snap == "yes"
+            locator.snap = args.snap
         locator.record["rule_tuning"] = {
             "env": args.env,
             "objects": args.objects,

@@ -14,12 +14,12 @@ not (lighting in camera images, look-alikes of the same footprint, blobs split b
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.perception.exemplar_match import MatchSettings, find_blobs, lab_colours, query_model
+from mpg_envs.perception.exemplar_match import Blob, MatchSettings, find_blobs, lab_colours, query_model
 
 DEPTH_SCALE = 10.0
 """Heights (m) are multiplied by this: 0.1 m of height reads 1.0."""
@@ -83,15 +83,30 @@ def centred_query(color: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.
     )
 
 
-def match_cues(
+def exemplar_blobs(
     obs: Mapping[str, np.ndarray], resolution: float = RESOLUTION, settings: MatchSettings | None = None
+) -> list[Blob]:
+    """The exemplar matcher's blobs of the exemplar's colour in the scene, best shape match first
+    (:func:`~mpg_envs.perception.exemplar_match.find_blobs`; ``settings``: the matcher's,
+    default :class:`MatchSettings`); none when the exemplar shows no object."""
+    settings = MatchSettings() if settings is None else settings
+    try:
+        return find_blobs(obs["color"], obs["depth"], obs["query_color"], obs["query_depth"], resolution, settings)
+    except ValueError:  # nothing above the table in the exemplar: nothing can match it
+        return []
+
+
+def match_cues(
+    obs: Mapping[str, np.ndarray],
+    blobs: Sequence[Blob] | None = None,
+    resolution: float = RESOLUTION,
+    settings: MatchSettings | None = None,
 ) -> np.ndarray:
     """The exemplar matcher's view of an exemplar-mode observation (:data:`CUE_CHANNELS` x H x
     W, float32): per pixel, the CIELAB distance of its colour to the exemplar's (divided by
     :data:`LAB_SCALE`); the shape score of the blob of the exemplar's colour it belongs to
-    (:func:`~mpg_envs.perception.exemplar_match.find_blobs`, 0 off every blob); 1 where that
-    blob is covered (``settings``: the matcher's, default :class:`MatchSettings`). An exemplar
-    showing no object gives distance 1 everywhere and no blob."""
+    (``blobs``: :func:`exemplar_blobs`, found when not given; 0 off every blob); 1 where that
+    blob is covered. An exemplar showing no object gives distance 1 everywhere and no blob."""
     settings = MatchSettings() if settings is None else settings
     color = np.asarray(obs["color"])
     cues = np.zeros((CUE_CHANNELS, *color.shape[:2]), np.float32)
@@ -101,14 +116,16 @@ def match_cues(
         cues[0] = 1.0
         return cues
     cues[0] = np.linalg.norm(lab_colours(color) - reference, axis=-1) / LAB_SCALE
-    blobs = find_blobs(color, obs["depth"], obs["query_color"], obs["query_depth"], resolution, settings)
+    blobs = exemplar_blobs(obs, resolution, settings) if blobs is None else blobs
     for blob in reversed(blobs):  # best last: where blobs share a pixel, the best one's score stays
         cues[1][blob.pixels] = blob.score
         cues[2][blob.pixels] = float(blob.covered)
     return cues
 
 
-def scene_input(obs: Mapping[str, np.ndarray], descriptor: np.ndarray | None = None) -> np.ndarray:
+def scene_input(
+    obs: Mapping[str, np.ndarray], descriptor: np.ndarray | None = None, blobs: Sequence[Blob] | None = None
+) -> np.ndarray:
     """The scene's channels (:data:`SCENE_CHANNELS` x H x W, float32) of an exemplar-mode
     observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour (from
     ``descriptor``, the exemplar's :func:`query_descriptor`, computed when not given) and the
@@ -118,7 +135,7 @@ def scene_input(obs: Mapping[str, np.ndarray], descriptor: np.ndarray | None = N
     color = np.asarray(obs["color"], np.float32).transpose(2, 0, 1) / 255.0
     depth = np.asarray(obs["depth"], np.float32)[None] * DEPTH_SCALE
     distance = colour_distance(obs["color"], descriptor[3:6])[None]
-    return np.concatenate([color, depth, distance, match_cues(obs)]).astype(np.float32)
+    return np.concatenate([color, depth, distance, match_cues(obs, blobs)]).astype(np.float32)
 
 
 def query_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
@@ -129,9 +146,11 @@ def query_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     return np.concatenate([color, depth]).astype(np.float32)
 
 
-def net_inputs(obs: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def net_inputs(
+    obs: Mapping[str, np.ndarray], blobs: Sequence[Blob] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(scene, query, descriptor)``: the network's three inputs of one exemplar-mode
     observation (:func:`scene_input`, :func:`query_input`, :func:`query_descriptor`), the
     descriptor computed once."""
     descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
-    return scene_input(obs, descriptor), query_input(obs), descriptor
+    return scene_input(obs, descriptor, blobs), query_input(obs), descriptor

@@ -20,10 +20,9 @@ from safetensors import safe_open
 from safetensors.torch import load_file, save
 
 from mpg_agents.locator.cover import CoverRule
-from mpg_agents.locator.features import RESOLUTION, net_inputs
+from mpg_agents.locator.features import exemplar_blobs, net_inputs
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_envs.files import write_bytes_whole
-from mpg_envs.perception.exemplar_match import find_blobs
 
 HEADER_KEY = "mpg_locator"
 SHIPPED_LOCATOR = Path(__file__).resolve().parent.parent / "checkpoints" / "locator.safetensors"
@@ -42,15 +41,29 @@ class Location:
     seen_probability: float
 
 
-def snap_to_blob(probability: np.ndarray, blobs: list[np.ndarray], threshold: float) -> np.ndarray | None:
+SNAPS = ("off", "probability", "shape")
+"""How the located mask snaps to the exemplar matcher's blobs: not at all; to the blob whose
+pixels the network rates highest; to the blob whose mean probability times its shape score
+(:func:`~mpg_envs.perception.exemplar_match.shape_score`) is highest."""
+
+
+def snap_to_blob(
+    probability: np.ndarray, blobs: list[np.ndarray], threshold: float, weights: list[float] | None = None
+) -> np.ndarray | None:
     """Of ``blobs`` (bool images: the exemplar matcher's blobs of the exemplar's colour), the one
-    whose pixels' mean ``probability`` is highest, when that mean reaches ``threshold`` (uint8);
-    else ``None``. The network chooses the object, the blob gives its outline."""
+    whose pixels' mean ``probability`` times its weight (``weights``, default 1 each) is highest,
+    when that mean reaches ``threshold`` and the product is positive (uint8); else ``None``. The
+    network (with the matcher's shape score as weight) chooses the object, the blob gives its
+    outline."""
     if not blobs:
         return None
+    weights = [1.0] * len(blobs) if weights is None else weights
+    if len(weights) != len(blobs):
+        raise ValueError(f"snap_to_blob: {len(weights)} weights for {len(blobs)} blobs")
     means = [float(np.asarray(probability)[b].mean()) if b.any() else 0.0 for b in blobs]
-    best = int(np.argmax(means))
-    return blobs[best].astype(np.uint8) if means[best] >= threshold else None
+    values = [m * w for m, w in zip(means, weights)]
+    best = int(np.argmax(values))
+    return blobs[best].astype(np.uint8) if means[best] >= threshold and values[best] > 0 else None
 
 
 def save_locator(
@@ -60,7 +73,7 @@ def save_locator(
     seen_threshold: float,
     record: Mapping[str, Any],
     rule: CoverRule | None = None,
-    snap: bool = False,
+    snap: str = "off",
 ) -> None:
     """Write ``net`` with its thresholds, search ``rule``, whether it snaps to blobs and training
     ``record`` to ``path`` (whole or not at all)."""
@@ -68,7 +81,7 @@ def save_locator(
         "config": net.config.to_dict(),
         "threshold": float(threshold),
         "seen_threshold": float(seen_threshold),
-        "snap": bool(snap),
+        "snap": snap,
         "rule": (CoverRule() if rule is None else rule).to_dict(),
         "record": dict(record),
     }
@@ -91,9 +104,12 @@ def read_locator_header(path: str | Path) -> dict[str, Any]:
 class TargetLocator:
     """A trained locator: ``locate(obs)`` for an exemplar-mode observation (one thread's worth
     of work: a few tens of milliseconds on one CPU core); ``rule`` is how a policy using it
-    judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`); with ``snap``
-    the mask is the matcher's blob the network's probability favours (:func:`snap_to_blob`),
-    where there is one."""
+    judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`); ``snap`` (one
+    of :data:`SNAPS`) whether the mask snaps to one of the matcher's blobs (:func:`snap_to_blob`).
+
+    Raises:
+        ValueError: ``snap`` is not one of :data:`SNAPS`.
+    """
 
     def __init__(
         self,
@@ -102,10 +118,12 @@ class TargetLocator:
         seen_threshold: float = 0.5,
         record: Mapping[str, Any] | None = None,
         rule: CoverRule | None = None,
-        snap: bool = False,
+        snap: str = "off",
     ):
+        if snap not in SNAPS:
+            raise ValueError(f"snap must be one of {SNAPS}, got {snap!r}")
         self.net = net.eval()
-        self.snap = bool(snap)
+        self.snap = snap
         self.threshold = float(threshold)
         self.seen_threshold = float(seen_threshold)
         self.record = dict(record or {})
@@ -124,7 +142,7 @@ class TargetLocator:
         net = LocatorNet(LocatorConfig(**header["config"]))
         net.load_state_dict(load_file(str(path)))
         rule = CoverRule(**header["rule"]) if "rule" in header else CoverRule()
-        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, header.get("snap", False))
+        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, header.get("snap", "off"))
 
     def locate(self, obs: Mapping[str, np.ndarray]) -> Location:
         """Where the object of ``obs``' exemplar (``query_color``, ``query_depth``) shows in its
@@ -132,7 +150,8 @@ class TargetLocator:
         missing = [k for k in ("color", "depth", "query_color", "query_depth") if k not in obs]
         if missing:
             raise KeyError(f"the locator needs an exemplar-mode observation; missing {missing}")
-        scene, query, descriptor = (torch.from_numpy(array)[None] for array in net_inputs(obs))
+        blobs = exemplar_blobs(obs)  # found once: the network's cues and the snap read them
+        scene, query, descriptor = (torch.from_numpy(array)[None] for array in net_inputs(obs, blobs))
         with torch.no_grad():
             pixels, seen = self.net(scene, query, descriptor)
         probability = torch.sigmoid(pixels[0]).numpy().astype(np.float32)
@@ -141,9 +160,9 @@ class TargetLocator:
         if not shown:
             return Location(probability, np.zeros(probability.shape, np.uint8), False, seen_probability)
         mask = None
-        if self.snap:
-            blobs = find_blobs(obs["color"], obs["depth"], obs["query_color"], obs["query_depth"], RESOLUTION)
-            mask = snap_to_blob(probability, [b.pixels for b in blobs], self.threshold)
+        if self.snap != "off":
+            weights = [b.score for b in blobs] if self.snap == "shape" else None
+            mask = snap_to_blob(probability, [b.pixels for b in blobs], self.threshold, weights)
         if mask is None:
             mask = (probability >= self.threshold).astype(np.uint8)
         return Location(probability, mask, True, seen_probability)

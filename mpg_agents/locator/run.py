@@ -139,7 +139,8 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
         card += f"""
 ## Cover and search rule
 
-`{json.dumps(rule)}` (`mpg_agents.locator.cover.CoverRule`), chosen among
+`{json.dumps(rule)}` (`mpg_agents.locator.cover.CoverRule`), masks snapping
+`{tuning.get("snap", "off")}` (`mpg_agents.locator.locator.SNAPS`), chosen among
 {len(tuning["rules"])} candidates on {tuning["episodes"]} tuning episodes per object count
 ({", ".join(str(n) for n in tuning["objects"])} objects) of `{tuning["env"]}`, seeds {tuning["seed"]} on, by
 `benchmarks/locator_search_tuning.py`.
@@ -187,10 +188,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         log_file.write(stamped + "\n")
         log_file.flush()
 
+    timing_path = args.out / "collect_seconds.json"  # collection may span sittings: the card gives the sum
+    earlier = json.loads(timing_path.read_text())["seconds"] if timing_path.is_file() else 0.0
     started = time.perf_counter()
     train = collect(args.out / "samples", args.shards, args.episodes_per_shard, args.seed, False, args.workers, log)
     tuning = collect(args.out / "tuning", args.tuning_shards, args.episodes_per_shard, args.seed, True, args.workers, log)
-    collect_seconds = time.perf_counter() - started
+    collect_seconds = earlier + time.perf_counter() - started
+    timing_path.write_text(json.dumps({"seconds": collect_seconds}) + "\n")
     torch.set_num_threads(args.torch_threads)
     torch.manual_seed(args.seed)
     data = read_shards(train)

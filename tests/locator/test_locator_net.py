@@ -44,11 +44,13 @@ def test_a_saved_locator_loads_and_locates_the_same(tmp_path: Path):
     net = LocatorNet(SMALL)
     path = tmp_path / "locator.safetensors"
     rule = CoverRule(search="empty", area_share=0.6)
-    save_locator(net, path, 0.5, 0.7, {"steps": 3}, rule, snap=True)
+    save_locator(net, path, 0.5, 0.7, {"steps": 3}, rule, snap="shape")
     header = read_locator_header(path)
     assert header["seen_threshold"] == 0.7 and header["record"] == {"steps": 3} and header["config"] == SMALL.to_dict()
     loaded = TargetLocator.load(path)
-    assert loaded.rule == rule and loaded.snap  # the search rule and the snapping travel with the weights
+    assert loaded.rule == rule and loaded.snap == "shape"  # the search rule and the snapping travel with the weights
+    with pytest.raises(ValueError, match="snap must be one of"):
+        TargetLocator(net, snap="yes")
     save_locator(net, path, 0.5, 0.7, {"steps": 3})
     obs = _obs(np.random.default_rng(0))
     a, b = TargetLocator(net, 0.5, 0.7).locate(obs), TargetLocator.load(path).locate(obs)
@@ -119,3 +121,6 @@ def test_the_mask_snaps_to_the_blob_the_network_favours():
     probability[4:6, 3:6] = 0.6  # b's mean is now 0.6
     assert np.array_equal(snap_to_blob(probability, [a, b], 0.5), b)
     assert snap_to_blob(probability, [a, b], 0.7) is None and snap_to_blob(probability, [], 0.1) is None
+    # Weighed by the matcher's shape scores, a's 0.4 x 0.9 = 0.36 beats b's 0.6 x 0.5 = 0.3.
+    assert np.array_equal(snap_to_blob(probability, [a, b], 0.3, [0.9, 0.5]), a)
+    assert snap_to_blob(probability, [a, b], 0.3, [0.0, 0.0]) is None  # no blob has the shape
