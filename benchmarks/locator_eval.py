@@ -29,7 +29,7 @@ import torch
 import mpg_envs  # noqa: F401  (registers the ids)
 from mpg_agents.locator.locator import SHIPPED_LOCATOR, TargetLocator
 from mpg_agents.locator.metrics import locator_figures
-from mpg_agents.locator.run import model_card
+from mpg_agents.locator.run import write_locator
 from mpg_agents.locator.samples import SampleSource, episode_samples, sample_observation
 from mpg_envs.files import write_text_whole
 
@@ -94,9 +94,7 @@ def main() -> None:
         write_text_whole(args.json, json.dumps(report, indent=2) + "\n")
     if args.record:
         locator.record["heldout"] = {**report, "cells": list(report["cells"])}
-        locator.save(args.locator)
-        card = Path(args.locator).with_suffix(".md")
-        write_text_whole(card, model_card(locator.record, locator.rule.to_dict()))
+        card = write_locator(locator, Path(args.locator))
         print(f"kept the figures in {args.locator} and wrote {card}")
 
 

@@ -33,7 +33,7 @@ from mpg_agents.evaluation.policy_zoo import make_policy
 from mpg_agents.evaluation.stats import bootstrap_mean_interval
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.locator import SNAPS, TargetLocator
-from mpg_agents.locator.run import model_card
+from mpg_agents.locator.run import write_locator
 
 TUNING_SEED = 700000
 """The first tuning seed: test seeds (500000 on) are never played here."""
@@ -109,11 +109,9 @@ def main() -> None:
             "episodes": args.episodes,
             "seed": args.seed,
             "rules": [r.to_dict() for r in rules],
-            "snap": locator.snap,
         }
-        locator.save(args.locator)
-        args.locator.with_suffix(".md").write_text(model_card(locator.record, best.to_dict()))
-        print(f"written the rule into {args.locator} and its model card")
+        card = write_locator(locator, args.locator)
+        print(f"written the rule into {args.locator} and its model card {card}")
 
 
 if __name__ == "__main__":

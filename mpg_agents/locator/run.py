@@ -29,11 +29,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from mpg_agents.locator.locator import TargetLocator, save_locator
+from mpg_agents.locator.locator import TargetLocator
 from mpg_agents.locator.metrics import locator_figures
 from mpg_agents.locator.net import LocatorNet
 from mpg_agents.locator.samples import SOURCES, collect_shard, read_shards, sample_observation, shard_plan
 from mpg_agents.locator.training import TrainSettings, train_locator
+from mpg_envs.files import write_text_whole
 
 FALSE_CLAIMS = 0.02
 """The share of hidden-target tuning samples "seen" may be claimed for."""
@@ -104,9 +105,9 @@ def _band_rows(figures: dict[str, Any]) -> str:
     )
 
 
-def model_card(record: dict[str, Any], rule: dict[str, Any] | None = None) -> str:
+def model_card(record: dict[str, Any], rule: dict[str, Any] | None = None, snap: str = "off") -> str:
     """The model card's Markdown, from the training record (and, once chosen, the search
-    ``rule`` and the held-out figures the record then holds)."""
+    ``rule``, the ``snap`` and the held-out figures the record then holds)."""
     card = f"""# Target locator (`locator.safetensors`)
 
 Finds the exemplar's object in the colour and depth heightmaps: a per-pixel probability that
@@ -140,7 +141,7 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
 ## Cover and search rule
 
 `{json.dumps(rule)}` (`mpg_agents.locator.cover.CoverRule`), masks snapping
-`{tuning.get("snap", "off")}` (`mpg_agents.locator.locator.SNAPS`), chosen among
+`{snap}` (`mpg_agents.locator.locator.SNAPS`), chosen among
 {len(tuning["rules"])} candidates on {tuning["episodes"]} tuning episodes per object count
 ({", ".join(str(n) for n in tuning["objects"])} objects) of `{tuning["env"]}`, seeds {tuning["seed"]} on, by
 `benchmarks/locator_search_tuning.py`.
@@ -160,6 +161,15 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
 """
     else:
         card += "\nHeld-out figures on the benchmark's exemplar tracks: `benchmarks/locator_eval.py`.\n"
+    return card
+
+
+def write_locator(locator: TargetLocator, path: Path) -> Path:
+    """Write ``locator`` to ``path`` and its model card beside it (``path`` with ``.md``), each
+    whole or not at all; returns the card's path."""
+    locator.save(path)
+    card = path.with_suffix(".md")
+    write_text_whole(card, model_card(locator.record, locator.rule.to_dict(), locator.snap))
     return card
 
 
@@ -229,8 +239,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "tuning_figures": figures,
         "settings": asdict(settings),
     }
-    save_locator(net, args.out / "locator.safetensors", PIXEL_THRESHOLD, seen_threshold, record)
-    (args.out / "locator.md").write_text(model_card(record))
+    write_locator(TargetLocator(net, PIXEL_THRESHOLD, seen_threshold, record), args.out / "locator.safetensors")
     (args.out / "figures.json").write_text(json.dumps(record, indent=2) + "\n")
     log(f"written {args.out / 'locator.safetensors'}; tuning figures {json.dumps(figures)}")
     return 0

@@ -20,7 +20,7 @@ from mpg_agents.locator.features import (
     scene_input,
 )
 from mpg_agents.locator.metrics import band_name, in_band, iou, locator_figures
-from mpg_agents.locator.run import calibrate_seen
+from mpg_agents.locator.run import calibrate_seen, model_card
 from mpg_agents.locator.samples import TUNING_SEEDS, disturbing_action, shard_plan
 from mpg_agents.locator.training import learning_rate_factor, locator_loss, symmetry
 from mpg_envs.grid.actions import decode_action
@@ -159,8 +159,6 @@ def test_a_photo_of_the_object_is_centred_as_the_envs_show_the_exemplar():
 
 
 def test_the_model_card_names_the_rule_and_the_heldout_figures():
-    from mpg_agents.locator.run import model_card  # noqa: PLC0415 - beside the card's test only
-
     band = {"30-60%": {"samples": 4, "iou": 0.85, "seen_rate": 1.0}, "hidden": {"samples": 2, "seen_rate": 0.0}}
     record = {
         "parameters": 10,
@@ -183,6 +181,7 @@ def test_the_model_card_names_the_rule_and_the_heldout_figures():
     assert "| 30-60% | 4 | 0.850 | 100.0% |" in plain and "Cover and search rule" not in plain
     record["rule_tuning"] = {"env": "E", "objects": [15], "episodes": 3, "seed": 700000, "rules": [{}, {}]}
     record["heldout"] = {"seed": 500000, "episodes": 2, "cells": ["E 15"], "motions": 4, "median_decision_s": 0.012, "pooled": band}
-    card = model_card(record, {"search": "empty"})
+    card = model_card(record, {"search": "empty"}, "probability")
     assert '`{"search": "empty"}`' in card and "among\n2 candidates on 3 tuning episodes" in card
+    assert "masks snapping\n`probability`" in card
     assert "seeds 500000 on" in card and "12.0 ms per decision" in card and "| hidden | 2 | - | 0.0% (false claims) |" in card

@@ -14,6 +14,7 @@ from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS
 from mpg_agents.locator.locator import TargetLocator, read_locator_header, save_locator, snap_to_blob
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
+from mpg_agents.locator.run import write_locator
 
 SMALL = LocatorConfig(8, 8, 16)
 
@@ -124,3 +125,26 @@ def test_the_mask_snaps_to_the_blob_the_network_favours():
     # Weighed by the matcher's shape scores, a's 0.4 x 0.9 = 0.36 beats b's 0.6 x 0.5 = 0.3.
     assert np.array_equal(snap_to_blob(probability, [a, b], 0.3, [0.9, 0.5]), a)
     assert snap_to_blob(probability, [a, b], 0.3, [0.0, 0.0]) is None  # no blob has the shape
+
+
+def test_a_locator_is_written_with_its_model_card_beside_it(tmp_path: Path):
+    record = {
+        "parameters": 1,
+        "command": "mpg-train-locator --out x",
+        "train_samples": 1,
+        "train_shards": 1,
+        "seed": 1,
+        "steps": 1,
+        "batch_size": 1,
+        "learning_rate": 0.001,
+        "train_seconds": 1.0,
+        "machine": "2 CPU cores",
+        "collect_seconds": 1.0,
+        "threshold": 0.5,
+        "seen_threshold": 0.7,
+        "tuning_samples": 1,
+        "tuning_figures": {"hidden": {"samples": 1, "seen_rate": 0.0}},
+    }
+    card = write_locator(TargetLocator(LocatorNet(SMALL), 0.5, 0.7, record), tmp_path / "locator.safetensors")
+    assert card == tmp_path / "locator.md" and "mpg-train-locator --out x" in card.read_text()
+    assert TargetLocator.load(tmp_path / "locator.safetensors").record == record
