@@ -15,11 +15,12 @@ not (lighting in camera images, look-alikes of the same footprint, blobs split b
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.perception.exemplar_match import Blob, MatchSettings, find_blobs, lab_colours, query_model
+from mpg_envs.perception.exemplar_match import Blob, MatchSettings, colour_gap, find_blobs, lab_colours, query_model
 
 DEPTH_SCALE = 10.0
 """Heights (m) are multiplied by this: 0.1 m of height reads 1.0."""
@@ -83,13 +84,60 @@ def centred_query(color: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, np.
     )
 
 
+@dataclass(frozen=True, eq=False)
+class Exemplar:
+    """What the locator reads of one exemplar, worked out once (:meth:`of`) and reused for every
+    look at a scene while the exemplar stays the same (:meth:`shows`): its images
+    (``query_color``, ``query_depth``), their network channels ``query`` (:func:`query_input`),
+    its ``descriptor`` (:func:`query_descriptor`) and the matcher's ``model`` of it (colour and
+    extents, :func:`~mpg_envs.perception.exemplar_match.query_model`; ``None`` when it shows no
+    object)."""
+
+    query_color: np.ndarray
+    query_depth: np.ndarray
+    query: np.ndarray
+    descriptor: np.ndarray
+    model: tuple[np.ndarray, np.ndarray] | None
+
+    @classmethod
+    def of(
+        cls, obs: Mapping[str, np.ndarray], resolution: float = RESOLUTION, settings: MatchSettings | None = None
+    ) -> Exemplar:
+        """The exemplar of the exemplar-mode observation ``obs`` (its arrays copied)."""
+        settings = MatchSettings() if settings is None else settings
+        color, depth = np.array(obs["query_color"]), np.array(obs["query_depth"])
+        try:
+            model: tuple[np.ndarray, np.ndarray] | None = query_model(color, depth, resolution, settings)
+        except ValueError:  # nothing above the table in the exemplar: nothing can match it
+            model = None
+        return cls(color, depth, query_input(obs), query_descriptor(color, depth), model)
+
+    def shows(self, obs: Mapping[str, np.ndarray]) -> bool:
+        """Whether ``obs``' exemplar images are this exemplar's (equal arrays)."""
+        return np.array_equal(self.query_color, obs["query_color"]) and np.array_equal(self.query_depth, obs["query_depth"])
+
+
 def exemplar_blobs(
-    obs: Mapping[str, np.ndarray], resolution: float = RESOLUTION, settings: MatchSettings | None = None
+    obs: Mapping[str, np.ndarray],
+    resolution: float = RESOLUTION,
+    settings: MatchSettings | None = None,
+    exemplar: Exemplar | None = None,
+    gap: np.ndarray | None = None,
 ) -> list[Blob]:
     """The exemplar matcher's blobs of the exemplar's colour in the scene, best shape match first
     (:func:`~mpg_envs.perception.exemplar_match.find_blobs`; ``settings``: the matcher's,
-    default :class:`MatchSettings`); none when the exemplar shows no object."""
+    default :class:`MatchSettings`); none when the exemplar shows no object. ``exemplar`` (its
+    :class:`Exemplar`, made with the same ``resolution`` and ``settings``) and ``gap`` (the
+    scene's :func:`~mpg_envs.perception.exemplar_match.colour_gap` to its colour) spare working
+    them out again."""
     settings = MatchSettings() if settings is None else settings
+    if exemplar is not None:
+        if exemplar.model is None:
+            return []
+        return find_blobs(
+            obs["color"], obs["depth"], exemplar.query_color, exemplar.query_depth, resolution, settings,
+            model=exemplar.model, gap=gap,
+        )  # fmt: skip
     try:
         return find_blobs(obs["color"], obs["depth"], obs["query_color"], obs["query_depth"], resolution, settings)
     except ValueError:  # nothing above the table in the exemplar: nothing can match it
@@ -101,22 +149,25 @@ def match_cues(
     blobs: Sequence[Blob] | None = None,
     resolution: float = RESOLUTION,
     settings: MatchSettings | None = None,
+    exemplar: Exemplar | None = None,
+    gap: np.ndarray | None = None,
 ) -> np.ndarray:
     """The exemplar matcher's view of an exemplar-mode observation (:data:`CUE_CHANNELS` x H x
     W, float32): per pixel, the CIELAB distance of its colour to the exemplar's (divided by
     :data:`LAB_SCALE`); the shape score of the blob of the exemplar's colour it belongs to
     (``blobs``: :func:`exemplar_blobs`, found when not given; 0 off every blob); 1 where that
-    blob is covered. An exemplar showing no object gives distance 1 everywhere and no blob."""
+    blob is covered. An exemplar showing no object gives distance 1 everywhere and no blob.
+    ``exemplar`` and ``gap`` as for :func:`exemplar_blobs`."""
     settings = MatchSettings() if settings is None else settings
     color = np.asarray(obs["color"])
     cues = np.zeros((CUE_CHANNELS, *color.shape[:2]), np.float32)
-    try:
-        reference, _ = query_model(obs["query_color"], obs["query_depth"], resolution, settings)
-    except ValueError:  # nothing above the table in the exemplar: nothing can match it
+    exemplar = Exemplar.of(obs, resolution, settings) if exemplar is None else exemplar
+    if exemplar.model is None:  # nothing above the table in the exemplar: nothing can match it
         cues[0] = 1.0
         return cues
-    cues[0] = np.linalg.norm(lab_colours(color) - reference, axis=-1) / LAB_SCALE
-    blobs = exemplar_blobs(obs, resolution, settings) if blobs is None else blobs
+    gap = colour_gap(lab_colours(color), exemplar.model[0]) if gap is None else gap
+    cues[0] = gap / LAB_SCALE
+    blobs = exemplar_blobs(obs, resolution, settings, exemplar, gap) if blobs is None else blobs
     for blob in reversed(blobs):  # best last: where blobs share a pixel, the best one's score stays
         cues[1][blob.pixels] = blob.score
         cues[2][blob.pixels] = float(blob.covered)
@@ -124,18 +175,24 @@ def match_cues(
 
 
 def scene_input(
-    obs: Mapping[str, np.ndarray], descriptor: np.ndarray | None = None, blobs: Sequence[Blob] | None = None
+    obs: Mapping[str, np.ndarray],
+    descriptor: np.ndarray | None = None,
+    blobs: Sequence[Blob] | None = None,
+    exemplar: Exemplar | None = None,
+    gap: np.ndarray | None = None,
 ) -> np.ndarray:
     """The scene's channels (:data:`SCENE_CHANNELS` x H x W, float32) of an exemplar-mode
     observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour (from
-    ``descriptor``, the exemplar's :func:`query_descriptor`, computed when not given) and the
-    matcher's cues (:func:`match_cues`)."""
+    ``descriptor``, the exemplar's :func:`query_descriptor`, taken from ``exemplar`` or computed
+    when not given) and the matcher's cues (:func:`match_cues`; ``exemplar`` and ``gap`` as for
+    :func:`exemplar_blobs`)."""
     if descriptor is None:
-        descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
+        descriptor = exemplar.descriptor if exemplar is not None else query_descriptor(obs["query_color"], obs["query_depth"])
     color = np.asarray(obs["color"], np.float32).transpose(2, 0, 1) / 255.0
     depth = np.asarray(obs["depth"], np.float32)[None] * DEPTH_SCALE
     distance = colour_distance(obs["color"], descriptor[3:6])[None]
-    return np.concatenate([color, depth, distance, match_cues(obs, blobs)]).astype(np.float32)
+    cues = match_cues(obs, blobs, exemplar=exemplar, gap=gap)
+    return np.concatenate([color, depth, distance, cues]).astype(np.float32)
 
 
 def query_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:

@@ -20,9 +20,10 @@ from safetensors import safe_open
 from safetensors.torch import load_file, save
 
 from mpg_agents.locator.cover import CoverRule
-from mpg_agents.locator.features import exemplar_blobs, net_inputs
+from mpg_agents.locator.features import Exemplar, exemplar_blobs, scene_input
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_envs.files import write_bytes_whole
+from mpg_envs.perception.exemplar_match import colour_gap, lab_colours
 
 HEADER_KEY = "mpg_locator"
 SHIPPED_LOCATOR = Path(__file__).resolve().parent.parent / "checkpoints" / "locator.safetensors"
@@ -128,6 +129,10 @@ class TargetLocator:
         self.seen_threshold = float(seen_threshold)
         self.record = dict(record or {})
         self.rule = CoverRule() if rule is None else rule
+        # The exemplar stays the same through an episode: what is read of it (the matcher's
+        # model, the network's embedding) is worked out once and kept until another shows.
+        self._exemplar: Exemplar | None = None
+        self._embedding: torch.Tensor | None = None
 
     def save(self, path: str | Path) -> None:
         """Write this locator (weights, thresholds, rule, record) to ``path``."""
@@ -150,10 +155,13 @@ class TargetLocator:
         missing = [k for k in ("color", "depth", "query_color", "query_depth") if k not in obs]
         if missing:
             raise KeyError(f"the locator needs an exemplar-mode observation; missing {missing}")
-        blobs = exemplar_blobs(obs)  # found once: the network's cues and the snap read them
-        scene, query, descriptor = (torch.from_numpy(array)[None] for array in net_inputs(obs, blobs))
+        exemplar, embedding = self._exemplar_embedding(obs)
+        # Worked out once: the network's cues and the snap read the same colour gap and blobs.
+        gap = None if exemplar.model is None else colour_gap(lab_colours(obs["color"]), exemplar.model[0])
+        blobs = exemplar_blobs(obs, exemplar=exemplar, gap=gap)
+        scene = torch.from_numpy(scene_input(obs, blobs=blobs, exemplar=exemplar, gap=gap))[None]
         with torch.no_grad():
-            pixels, seen = self.net(scene, query, descriptor)
+            pixels, seen = self.net.scene_logits(scene, embedding)
         probability = torch.sigmoid(pixels[0]).numpy().astype(np.float32)
         seen_probability = float(torch.sigmoid(seen[0]))
         shown = seen_probability >= self.seen_threshold
@@ -166,3 +174,15 @@ class TargetLocator:
         if mask is None:
             mask = (probability >= self.threshold).astype(np.uint8)
         return Location(probability, mask, True, seen_probability)
+
+    def _exemplar_embedding(self, obs: Mapping[str, np.ndarray]) -> tuple[Exemplar, torch.Tensor]:
+        """``obs``' :class:`~mpg_agents.locator.features.Exemplar` and its network embedding,
+        kept from the last call while the exemplar images are the same."""
+        if self._exemplar is None or self._embedding is None or not self._exemplar.shows(obs):
+            exemplar = Exemplar.of(obs)
+            with torch.no_grad():
+                query, descriptor = (torch.from_numpy(a)[None] for a in (exemplar.query, exemplar.descriptor))
+                self._embedding = self.net.query_embedding(query, descriptor)
+            self._exemplar = exemplar
+        return self._exemplar, self._embedding
+

@@ -92,7 +92,11 @@ class LocatorNet(nn.Module):
         return self.embedding(torch.cat([mean, peak, descriptor], dim=1))
 
     def forward(self, scene: torch.Tensor, query: torch.Tensor, descriptor: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        embedding = self.query_embedding(query, descriptor)
+        return self.scene_logits(scene, self.query_embedding(query, descriptor))
+
+    def scene_logits(self, scene: torch.Tensor, embedding: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(pixel logits, seen logits)`` of ``scene`` for an exemplar's :meth:`query_embedding`
+        (what :meth:`forward` gives; the embedding can be kept while the exemplar stays)."""
         quarter, eighth = self.scene(scene)
         gamma8, beta8 = self.film_eighth(embedding)[:, :, None, None].chunk(2, dim=1)
         eighth = eighth * (1.0 + gamma8) + beta8

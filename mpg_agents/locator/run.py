@@ -105,6 +105,11 @@ def _band_rows(figures: dict[str, Any]) -> str:
     )
 
 
+def _note(record: dict[str, Any]) -> str:
+    """The record's ``collect_note`` (what the collection time leaves out, say), in brackets."""
+    return f" ({record['collect_note']})" if record.get("collect_note") else ""
+
+
 def model_card(record: dict[str, Any], rule: dict[str, Any] | None = None, snap: str = "off") -> str:
     """The model card's Markdown, from the training record (and, once chosen, the search
     ``rule``, the ``snap`` and the held-out figures the record then holds)."""
@@ -124,7 +129,7 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
   the target is the top surface). No test seed, no unseen-shape test object.
 - {record["steps"]} steps of batch {record["batch_size"]} (AdamW, warm-up then cosine decay from learning rate
   {record["learning_rate"]}), {record["train_seconds"] / 60:.0f} minutes of training on
-  {record["machine"]}; collecting the samples took {record["collect_seconds"] / 60:.0f} minutes.
+  {record["machine"]}; collecting the samples took {record["collect_seconds"] / 60:.0f} minutes{_note(record)}.
 - Thresholds: a pixel is the target's at probability {record["threshold"]}; "seen" is claimed at
   {record["seen_threshold"]:.3f}, calibrated on {record["tuning_samples"]} tuning samples
   (seeds 700000-) to claim at most {FALSE_CLAIMS:.0%} of hidden targets.

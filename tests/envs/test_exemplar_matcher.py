@@ -12,9 +12,12 @@ import pytest
 import mpg_envs  # noqa: F401  (registers the ids)
 from mpg_envs.perception.exemplar_match import (
     MatchSettings,
+    colour_gap,
     colour_match,
+    find_blobs,
     height_steps,
     heights,
+    lab_colours,
     object_extents,
     query_model,
     shape_score,
@@ -81,6 +84,29 @@ def test_colour_match_and_the_table_level():
     depth = np.full((10, 10), 0.005, np.float32)  # a camera's table, 5 mm up
     depth[:3, :3] = 0.035
     assert heights(depth)[0, 0] == pytest.approx(0.03) and heights(depth)[9, 9] == 0
+
+
+def test_colour_gap_by_hand_and_blobs_from_what_a_caller_worked_out_are_the_same():
+    lab = np.array([[[50.0, 128.0, 128.0], [53.0, 132.0, 128.0]]], np.float32)
+    assert colour_gap(lab, np.array([50.0, 128.0, 128.0])).tolist() == [[0.0, 5.0]]  # a 3-4-5 triangle
+    rng = np.random.default_rng(3)
+    color = np.full((60, 60, 3), 90, np.uint8)
+    depth = np.zeros((60, 60), np.float32)
+    for rows, cols, height in ((slice(5, 15), slice(5, 30), 0.03), (slice(30, 50), slice(30, 40), 0.05), (slice(40, 58), slice(2, 12), 0.03)):
+        color[rows, cols] = (89, 161, 79)
+        depth[rows, cols] = height
+    color[8:11, 8:12] = (225, 87, 89)  # another colour on the first box
+    depth[8:11, 8:12] = 0.045
+    depth += rng.uniform(0, 0.001, depth.shape).astype(np.float32)
+    query_color, query_depth = np.full((60, 60, 3), 90, np.uint8), np.zeros((60, 60), np.float32)
+    query_color[20:30, 20:45], query_depth[20:30, 20:45] = (89, 161, 79), 0.03
+    model = query_model(query_color, query_depth, RES)
+    plain = find_blobs(color, depth, query_color, query_depth, RES)
+    given = find_blobs(color, depth, np.zeros(0), np.zeros(0), RES, model=model, gap=colour_gap(lab_colours(color), model[0]))
+    assert len(plain) == 3 and len(given) == len(plain)
+    for a, b in zip(plain, given):
+        assert np.array_equal(a.pixels, b.pixels) and (a.score, a.covered, a.height, a.top) == (b.score, b.covered, b.height, b.top)
+    assert plain[0].score > 0.9 and not plain[0].covered  # the unmarked 10 x 25 box of 3 cm
 
 
 def test_query_model_reads_the_object():

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from mpg_agents.locator.cover import CoverRule
-from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS
+from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS, Exemplar, exemplar_blobs, net_inputs
 from mpg_agents.locator.locator import TargetLocator, read_locator_header, save_locator, snap_to_blob
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_agents.locator.run import write_locator
@@ -59,6 +59,34 @@ def test_a_saved_locator_loads_and_locates_the_same(tmp_path: Path):
     assert a.probability.shape == (64, 64) and a.mask.dtype == np.uint8
     if not a.seen:
         assert not a.mask.any()  # nothing is located where the target is not seen
+
+
+def _boxes(colour: tuple[int, int, int]) -> dict[str, np.ndarray]:
+    """A scene of three boxes (two of ``colour``) and an exemplar of one of them."""
+    obs = _obs(np.random.default_rng(5))
+    obs["color"][:], obs["depth"][:] = 90, 0.0
+    obs["query_color"][:], obs["query_depth"][:] = 90, 0.0
+    for rows, cols, paint in ((slice(5, 15), slice(5, 30), colour), (slice(30, 50), slice(30, 40), colour), (slice(40, 60), slice(2, 12), (225, 87, 89))):
+        obs["color"][rows, cols], obs["depth"][rows, cols] = paint, 0.03
+    obs["query_color"][20:30, 20:45], obs["query_depth"][20:30, 20:45] = colour, 0.03
+    return obs
+
+
+def test_what_is_read_of_an_exemplar_is_kept_while_it_stays_and_locating_is_the_same():
+    torch.manual_seed(2)
+    net = LocatorNet(SMALL).eval()
+    green, orange = _boxes((89, 161, 79)), _boxes((242, 142, 43))
+    exemplar = Exemplar.of(green)
+    assert exemplar.shows(green) and not exemplar.shows(orange) and exemplar.model is not None
+    kept = TargetLocator(net, 0.5, 0.0, snap="probability")
+    for obs in (green, orange, green, green):  # the exemplar changes, comes back, stays
+        fresh = TargetLocator(net, 0.5, 0.0, snap="probability").locate(obs)
+        located = kept.locate(obs)
+        with torch.no_grad():  # what every decision computed in full gives
+            pixels, seen = net(*(torch.from_numpy(a)[None] for a in net_inputs(obs, exemplar_blobs(obs))))
+        assert np.array_equal(located.probability, fresh.probability) and np.array_equal(located.mask, fresh.mask)
+        assert np.array_equal(located.probability, torch.sigmoid(pixels[0]).numpy())
+        assert located.seen_probability == fresh.seen_probability == float(torch.sigmoid(seen[0]))
 
 
 def test_bad_input_is_named(tmp_path: Path):
