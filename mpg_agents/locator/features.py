@@ -20,7 +20,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpg_envs.grid.workspace import Workspace
-from mpg_envs.perception.exemplar_match import Blob, MatchSettings, colour_gap, find_blobs, lab_colours, query_model
+from mpg_envs.perception.exemplar_match import (
+    Blob,
+    MatchSettings,
+    colour_gap,
+    find_blobs,
+    lab_colours,
+    pose_table,
+    query_model,
+)
 
 DEPTH_SCALE = 10.0
 """Heights (m) are multiplied by this: 0.1 m of height reads 1.0."""
@@ -89,15 +97,17 @@ class Exemplar:
     """What the locator reads of one exemplar, worked out once (:meth:`of`) and reused for every
     look at a scene while the exemplar stays the same (:meth:`shows`): its images
     (``query_color``, ``query_depth``), their network channels ``query`` (:func:`query_input`),
-    its ``descriptor`` (:func:`query_descriptor`) and the matcher's ``model`` of it (colour and
+    its ``descriptor`` (:func:`query_descriptor`), the matcher's ``model`` of it (colour and
     extents, :func:`~mpg_envs.perception.exemplar_match.query_model`; ``None`` when it shows no
-    object)."""
+    object) and the ``poses`` a box of its extents shows from above
+    (:func:`~mpg_envs.perception.exemplar_match.pose_table`; ``None`` without a model)."""
 
     query_color: np.ndarray
     query_depth: np.ndarray
     query: np.ndarray
     descriptor: np.ndarray
     model: tuple[np.ndarray, np.ndarray] | None
+    poses: np.ndarray | None = None
 
     @classmethod
     def of(
@@ -110,7 +120,8 @@ class Exemplar:
             model: tuple[np.ndarray, np.ndarray] | None = query_model(color, depth, resolution, settings)
         except ValueError:  # nothing above the table in the exemplar: nothing can match it
             model = None
-        return cls(color, depth, query_input(obs), query_descriptor(color, depth), model)
+        poses = None if model is None else pose_table(model[1])
+        return cls(color, depth, query_input(obs), query_descriptor(color, depth), model, poses)
 
     def shows(self, obs: Mapping[str, np.ndarray]) -> bool:
         """Whether ``obs``' exemplar images are this exemplar's (equal arrays)."""

@@ -20,10 +20,10 @@ from safetensors import safe_open
 from safetensors.torch import load_file, save
 
 from mpg_agents.locator.cover import CoverRule
-from mpg_agents.locator.features import Exemplar, exemplar_blobs, scene_input
+from mpg_agents.locator.features import RESOLUTION, Exemplar, exemplar_blobs, scene_input
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_envs.files import write_bytes_whole
-from mpg_envs.perception.exemplar_match import colour_gap, lab_colours
+from mpg_envs.perception.exemplar_match import Blob, colour_gap, footprint_sides, lab_colours, pose_fit
 
 HEADER_KEY = "mpg_locator"
 SHIPPED_LOCATOR = Path(__file__).resolve().parent.parent / "checkpoints" / "locator.safetensors"
@@ -42,10 +42,36 @@ class Location:
     seen_probability: float
 
 
-SNAPS = ("off", "probability", "shape")
+SNAPS = ("off", "probability", "shape", "pose")
 """How the located mask snaps to the exemplar matcher's blobs: not at all; to the blob whose
 pixels the network rates highest; to the blob whose mean probability times its shape score
-(:func:`~mpg_envs.perception.exemplar_match.shape_score`) is highest."""
+(:func:`~mpg_envs.perception.exemplar_match.shape_score`) is highest; as the last, but an
+uncovered blob (its whole top shows) is weighed by how well it shows the exemplar's box in some
+pose, leaning ones included (:func:`~mpg_envs.perception.exemplar_match.pose_fit`), and one that
+fits no pose by at least the locator's ``pose_floor`` is not the target (see :func:`blob_weights`)."""
+
+
+def blob_weights(
+    snap: str, blobs: list[Blob], exemplar: Exemplar, pose_floor: float
+) -> tuple[list[float] | None, np.ndarray | None]:
+    """``(weights, ruled_out)`` of the matcher's ``blobs`` by the snapping ``snap`` (one of
+    :data:`SNAPS`): the weights :func:`snap_to_blob` takes (``None``: all alike) and, by the
+    ``"pose"`` snapping, the pixels of the blobs ruled out (uncovered, fitting no pose of the
+    exemplar's box by ``pose_floor``: weight 0; ``None`` otherwise)."""
+    if snap == "shape":
+        return [b.score for b in blobs], None
+    if snap != "pose" or exemplar.poses is None or not blobs:
+        return None, None
+    weights, ruled_out = [], np.zeros(blobs[0].pixels.shape, bool)
+    for blob in blobs:
+        if blob.covered:  # part of its top shows: judged as the matcher judges a part
+            weights.append(blob.score)
+            continue
+        fit = pose_fit(footprint_sides(blob.pixels, RESOLUTION), blob.height, exemplar.poses)
+        weights.append(fit if fit >= pose_floor else 0.0)
+        if fit < pose_floor:
+            ruled_out |= blob.pixels
+    return weights, ruled_out
 
 
 def snap_to_blob(
@@ -75,14 +101,16 @@ def save_locator(
     record: Mapping[str, Any],
     rule: CoverRule | None = None,
     snap: str = "off",
+    pose_floor: float = 0.1,
 ) -> None:
-    """Write ``net`` with its thresholds, search ``rule``, whether it snaps to blobs and training
-    ``record`` to ``path`` (whole or not at all)."""
+    """Write ``net`` with its thresholds, search ``rule``, how it snaps to blobs (``snap``,
+    ``pose_floor``) and training ``record`` to ``path`` (whole or not at all)."""
     header = {
         "config": net.config.to_dict(),
         "threshold": float(threshold),
         "seen_threshold": float(seen_threshold),
         "snap": snap,
+        "pose_floor": float(pose_floor),
         "rule": (CoverRule() if rule is None else rule).to_dict(),
         "record": dict(record),
     }
@@ -106,10 +134,11 @@ class TargetLocator:
     """A trained locator: ``locate(obs)`` for an exemplar-mode observation (one thread's worth
     of work: a few tens of milliseconds on one CPU core); ``rule`` is how a policy using it
     judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`); ``snap`` (one
-    of :data:`SNAPS`) whether the mask snaps to one of the matcher's blobs (:func:`snap_to_blob`).
+    of :data:`SNAPS`) whether the mask snaps to one of the matcher's blobs (:func:`snap_to_blob`),
+    ``pose_floor`` the least pose fit of an uncovered blob by the ``"pose"`` snapping.
 
     Raises:
-        ValueError: ``snap`` is not one of :data:`SNAPS`.
+        ValueError: ``snap`` is not one of :data:`SNAPS`, or ``pose_floor`` is outside [0, 1].
     """
 
     def __init__(
@@ -120,9 +149,13 @@ class TargetLocator:
         record: Mapping[str, Any] | None = None,
         rule: CoverRule | None = None,
         snap: str = "off",
+        pose_floor: float = 0.1,
     ):
         if snap not in SNAPS:
             raise ValueError(f"snap must be one of {SNAPS}, got {snap!r}")
+        if not 0.0 <= pose_floor <= 1.0:
+            raise ValueError(f"pose_floor must lie in [0, 1], got {pose_floor}")
+        self.pose_floor = float(pose_floor)
         self.net = net.eval()
         self.snap = snap
         self.threshold = float(threshold)
@@ -136,7 +169,7 @@ class TargetLocator:
 
     def save(self, path: str | Path) -> None:
         """Write this locator (weights, thresholds, rule, record) to ``path``."""
-        save_locator(self.net, path, self.threshold, self.seen_threshold, self.record, self.rule, self.snap)
+        save_locator(self.net, path, self.threshold, self.seen_threshold, self.record, self.rule, self.snap, self.pose_floor)
 
     @classmethod
     def load(cls, path: str | Path = SHIPPED_LOCATOR) -> TargetLocator:
@@ -147,7 +180,8 @@ class TargetLocator:
         net = LocatorNet(LocatorConfig(**header["config"]))
         net.load_state_dict(load_file(str(path)))
         rule = CoverRule(**header["rule"]) if "rule" in header else CoverRule()
-        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, header.get("snap", "off"))
+        snap, floor = header.get("snap", "off"), header.get("pose_floor", 0.1)
+        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, snap, floor)
 
     def locate(self, obs: Mapping[str, np.ndarray]) -> Location:
         """Where the object of ``obs``' exemplar (``query_color``, ``query_depth``) shows in its
@@ -167,12 +201,15 @@ class TargetLocator:
         shown = seen_probability >= self.seen_threshold
         if not shown:
             return Location(probability, np.zeros(probability.shape, np.uint8), False, seen_probability)
-        mask = None
+        mask, ruled_out = None, None
         if self.snap != "off":
-            weights = [b.score for b in blobs] if self.snap == "shape" else None
+            weights, ruled_out = blob_weights(self.snap, blobs, exemplar, self.pose_floor)
             mask = snap_to_blob(probability, [b.pixels for b in blobs], self.threshold, weights)
         if mask is None:
-            mask = (probability >= self.threshold).astype(np.uint8)
+            above = probability >= self.threshold
+            mask = (above if ruled_out is None else above & ~ruled_out).astype(np.uint8)
+            if ruled_out is not None and not mask.any():  # only objects that cannot be it rate high
+                return Location(probability, mask, False, seen_probability)
         return Location(probability, mask, True, seen_probability)
 
     def _exemplar_embedding(self, obs: Mapping[str, np.ndarray]) -> tuple[Exemplar, torch.Tensor]:
@@ -185,4 +222,3 @@ class TargetLocator:
                 self._embedding = self.net.query_embedding(query, descriptor)
             self._exemplar = exemplar
         return self._exemplar, self._embedding
-

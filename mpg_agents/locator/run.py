@@ -110,7 +110,9 @@ def _note(record: dict[str, Any]) -> str:
     return f" ({record['collect_note']})" if record.get("collect_note") else ""
 
 
-def model_card(record: dict[str, Any], rule: dict[str, Any] | None = None, snap: str = "off") -> str:
+def model_card(
+    record: dict[str, Any], rule: dict[str, Any] | None = None, snap: str = "off", pose_floor: float | None = None
+) -> str:
     """The model card's Markdown, from the training record (and, once chosen, the search
     ``rule``, the ``snap`` and the held-out figures the record then holds)."""
     card = f"""# Target locator (`locator.safetensors`)
@@ -146,10 +148,15 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
 ## Cover and search rule
 
 `{json.dumps(rule)}` (`mpg_agents.locator.cover.CoverRule`), masks snapping
-`{snap}` (`mpg_agents.locator.locator.SNAPS`), chosen among
+`{snap}`{"" if snap != "pose" or pose_floor is None else f" (least pose fit {pose_floor})"} (`mpg_agents.locator.locator.SNAPS`), chosen among
 {len(tuning["rules"])} candidates on {tuning["episodes"]} tuning episodes per object count
 ({", ".join(str(n) for n in tuning["objects"])} objects) of `{tuning["env"]}`, seeds {tuning["seed"]} on, by
 `benchmarks/locator_search_tuning.py`.
+"""
+        snaps = record.get("snap_tuning")
+        if snaps is not None:
+            card += f"""The snapping was then chosen among {", ".join(f"`{c}`" for c in snaps["candidates"])} on
+{snaps["episodes"]} other tuning episodes per object count, seeds {snaps["seed"]} on: {snaps["result"]}.
 """
     heldout = record.get("heldout")
     if heldout is not None:
@@ -174,7 +181,7 @@ def write_locator(locator: TargetLocator, path: Path) -> Path:
     whole or not at all; returns the card's path."""
     locator.save(path)
     card = path.with_suffix(".md")
-    write_text_whole(card, model_card(locator.record, locator.rule.to_dict(), locator.snap))
+    write_text_whole(card, model_card(locator.record, locator.rule.to_dict(), locator.snap, locator.pose_floor))
     return card
 
 

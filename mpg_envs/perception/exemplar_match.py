@@ -15,7 +15,9 @@ part of its top shows, so its shape is judged without that part.
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -34,6 +36,8 @@ __all__ = [
     "heights",
     "lab_colours",
     "object_extents",
+    "pose_fit",
+    "pose_table",
     "query_model",
     "shape_score",
 ]
@@ -120,7 +124,8 @@ def footprint_sides(pixels: np.ndarray, resolution: float) -> np.ndarray:
     Raises:
         ValueError: no pixel.
     """
-    return _sides(*np.nonzero(pixels), resolution)
+    rows, cols = np.nonzero(pixels)
+    return _sides(rows, cols, resolution)
 
 
 def _sides(rows: np.ndarray, cols: np.ndarray, resolution: float) -> np.ndarray:
@@ -161,6 +166,45 @@ def shape_score(
         cover = 1.0 if partial else min(1.0, long_side / rest[1]) * min(1.0, short_side / rest[0])
         best = max(best, up * fit * cover)
     return best
+
+
+POSE_TILTS: tuple[float, ...] = tuple(math.radians(d) for d in range(0, 46, 5))
+"""The tilts (radians) about each horizontal axis :func:`pose_table` takes an object through: in
+clutter an object leans on others, so from above it shows more than one face."""
+
+
+def pose_table(extents: Sequence[float] | np.ndarray, tilts: Sequence[float] = POSE_TILTS) -> np.ndarray:
+    """``(N, 3)``: the footprint rectangle's (long, short) sides and the height (m) a box of
+    ``extents`` shows from above in each of ``N`` poses: each assignment of its extents to the
+    axes, tilted about the two horizontal axes by each pair of ``tilts`` (the yaw changes neither)."""
+    corners = np.array(list(itertools.product((-0.5, 0.5), repeat=3)))
+    rows = []
+    for order in itertools.permutations(range(3)):
+        box = corners * np.asarray(extents, dtype=float)[list(order)]
+        for a, b in itertools.product(tilts, tilts):
+            about_x = np.array([[1.0, 0.0, 0.0], [0.0, math.cos(a), -math.sin(a)], [0.0, math.sin(a), math.cos(a)]])
+            about_y = np.array([[math.cos(b), 0.0, math.sin(b)], [0.0, 1.0, 0.0], [-math.sin(b), 0.0, math.cos(b)]])
+            turned = box @ (about_y @ about_x).T
+            _, sides, _ = footprint_rect(turned[:, :2])
+            rows.append((*sides, float(np.ptp(turned[:, 2]))))
+    return np.array(rows)
+
+
+def pose_fit(
+    sides: Sequence[float] | np.ndarray,
+    height: float,
+    table: np.ndarray,
+    side_sigma: float = 0.006,
+    height_sigma: float = 0.006,
+) -> float:
+    """How well a blob of footprint ``sides`` (long, short; m) whose top stands ``height`` above
+    what surrounds it shows a box in one of the poses of ``table`` (:func:`pose_table`): the best
+    pose's agreement, a Gaussian of the three differences (``side_sigma``, ``height_sigma``), in [0, 1].
+    Unlike :func:`shape_score` it allows the object to lean (a tilted box is wider and higher)."""
+    table = np.asarray(table, dtype=float)
+    gaps = ((sides[0] - table[:, 0]) / side_sigma) ** 2 + ((sides[1] - table[:, 1]) / side_sigma) ** 2
+    gaps += ((height - table[:, 2]) / height_sigma) ** 2
+    return float(np.exp(-0.5 * gaps.min()))
 
 
 def height_steps(up: np.ndarray, step: float) -> np.ndarray:

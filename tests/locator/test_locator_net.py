@@ -12,9 +12,10 @@ import torch
 
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS, Exemplar, exemplar_blobs, net_inputs
-from mpg_agents.locator.locator import TargetLocator, read_locator_header, save_locator, snap_to_blob
+from mpg_agents.locator.locator import TargetLocator, blob_weights, read_locator_header, save_locator, snap_to_blob
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_agents.locator.run import write_locator
+from mpg_envs.perception.exemplar_match import Blob, pose_table
 
 SMALL = LocatorConfig(8, 8, 16)
 
@@ -52,6 +53,10 @@ def test_a_saved_locator_loads_and_locates_the_same(tmp_path: Path):
     assert loaded.rule == rule and loaded.snap == "shape"  # the search rule and the snapping travel with the weights
     with pytest.raises(ValueError, match="snap must be one of"):
         TargetLocator(net, snap="yes")
+    with pytest.raises(ValueError, match=r"pose_floor must lie in \[0, 1\]"):
+        TargetLocator(net, snap="pose", pose_floor=1.5)
+    save_locator(net, path, 0.5, 0.7, {}, snap="pose", pose_floor=0.25)
+    assert TargetLocator.load(path).pose_floor == 0.25 and TargetLocator.load(path).snap == "pose"
     save_locator(net, path, 0.5, 0.7, {"steps": 3})
     obs = _obs(np.random.default_rng(0))
     a, b = TargetLocator(net, 0.5, 0.7).locate(obs), TargetLocator.load(path).locate(obs)
@@ -66,7 +71,11 @@ def _boxes(colour: tuple[int, int, int]) -> dict[str, np.ndarray]:
     obs = _obs(np.random.default_rng(5))
     obs["color"][:], obs["depth"][:] = 90, 0.0
     obs["query_color"][:], obs["query_depth"][:] = 90, 0.0
-    for rows, cols, paint in ((slice(5, 15), slice(5, 30), colour), (slice(30, 50), slice(30, 40), colour), (slice(40, 60), slice(2, 12), (225, 87, 89))):
+    for rows, cols, paint in (
+        (slice(5, 15), slice(5, 30), colour),
+        (slice(30, 50), slice(30, 40), colour),
+        (slice(40, 60), slice(2, 12), (225, 87, 89)),
+    ):
         obs["color"][rows, cols], obs["depth"][rows, cols] = paint, 0.03
     obs["query_color"][20:30, 20:45], obs["query_depth"][20:30, 20:45] = colour, 0.03
     return obs
@@ -87,6 +96,49 @@ def test_what_is_read_of_an_exemplar_is_kept_while_it_stays_and_locating_is_the_
         assert np.array_equal(located.probability, fresh.probability) and np.array_equal(located.mask, fresh.mask)
         assert np.array_equal(located.probability, torch.sigmoid(pixels[0]).numpy())
         assert located.seen_probability == fresh.seen_probability == float(torch.sigmoid(seen[0]))
+
+
+def test_the_pose_snapping_weighs_uncovered_blobs_by_their_fit_and_rules_out_misfits():
+    exemplar = Exemplar.of(_boxes((89, 161, 79)))  # a 10 x 25 pixel box, 3 cm high: 0.02 x 0.05 x 0.03 m
+    assert exemplar.poses is not None and np.allclose(exemplar.poses, pose_table(exemplar.model[1]))
+
+    def blob(rows: slice, cols: slice, height: float, covered: bool, score: float) -> Blob:
+        pixels = np.zeros((64, 64), bool)
+        pixels[rows, cols] = True
+        return Blob(pixels, score, covered, height, height)
+
+    fits = blob(slice(0, 10), slice(0, 25), 0.03, False, 0.9)  # the exemplar's box lying as it does
+    too_low = blob(slice(20, 30), slice(0, 25), 0.01, False, 0.8)  # its footprint but 1 cm high: not it
+    covered = blob(slice(40, 45), slice(0, 10), 0.03, True, 0.4)  # part of a top: judged by its score
+    weights, ruled_out = blob_weights("pose", [fits, too_low, covered], exemplar, 0.1)
+    assert weights is not None and ruled_out is not None
+    assert weights[0] > 0.5 and weights[1] == 0.0 and weights[2] == 0.4
+    assert np.array_equal(ruled_out, too_low.pixels)
+    assert blob_weights("shape", [fits, too_low], exemplar, 0.1) == ([0.9, 0.8], None)
+    assert blob_weights("probability", [fits, too_low], exemplar, 0.1) == (None, None)
+
+
+class _Rates(LocatorNet):
+    """A network that rates one region of the scene the target's (for the snapping's tests)."""
+
+    def __init__(self, region: tuple[slice, slice]):
+        super().__init__(SMALL)
+        self.region = region
+
+    def scene_logits(self, scene: torch.Tensor, embedding: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        pixels = torch.full(scene.shape[:1] + scene.shape[2:], -10.0)
+        pixels[(slice(None), *self.region)] = 10.0
+        return pixels, torch.full(scene.shape[:1], 10.0)
+
+
+def test_a_locator_snapping_by_pose_does_not_see_the_target_where_only_misfits_rate_high():
+    obs = _boxes((89, 161, 79))
+    obs["depth"][30:50, 30:40] = 0.012  # the second box of the exemplar's colour: too low to be it
+    first, second = (slice(5, 15), slice(5, 30)), (slice(30, 50), slice(30, 40))
+    located = TargetLocator(_Rates(first), 0.5, 0.5, snap="pose").locate(obs)
+    assert located.seen and located.mask[first].all() and located.mask.sum() == located.mask[first].size
+    assert not TargetLocator(_Rates(second), 0.5, 0.5, snap="pose").locate(obs).seen
+    assert TargetLocator(_Rates(second), 0.5, 0.5, snap="probability").locate(obs).seen  # without the pose check
 
 
 def test_bad_input_is_named(tmp_path: Path):
