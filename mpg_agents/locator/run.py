@@ -155,7 +155,7 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
 """
         snaps = record.get("snap_tuning")
         if snaps is not None:
-            card += f"""The snapping was then chosen among {", ".join(f"`{c}`" for c in snaps["candidates"])} on
+            card += f"""The snapping was then tried among {", ".join(f"`{c}`" for c in snaps["candidates"])} on
 {snaps["episodes"]} other tuning episodes per object count, seeds {snaps["seed"]} on: {snaps["result"]}.
 """
     heldout = record.get("heldout")
