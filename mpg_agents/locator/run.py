@@ -143,12 +143,13 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
 {_band_rows(record["tuning_figures"])}
 """
     tuning = record.get("rule_tuning")
+    floor_note = "" if snap != "pose" or pose_floor is None else f" (least pose fit {pose_floor})"
     if rule is not None and tuning is not None:
         card += f"""
 ## Cover and search rule
 
 `{json.dumps(rule)}` (`mpg_agents.locator.cover.CoverRule`), masks snapping
-`{snap}`{"" if snap != "pose" or pose_floor is None else f" (least pose fit {pose_floor})"} (`mpg_agents.locator.locator.SNAPS`), chosen among
+`{snap}`{floor_note} (`mpg_agents.locator.locator.SNAPS`), chosen among
 {len(tuning["rules"])} candidates on {tuning["episodes"]} tuning episodes per object count
 ({", ".join(str(n) for n in tuning["objects"])} objects) of `{tuning["env"]}`, seeds {tuning["seed"]} on, by
 `benchmarks/locator_search_tuning.py`.
