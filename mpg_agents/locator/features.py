@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -99,15 +100,19 @@ class Exemplar:
     (``query_color``, ``query_depth``), their network channels ``query`` (:func:`query_input`),
     its ``descriptor`` (:func:`query_descriptor`), the matcher's ``model`` of it (colour and
     extents, :func:`~mpg_envs.perception.exemplar_match.query_model`; ``None`` when it shows no
-    object) and the ``poses`` a box of its extents shows from above
-    (:func:`~mpg_envs.perception.exemplar_match.pose_table`; ``None`` without a model)."""
+    object); :attr:`poses` is worked out when first asked for."""
 
     query_color: np.ndarray
     query_depth: np.ndarray
     query: np.ndarray
     descriptor: np.ndarray
     model: tuple[np.ndarray, np.ndarray] | None
-    poses: np.ndarray | None = None
+
+    @cached_property
+    def poses(self) -> np.ndarray | None:
+        """The footprints and heights a box of the exemplar's extents shows from above
+        (:func:`~mpg_envs.perception.exemplar_match.pose_table`; ``None`` without a model)."""
+        return None if self.model is None else pose_table(self.model[1])
 
     @classmethod
     def of(
@@ -120,8 +125,7 @@ class Exemplar:
             model: tuple[np.ndarray, np.ndarray] | None = query_model(color, depth, resolution, settings)
         except ValueError:  # nothing above the table in the exemplar: nothing can match it
             model = None
-        poses = None if model is None else pose_table(model[1])
-        return cls(color, depth, query_input(obs), query_descriptor(color, depth), model, poses)
+        return cls(color, depth, query_input(obs), query_descriptor(color, depth), model)
 
     def shows(self, obs: Mapping[str, np.ndarray]) -> bool:
         """Whether ``obs``' exemplar images are this exemplar's (equal arrays)."""
