@@ -82,10 +82,8 @@ def main() -> None:
             figures = locator_figures(masks, seen, labels, visible)
             report["cells"][f"{track} {n}"] = figures
             print(f"{track}, {n} objects: {json.dumps(figures)}", flush=True)
-            pooled["masks"].extend(masks)
-            pooled["seen"].extend(seen)
-            pooled["labels"].extend(labels)
-            pooled["visible"].extend(visible)
+            for key, values in zip(("masks", "seen", "labels", "visible"), (masks, seen, labels, visible)):
+                pooled[key].extend(values)
     report["pooled"] = locator_figures(pooled["masks"], pooled["seen"], pooled["labels"], pooled["visible"])
     report["median_decision_s"] = statistics.median(seconds)
     print(f"pooled: {json.dumps(report['pooled'])}")

@@ -146,17 +146,13 @@ def exemplar_blobs(
     scene's :func:`~mpg_envs.perception.exemplar_match.colour_gap` to its colour) spare working
     them out again."""
     settings = MatchSettings() if settings is None else settings
-    if exemplar is not None:
-        if exemplar.model is None:
-            return []
-        return find_blobs(
-            obs["color"], obs["depth"], exemplar.query_color, exemplar.query_depth, resolution, settings,
-            model=exemplar.model, gap=gap,
-        )  # fmt: skip
-    try:
-        return find_blobs(obs["color"], obs["depth"], obs["query_color"], obs["query_depth"], resolution, settings)
-    except ValueError:  # nothing above the table in the exemplar: nothing can match it
+    exemplar = Exemplar.of(obs, resolution, settings) if exemplar is None else exemplar
+    if exemplar.model is None:  # nothing above the table in the exemplar: nothing can match it
         return []
+    return find_blobs(
+        obs["color"], obs["depth"], exemplar.query_color, exemplar.query_depth, resolution, settings,
+        model=exemplar.model, gap=gap,
+    )  # fmt: skip
 
 
 def match_cues(
@@ -191,21 +187,18 @@ def match_cues(
 
 def scene_input(
     obs: Mapping[str, np.ndarray],
-    descriptor: np.ndarray | None = None,
     blobs: Sequence[Blob] | None = None,
     exemplar: Exemplar | None = None,
     gap: np.ndarray | None = None,
 ) -> np.ndarray:
     """The scene's channels (:data:`SCENE_CHANNELS` x H x W, float32) of an exemplar-mode
-    observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour (from
-    ``descriptor``, the exemplar's :func:`query_descriptor`, taken from ``exemplar`` or computed
-    when not given) and the matcher's cues (:func:`match_cues`; ``exemplar`` and ``gap`` as for
-    :func:`exemplar_blobs`)."""
-    if descriptor is None:
-        descriptor = exemplar.descriptor if exemplar is not None else query_descriptor(obs["query_color"], obs["query_depth"])
+    observation: colour in [0, 1], scaled height, distance to the exemplar's mean colour (from its
+    :func:`query_descriptor`) and the matcher's cues (:func:`match_cues`; ``exemplar``, made when
+    not given, and ``gap`` as for :func:`exemplar_blobs`)."""
+    exemplar = Exemplar.of(obs) if exemplar is None else exemplar
     color = np.asarray(obs["color"], np.float32).transpose(2, 0, 1) / 255.0
     depth = np.asarray(obs["depth"], np.float32)[None] * DEPTH_SCALE
-    distance = colour_distance(obs["color"], descriptor[3:6])[None]
+    distance = colour_distance(obs["color"], exemplar.descriptor[3:6])[None]
     cues = match_cues(obs, blobs, exemplar=exemplar, gap=gap)
     return np.concatenate([color, depth, distance, cues]).astype(np.float32)
 
@@ -218,11 +211,9 @@ def query_input(obs: Mapping[str, np.ndarray]) -> np.ndarray:
     return np.concatenate([color, depth]).astype(np.float32)
 
 
-def net_inputs(
-    obs: Mapping[str, np.ndarray], blobs: Sequence[Blob] | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def net_inputs(obs: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(scene, query, descriptor)``: the network's three inputs of one exemplar-mode
-    observation (:func:`scene_input`, :func:`query_input`, :func:`query_descriptor`), the
-    descriptor computed once."""
-    descriptor = query_descriptor(obs["query_color"], obs["query_depth"])
-    return scene_input(obs, descriptor, blobs), query_input(obs), descriptor
+    observation (:func:`scene_input`, :func:`query_input`, :func:`query_descriptor`), what is read
+    of the exemplar worked out once (:class:`Exemplar`)."""
+    exemplar = Exemplar.of(obs)
+    return scene_input(obs, exemplar=exemplar), exemplar.query, exemplar.descriptor

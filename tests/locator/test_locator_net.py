@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from mpg_agents.locator.cover import CoverRule
-from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS, Exemplar, exemplar_blobs, net_inputs
+from mpg_agents.locator.features import QUERY_CHANNELS, SCENE_CHANNELS, Exemplar, net_inputs
 from mpg_agents.locator.locator import TargetLocator, blob_weights, read_locator_header, save_locator, snap_to_blob
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
 from mpg_agents.locator.run import write_locator
@@ -92,7 +92,7 @@ def test_what_is_read_of_an_exemplar_is_kept_while_it_stays_and_locating_is_the_
         fresh = TargetLocator(net, 0.5, 0.0, snap="probability").locate(obs)
         located = kept.locate(obs)
         with torch.no_grad():  # what every decision computed in full gives
-            pixels, seen = net(*(torch.from_numpy(a)[None] for a in net_inputs(obs, exemplar_blobs(obs))))
+            pixels, seen = net(*(torch.from_numpy(a)[None] for a in net_inputs(obs)))
         assert np.array_equal(located.probability, fresh.probability) and np.array_equal(located.mask, fresh.mask)
         assert np.array_equal(located.probability, torch.sigmoid(pixels[0]).numpy())
         assert located.seen_probability == fresh.seen_probability == float(torch.sigmoid(seen[0]))
