@@ -16,6 +16,7 @@ from typing import Any
 from mpg_agents.acting.device import DEVICES
 from mpg_agents.acting.seeds import check_seed
 from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 from mpg_envs.settings_fields import check_known_fields
 
 DEMO_BUDGETS: tuple[int, ...] = (10, 100, 1000)
@@ -37,6 +38,12 @@ class BCConfig:
         color_input: the nets read the colour heightmap too. Off by default, as in the shipped
             checkpoint: each branch then runs a depth trunk beside the shared mask trunk, half the
             cost of a step (the target is named by its mask).
+        rotations_per_sample: rotations the softmax of a step runs per sample. ``16`` (every one,
+            the default) is the exact loss; fewer is a sampled softmax (the recorded rotation and
+            ``K - 1`` others drawn each step, :func:`~mpg_agents.imitation.bc_loss.sampled_rotations`),
+            about ``K / 16`` of the cost of a step.
+        quarter_turns: turn each drawn sample's heightmaps and action by 0-3 quarter turns
+            (drawn each step; :mod:`~mpg_agents.imitation.augment`), four scenes from each record.
         save_every: steps between saved run states (and ``weights.safetensors``); the last step
             always saves.
         device: ``auto`` (CUDA when available), ``cpu`` or ``cuda``.
@@ -49,6 +56,8 @@ class BCConfig:
     seed: int = 0
     variant: str = "small"
     color_input: bool = False
+    rotations_per_sample: int = NUM_ROTATIONS
+    quarter_turns: bool = False
     save_every: int = 25
     device: str = "auto"
 
@@ -58,11 +67,16 @@ class BCConfig:
         _positive_int(self.steps, "steps (--steps)")
         _positive_int(self.batch_size, "batch_size")
         _positive_int(self.save_every, "save_every")
+        _positive_int(self.rotations_per_sample, "rotations_per_sample")
+        if self.rotations_per_sample > NUM_ROTATIONS:
+            raise ValueError(f"rotations_per_sample must lie in 1..{NUM_ROTATIONS}, got {self.rotations_per_sample}")
         if isinstance(self.learning_rate, bool) or not isinstance(self.learning_rate, Real) or not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be a number > 0, got {self.learning_rate!r}")
         check_seed(self.seed, "seed (--seed)")
         if self.variant not in ("small", "large"):
             raise ValueError(f"variant must be 'small' or 'large', got {self.variant!r}")
+        if not isinstance(self.quarter_turns, bool):
+            raise ValueError(f"quarter_turns must be true or false, got {self.quarter_turns!r}")
         if not isinstance(self.color_input, bool):
             raise ValueError(f"color_input must be true or false, got {self.color_input!r}")
         if self.device not in DEVICES and not (self.device.startswith("cuda:") and self.device[5:].isdigit()):

@@ -3,11 +3,14 @@
 The nets' maps over every primitive, rotation and pixel, flattened in the env's action order
 (:func:`mpg_agents.network.mpgnet.flat_q`), are the logits of one softmax, and the loss is the
 cross-entropy of the recorded flat action (as Transporter networks train their picking and
-placing maps). Pure functions of tensors; no network, no env.
+placing maps). With :func:`sampled_rotations` the softmax runs over a sample of the rotations
+that always holds the recorded one (a sampled softmax: the normaliser leaves the other
+rotations out of that step). Pure functions of tensors and a seeded generator; no network, no env.
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 from torch import Tensor
 from torch.nn import functional as F
@@ -41,3 +44,40 @@ def top1_accuracy(logits: Tensor, actions: Tensor) -> float:
     """The share of rows whose largest logit is the recorded action (the greedy choice copies it)."""
     actions = _check(logits, actions)
     return float((logits.argmax(dim=1) == actions).float().mean())
+
+
+def sampled_rotations(
+    rng: np.random.Generator, actions: np.ndarray, per_sample: int, num_rotations: int, pixels: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The rotations one step of a sampled softmax runs, and each recorded action's class among them.
+
+    Args:
+        rng: the run's seeded generator (the draws are part of a resumable run).
+        actions: ``(B,)`` recorded flat actions over ``(primitive, rotation, pixel)`` in C order.
+        per_sample: ``K``, rotations per sample: the recorded one first, then ``K - 1`` others
+            drawn without replacement.
+        num_rotations: ``R``, the rotations of the action space.
+        pixels: ``H * W``, the pixels of one map.
+
+    Returns:
+        ``(B, K)`` rotation indices and ``(B,)`` classes into the ``(primitive, K, pixel)`` flat
+        logits of those maps: ``primitive * K * pixels + pixel`` (the recorded rotation is slot 0).
+
+    Raises:
+        ValueError: ``per_sample`` outside ``1..num_rotations``, or a negative action (a primitive
+            beyond the space is caught by :func:`imitation_loss`).
+    """
+    if not 1 <= per_sample <= num_rotations:
+        raise ValueError(f"rotations per sample must lie in 1..{num_rotations}, got {per_sample}")
+    actions = np.asarray(actions, dtype=np.int64).reshape(-1)
+    per_primitive = num_rotations * pixels
+    if actions.size and actions.min() < 0:
+        raise ValueError(f"actions must be flat action indices >= 0, got {actions.tolist()}")
+    primitive, rest = np.divmod(actions, per_primitive)
+    recorded, pixel = np.divmod(rest, pixels)
+    rotations = np.empty((actions.size, per_sample), dtype=np.int64)
+    for b, k in enumerate(recorded):
+        others = np.delete(np.arange(num_rotations), k)
+        rotations[b, 0] = k
+        rotations[b, 1:] = rng.choice(others, size=per_sample - 1, replace=False)
+    return rotations, primitive * per_sample * pixels + pixel

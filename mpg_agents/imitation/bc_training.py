@@ -4,7 +4,9 @@ One gradient step, as a CleanRL script would write it::
 
     indices = rng.choice(len(samples), batch_size)            # seeded, without replacement
     obs, actions = samples.batch(indices)
+    obs, actions = turn_planes(obs, t), turn_action(actions, t, ...)  # with quarter_turns: t drawn in 0..3
     logits = flat_q(net(obs), primitives)                      # (B, P * 16 * 224 * 224): every rotation of every branch
+    # (with rotations_per_sample K < 16: the recorded rotation and K - 1 drawn ones, (B, P * K * 224 * 224))
     loss = imitation_loss(logits, actions)                     # one softmax, cross-entropy of the recorded action
     optimizer.zero_grad(); loss.backward(); optimizer.step()   # Adam
 
@@ -36,8 +38,9 @@ import torch
 
 from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
+from mpg_agents.imitation.augment import turn_action, turn_planes
 from mpg_agents.imitation.bc_config import BCConfig, bc_net_config
-from mpg_agents.imitation.bc_loss import imitation_loss, top1_accuracy
+from mpg_agents.imitation.bc_loss import imitation_loss, sampled_rotations, top1_accuracy
 from mpg_agents.imitation.demo_samples import DemoSamples, DemoSource
 from mpg_agents.learning.run_folder import RunLock, prepare_run_folder, resume_differences
 from mpg_agents.learning.run_state import load_optimizer, save_optimizer, state_folder, write_state
@@ -115,6 +118,8 @@ def model_card(source: DemoSource, config: BCConfig, step: int, wall_s: float, l
             "steps_asked": config.steps,
             "batch_size": config.batch_size,
             "learning_rate": config.learning_rate,
+            "rotations_per_sample": config.rotations_per_sample,
+            "quarter_turns": config.quarter_turns,
             "seed": config.seed,
             "wall_time_s": round(wall_s, 1),
             "last_loss": None if math.isnan(loss) else round(loss, 6),
@@ -176,6 +181,26 @@ def draw_batch(rng: np.random.Generator, samples: int, batch_size: int) -> np.nd
     return rng.choice(samples, size=batch_size, replace=samples < batch_size)
 
 
+def step_logits(
+    net: MPGNet,
+    batch: Mapping[str, torch.Tensor],
+    actions: np.ndarray,
+    primitives: tuple[str, ...],
+    config: BCConfig,
+    rng: np.random.Generator,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """One step's flat logits and classes: over every rotation (the exact loss), or over the
+    recorded rotation and ``rotations_per_sample - 1`` drawn others (a sampled softmax)."""
+    device = next(net.parameters()).device
+    r = net.config.num_rotations
+    if config.rotations_per_sample >= r:
+        return flat_q(net(batch, primitives), primitives), torch.from_numpy(actions).to(device)
+    size = net.config.heightmap_size
+    rotations, classes = sampled_rotations(rng, actions, config.rotations_per_sample, r, size * size)
+    maps = net.maps_from(net.encode(batch, rotations=torch.from_numpy(rotations).to(device)), primitives)
+    return flat_q(maps, primitives), torch.from_numpy(classes).to(device)
+
+
 def train_bc(
     config: BCConfig,
     demos: str | Path,
@@ -220,9 +245,12 @@ def train_bc(
             while step < config.steps:
                 start = time.perf_counter()
                 obs, actions = samples.batch(draw_batch(rng, len(samples), config.batch_size))
+                if config.quarter_turns:
+                    turns = rng.integers(4, size=actions.size)
+                    obs = turn_planes(obs, turns)
+                    actions = turn_action(actions, turns, net.config.num_rotations, net.config.heightmap_size)
                 batch = {k: torch.from_numpy(v).to(device) for k, v in obs.items()}
-                logits = flat_q(net(batch, source.action_primitives), source.action_primitives)
-                target = torch.from_numpy(actions).to(device)
+                logits, target = step_logits(net, batch, actions, source.action_primitives, config, rng)
                 loss_t = imitation_loss(logits, target)
                 optimizer.zero_grad()
                 loss_t.backward()

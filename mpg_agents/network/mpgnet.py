@@ -240,8 +240,9 @@ class MPGNet(nn.Module):
         Args:
             obs: raw observation dict (see class docstring), or a :class:`PreparedObs` to rotate
                 one observation several times without normalising it again.
-            rotations: ``None`` for all ``num_rotations`` per sample (sample-major order), or one
-                rotation index per sample ``(B,)`` (the training path: only the chosen rotation).
+            rotations: ``None`` for all ``num_rotations`` per sample (sample-major order), one
+                rotation index per sample ``(B,)`` (the training path: only the chosen rotation),
+                or ``(B, K)``: each sample's ``K`` listed rotations (behaviour cloning's sampled ones).
         """
         prep = obs if isinstance(obs, PreparedObs) else self.prepare(obs)
         b = prep.planes.shape[0]
@@ -251,10 +252,12 @@ class MPGNet(nn.Module):
             rot = torch.arange(r, device=device).repeat(b)
             planes = self._rotate_all(prep.planes)
         else:
-            rot = torch.as_tensor(rotations, device=device).long().reshape(-1)
-            if rot.numel() != b or (rot < 0).any() or (rot >= r).any():
-                raise ValueError(f"rotations must be {b} indices in 0..{r - 1}, got {rotations}")
-            planes = self._rotate(prep.planes, rot)
+            asked = torch.as_tensor(rotations, device=device).long()
+            shaped = asked.dim() in (1, 2) and asked.shape[0] == b and asked.numel() > 0
+            if not shaped or not 0 <= asked.min() <= asked.max() < r:
+                raise ValueError(f"rotations must be ({b},) or ({b}, K) indices in 0..{r - 1}, got {asked.tolist()}")
+            rot = asked.reshape(-1)  # sample-major: each sample's K copies side by side
+            planes = self._rotate(prep.planes.repeat_interleave(rot.numel() // b, dim=0), rot)
         size = trunk_chunk(self.config, self.training, planes)
         return EncodedObs(
             planes=planes,
@@ -308,9 +311,10 @@ class MPGNet(nn.Module):
         return self.maps_from(enc, primitives)
 
     def maps_from(self, enc: EncodedObs, primitives: Sequence[str]) -> dict[str, Tensor]:
-        """Q maps ``{primitive: (B, R, H, W)}`` from an all-rotation :class:`EncodedObs`."""
-        r, size = self.config.num_rotations, self.config.heightmap_size
-        return {p: self.branch_q(enc, p).view(enc.batch_size, r, size, size) for p in primitives}
+        """Q maps ``{primitive: (B, K, H, W)}`` from an :class:`EncodedObs` of ``K`` rotations per
+        sample (``K = num_rotations`` when encoded with all of them)."""
+        size = self.config.heightmap_size
+        return {p: self.branch_q(enc, p).view(enc.batch_size, -1, size, size) for p in primitives}
 
     def chosen_q(
         self, obs: Mapping[str, Any], primitives: Sequence[str], action_primitive: Tensor, rotation: Tensor
@@ -357,7 +361,7 @@ class MPGNet(nn.Module):
 
 def flat_q(maps: Mapping[str, Tensor], primitives: Sequence[str]) -> Tensor:
     """Flat Q ``(B, P * R * H * W)`` in an env's action order (C order over primitive,
-    rotation, row, col, primitives as listed), from ``{primitive: (B, R, H, W)}`` maps."""
+    rotation, row, col, primitives as listed), from ``{primitive: (B, R or K, H, W)}`` maps."""
     missing = [p for p in primitives if p not in maps]
     if missing:
         raise KeyError(f"no Q maps for {missing}; have {sorted(maps)}")

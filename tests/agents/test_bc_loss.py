@@ -55,6 +55,9 @@ def test_settings_are_checked_by_name_and_range():
         ({"seed": -1}, "seed \\(--seed\\) must be >= 0"),
         ({"variant": "tiny"}, "variant must be 'small' or 'large'"),
         ({"color_input": "yes"}, "color_input must be true or false"),
+        ({"quarter_turns": 1}, "quarter_turns must be true or false"),
+        ({"rotations_per_sample": 0}, "rotations_per_sample must be an integer >= 1"),
+        ({"rotations_per_sample": 17}, r"rotations_per_sample must lie in 1..16"),
         ({"device": "tpu"}, "device must be one of"),
         ({"epochs": 3}, r"unknown BCConfig fields \['epochs'\]; valid: \[.*'batch_size'"),
     ]
@@ -62,7 +65,16 @@ def test_settings_are_checked_by_name_and_range():
         with pytest.raises(ValueError, match=says):
             BCConfig.from_dict(settings)
     # What a resume must share leaves out where it runs, how often it saves and how long.
-    assert set(BCConfig().run_record()) == {"demo_episodes", "batch_size", "learning_rate", "seed", "variant", "color_input"}
+    assert set(BCConfig().run_record()) == {
+        "demo_episodes",
+        "batch_size",
+        "learning_rate",
+        "seed",
+        "variant",
+        "color_input",
+        "rotations_per_sample",
+        "quarter_turns",
+    }
 
 
 def test_the_untrained_net_gives_every_action_the_same_probability():
@@ -78,3 +90,25 @@ def test_the_untrained_net_gives_every_action_the_same_probability():
     logits = flat_q(maps, ("grasp",))
     assert logits.shape == (1, 16 * 224 * 224)
     assert imitation_loss(logits, torch.tensor([12345])).item() == pytest.approx(math.log(16 * 224 * 224), abs=1e-5)
+
+
+def test_the_maps_of_listed_rotations_are_those_of_the_all_rotation_pass():
+    """``encode(obs, rotations=(B, K))`` runs just the listed rotations of each sample, in order; their
+    maps are the all-rotation pass's at those rotations (up to float rounding of the resampling)."""
+    torch.manual_seed(0)
+    net = MPGNet(bc_net_config(BCConfig(), ("push", "grasp")))
+    for p in net.parameters():  # a head that is not zero, so the maps differ by rotation
+        p.data.add_(0.05 * torch.randn_like(p))
+    obs = {"color": torch.zeros(2, 224, 224, 3, dtype=torch.uint8), "depth": torch.rand(2, 224, 224) * 0.05}
+    obs["mask"] = (obs["depth"] > 0.04).to(torch.uint8)
+    net.eval()
+    listed = torch.tensor([[5, 0, 12], [3, 15, 8]])
+    with torch.no_grad():
+        every = net(obs)
+        some = net.maps_from(net.encode(obs, rotations=listed), ("push", "grasp"))
+    for name in ("push", "grasp"):
+        assert some[name].shape == (2, 3, 224, 224)
+        for b in range(2):
+            assert torch.allclose(some[name][b], every[name][b, listed[b]], atol=1e-4)
+    with pytest.raises(ValueError, match=r"rotations must be \(2,\) or \(2, K\) indices in 0..15"):
+        net.encode(obs, rotations=torch.tensor([[0, 16], [1, 2]]))

@@ -104,8 +104,10 @@ def test_a_few_steps_lower_the_loss_and_the_checkpoint_plays_an_episode(demos, t
     assert all(np.array_equal(before[k].numpy(), after[k].numpy()) for k in before)
 
 
-def test_a_stopped_run_resumes_as_if_it_had_not_stopped(demos, tmp_path):
-    settings = {"batch_size": 2, "save_every": 1, "learning_rate": 1e-3, "seed": 3}
+@pytest.mark.parametrize("draws", [{}, {"rotations_per_sample": 3, "quarter_turns": True}], ids=["exact", "sampled"])
+def test_a_stopped_run_resumes_as_if_it_had_not_stopped(demos, tmp_path, draws):
+    """Also with a sampled softmax and quarter turns: their draws come from the run's saved generator."""
+    settings = {"batch_size": 2, "save_every": 1, "learning_rate": 1e-3, "seed": 3, **draws}
     straight = tmp_path / "straight"
     train_bc(BCConfig(steps=3, **settings), demos, straight)
     stopped = tmp_path / "stopped"
