@@ -35,13 +35,26 @@ CHECKPOINT_FORMAT = "mpgnet-safetensors-v1"
 
 
 def checkpoint_metadata(
-    net: MPGNet, q_star: float | None = UNCALIBRATED, extra: Mapping[str, Any] | None = None
+    net: MPGNet,
+    q_star: float | None = UNCALIBRATED,
+    extra: Mapping[str, Any] | None = None,
+    config: MPGNetConfig | None = None,
 ) -> dict[str, str]:
     """The safetensors metadata header: one JSON document under key ``"mpgnet"``; its
     ``"q_star"`` is where a checkpoint stores Q*_g (:mod:`mpg_agents.acting.grasp_threshold`), its
     ``"package_version"`` the version of the package that wrote it and ``"mujoco_version"`` the
     MuJoCo it ran on (a net trained on one MuJoCo major version acts on scenes of another; the
-    env id, with its version, a training run writes under ``extra``)."""
+    env id, with its version, a training run writes under ``extra``). ``config``: the configuration
+    the checkpoint acts with, when it differs from ``net``'s in :data:`SETTINGS_WITHOUT_WEIGHTS` alone.
+
+    Raises:
+        ValueError: ``config`` differs from ``net``'s in a setting that has weights (named)."""
+    if config is not None:
+        theirs, mine = config.to_dict(), net.config.to_dict()
+        changed = {k for k in set(theirs) | set(mine) if theirs.get(k) != mine.get(k)}
+        weighty = sorted(changed - set(SETTINGS_WITHOUT_WEIGHTS))
+        if weighty:
+            raise ValueError(f"the checkpoint config differs from the net in {weighty}; only {SETTINGS_WITHOUT_WEIGHTS} may")
     header = {
         "format": CHECKPOINT_FORMAT,
         "package_version": __version__,
@@ -49,7 +62,7 @@ def checkpoint_metadata(
         "variant": net.config.variant,
         "primitives": list(net.primitives),
         "q_star": as_record(q_star),
-        "config": net.config.to_dict(),
+        "config": (net.config if config is None else config).to_dict(),
     }
     if extra:
         header["extra"] = dict(extra)
@@ -57,20 +70,25 @@ def checkpoint_metadata(
 
 
 def save_mpgnet(
-    net: MPGNet, path: str | Path, q_star: float | None = UNCALIBRATED, extra: Mapping[str, Any] | None = None
+    net: MPGNet,
+    path: str | Path,
+    q_star: float | None = UNCALIBRATED,
+    extra: Mapping[str, Any] | None = None,
+    config: MPGNetConfig | None = None,
 ) -> None:
     """Write ``net``'s weights (and BN statistics) to a safetensors file with a JSON header,
     whole or not at all (:func:`mpg_envs.files.write_bytes_whole`): a process killed meanwhile,
-    or a full disk, leaves the old file whole.
+    or a full disk, leaves the old file whole. ``config``: see :func:`checkpoint_metadata`.
 
     Raises:
+        ValueError: ``config`` changes a setting with weights.
         mpg_envs.files.WriteFailed: the file cannot be written (one line naming it and why).
     """
     state = {k: v.detach().cpu().contiguous() for k, v in net.state_dict().items()}
     check_finite(state, f"the MPGNet to be written to {path}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_bytes_whole(path, save(state, metadata=checkpoint_metadata(net, q_star, extra)))
+    write_bytes_whole(path, save(state, metadata=checkpoint_metadata(net, q_star, extra, config)))
 
 
 def read_checkpoint_header(path: str | Path) -> dict[str, Any]:

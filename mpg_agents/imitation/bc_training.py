@@ -39,7 +39,7 @@ import torch
 from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
 from mpg_agents.imitation.augment import turn_action, turn_planes
-from mpg_agents.imitation.bc_config import BCConfig, bc_net_config
+from mpg_agents.imitation.bc_config import BCConfig, bc_acting_config, bc_net_config
 from mpg_agents.imitation.bc_loss import imitation_loss, sampled_rotations, top1_accuracy
 from mpg_agents.imitation.demo_samples import DemoSamples, DemoSource
 from mpg_agents.learning.run_folder import RunLock, prepare_run_folder, resume_differences
@@ -120,6 +120,7 @@ def model_card(source: DemoSource, config: BCConfig, step: int, wall_s: float, l
             "learning_rate": config.learning_rate,
             "rotations_per_sample": config.rotations_per_sample,
             "quarter_turns": config.quarter_turns,
+            "grasp_fingers": config.grasp_fingers,
             "seed": config.seed,
             "wall_time_s": round(wall_s, 1),
             "last_loss": None if math.isnan(loss) else round(loss, 6),
@@ -227,6 +228,7 @@ def train_bc(
         torch.manual_seed(config.seed)
         torch.set_flush_denormal(True)
         net = MPGNet(bc_net_config(config, source.action_primitives)).to(device)
+        acting = bc_acting_config(config, net.config)  # what the saved policy acts with
         optimizer = torch.optim.Adam(net.parameters(), lr=config.learning_rate)
         rng = np.random.default_rng(config.seed)
         record = run_record(config, source)
@@ -265,10 +267,10 @@ def train_bc(
                     on_step(done)
                 if step % config.save_every == 0 or step == config.steps:
                     log.sync()
-                    save_mpgnet(net, folder / WEIGHTS, extra=model_card(source, config, step, wall_s, loss))
+                    save_mpgnet(net, folder / WEIGHTS, extra=model_card(source, config, step, wall_s, loss), config=acting)
                     save_bc_state(folder, net, optimizer, rng, {"step": step, "wall_s": wall_s, "loss": loss}, record)
             if not (folder / WEIGHTS).is_file():  # a finished run resumed with its own steps
-                save_mpgnet(net, folder / WEIGHTS, extra=model_card(source, config, step, wall_s, loss))
+                save_mpgnet(net, folder / WEIGHTS, extra=model_card(source, config, step, wall_s, loss), config=acting)
         finally:
             log.close()
     finally:

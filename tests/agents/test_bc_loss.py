@@ -7,9 +7,11 @@ import math
 import pytest
 import torch
 
-from mpg_agents.imitation.bc_config import BCConfig, bc_net_config
+from mpg_agents.acting.weights import read_checkpoint_header, save_mpgnet
+from mpg_agents.imitation.bc_config import BCConfig, bc_acting_config, bc_net_config
 from mpg_agents.imitation.bc_loss import imitation_loss, top1_accuracy
 from mpg_agents.network.mpgnet import MPGNet, flat_q
+from mpg_agents.network.mpgnet_config import MPGNetConfig
 
 
 def test_the_loss_is_the_cross_entropy_of_the_recorded_action_computed_by_hand():
@@ -56,6 +58,7 @@ def test_settings_are_checked_by_name_and_range():
         ({"variant": "tiny"}, "variant must be 'small' or 'large'"),
         ({"color_input": "yes"}, "color_input must be true or false"),
         ({"quarter_turns": 1}, "quarter_turns must be true or false"),
+        ({"grasp_fingers": "free"}, r"grasp_fingers must be one of \('any', 'clear'\)"),
         ({"rotations_per_sample": 0}, "rotations_per_sample must be an integer >= 1"),
         ({"rotations_per_sample": 17}, r"rotations_per_sample must lie in 1..16"),
         ({"device": "tpu"}, "device must be one of"),
@@ -112,3 +115,18 @@ def test_the_maps_of_listed_rotations_are_those_of_the_all_rotation_pass():
             assert torch.allclose(some[name][b], every[name][b, listed[b]], atol=1e-4)
     with pytest.raises(ValueError, match=r"rotations must be \(2,\) or \(2, K\) indices in 0..15"):
         net.encode(obs, rotations=torch.tensor([[0, 16], [1, 2]]))
+
+
+def test_the_checkpoint_acts_with_its_finger_setting_and_nothing_with_weights_may_differ(tmp_path):
+    net = MPGNet(bc_net_config(BCConfig(), ("grasp",)))
+    assert net.config.grasp_fingers == "any"  # training: every action is a class
+    acting = bc_acting_config(BCConfig(), net.config)
+    assert acting.grasp_fingers == "clear"
+    assert bc_acting_config(BCConfig(grasp_fingers="any"), net.config).grasp_fingers == "any"
+    save_mpgnet(net, tmp_path / "w.safetensors", config=acting)
+    header = read_checkpoint_header(tmp_path / "w.safetensors")
+    assert header["config"]["grasp_fingers"] == "clear" and header["config"]["color_input"] is False
+    other = MPGNetConfig.from_checkpoint(net.config.to_dict(), color_input=True)
+    with pytest.raises(ValueError, match=r"differs from the net in \['color_input'\]"):
+        save_mpgnet(net, tmp_path / "x.safetensors", config=other)
+    assert not (tmp_path / "x.safetensors").exists()
