@@ -46,12 +46,24 @@ from mpg_agents.learning.run_folder import RunLock, prepare_run_folder, resume_d
 from mpg_agents.learning.run_state import load_optimizer, save_optimizer, state_folder, write_state
 from mpg_agents.network.mpgnet import MPGNet, flat_q
 from mpg_envs.files import write_text_whole
+from mpg_envs.grid.workspace import NUM_ROTATIONS
 
 WEIGHTS = "weights.safetensors"
 PROGRESS = "bc_progress.csv"
 PROGRESS_COLUMNS = ("step", "loss", "accuracy", "step_s", "wall_s")
 BASELINE = "bc"
 LOSS_NAME = "cross-entropy of the recorded flat action under one softmax over every primitive, rotation and pixel"
+SAMPLED_LOSS_NAME = (
+    "cross-entropy of the recorded flat action under one softmax over every primitive and pixel of the recorded "
+    "rotation and {others} others drawn each step (a sampled softmax)"
+)
+
+
+def loss_name(config: BCConfig, num_rotations: int) -> str:
+    """What the loss of ``config``'s steps is, in words (the model card's)."""
+    if config.rotations_per_sample >= num_rotations:
+        return LOSS_NAME
+    return SAMPLED_LOSS_NAME.format(others=config.rotations_per_sample - 1)
 
 
 @dataclass(frozen=True)
@@ -124,7 +136,7 @@ def model_card(source: DemoSource, config: BCConfig, step: int, wall_s: float, l
             "seed": config.seed,
             "wall_time_s": round(wall_s, 1),
             "last_loss": None if math.isnan(loss) else round(loss, 6),
-            "loss": LOSS_NAME,
+            "loss": loss_name(config, NUM_ROTATIONS),
         },
     }
 
