@@ -97,6 +97,9 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
         ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=track)
     ax.axhline(100, color="grey", linestyle="--", linewidth=1, label="the oracle it copies")
     ax.set_xscale("log")
+    ticks = sorted({r["demos"] for r in rows})
+    ax.set_xticks(ticks, [str(t) for t in ticks])
+    ax.minorticks_off()
     ax.set_xlabel("demonstrations (oracle episodes)")
     ax.set_ylabel("held-out success (%)")
     ax.set_ylim(0, 105)
@@ -124,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     if args.plot is not None:
         plot(rows, args.plot)
-        print(f"plot: {args.plot}")
+        print(f"plot: {args.plot}", file=sys.stderr)
     return 0
 
 
