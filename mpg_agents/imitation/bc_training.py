@@ -33,9 +33,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import torch
 
+import mpg_envs  # noqa: F401  (registers the env ids a dataset names)
 from mpg_agents.acting.device import resolve_device
 from mpg_agents.acting.weights import load_mpgnet_weights, save_mpgnet
 from mpg_agents.imitation.augment import turn_action, turn_planes
@@ -47,6 +49,7 @@ from mpg_agents.learning.run_state import load_optimizer, save_optimizer, state_
 from mpg_agents.network.mpgnet import MPGNet, flat_q
 from mpg_envs.files import write_text_whole
 from mpg_envs.grid.workspace import NUM_ROTATIONS
+from mpg_envs.simulation.objects import check_not_held_out
 
 WEIGHTS = "weights.safetensors"
 PROGRESS = "bc_progress.csv"
@@ -194,6 +197,24 @@ def draw_batch(rng: np.random.Generator, samples: int, batch_size: int) -> np.nd
     return rng.choice(samples, size=batch_size, replace=samples < batch_size)
 
 
+def refuse_held_out(source: DemoSource) -> None:
+    """Refuse demonstrations recorded on objects held out for testing (the unseen-object track), as
+    ``mpg-train`` refuses to train on them: the dataset's env is built from its id and keywords and
+    its object set checked (:func:`~mpg_envs.simulation.objects.check_not_held_out`).
+
+    Raises:
+        mpg_envs.simulation.objects.HeldOutObjectsError: the dataset's objects are held out.
+    """
+    what = f"behaviour cloning on demonstrations recorded on {source.env_id}"
+    kwargs = dict(source.env_kwargs)
+    check_not_held_out(kwargs.get("object_set", gym.spec(source.env_id).kwargs.get("object_set", "blocks")), what=what)
+    env = gym.make(source.env_id, **kwargs)
+    try:
+        check_not_held_out("custom", env.unwrapped.object_set, what)  # type: ignore[attr-defined]  # an MPG env
+    finally:
+        env.close()
+
+
 def step_logits(
     net: MPGNet,
     batch: Mapping[str, torch.Tensor],
@@ -229,10 +250,13 @@ def train_bc(
     Raises:
         ValueError: a bad dataset or number of demonstrations (:class:`DemoSamples`), a run folder
             that holds something else or another run (:func:`check_bc_resume`).
+        mpg_envs.simulation.objects.HeldOutObjectsError: demonstrations of objects held out for
+            testing (:func:`refuse_held_out`).
         mpg_agents.learning.run_folder.RunFolderBusy: another process trains in ``out``.
     """
     samples = DemoSamples(demos, config.demo_episodes, color=config.color_input)
     source = samples.source
+    refuse_held_out(source)  # before the run folder exists: nothing is written
     device = resolve_device(config.device)
     folder = prepare_run_folder(out)
     lock = RunLock(folder)

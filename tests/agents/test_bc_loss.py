@@ -10,8 +10,11 @@ import torch
 from mpg_agents.acting.weights import read_checkpoint_header, save_mpgnet
 from mpg_agents.imitation.bc_config import BCConfig, bc_acting_config, bc_net_config
 from mpg_agents.imitation.bc_loss import imitation_loss, top1_accuracy
+from mpg_agents.imitation.bc_training import refuse_held_out
+from mpg_agents.imitation.demo_samples import DemoSource
 from mpg_agents.network.mpgnet import MPGNet, flat_q
 from mpg_agents.network.mpgnet_config import MPGNetConfig
+from mpg_envs.simulation.objects import HeldOutObjectsError
 
 
 def test_the_loss_is_the_cross_entropy_of_the_recorded_action_computed_by_hand():
@@ -130,3 +133,25 @@ def test_the_checkpoint_acts_with_its_finger_setting_and_nothing_with_weights_ma
     with pytest.raises(ValueError, match=r"differs from the net in \['color_input'\]"):
         save_mpgnet(net, tmp_path / "x.safetensors", config=other)
     assert not (tmp_path / "x.safetensors").exists()
+
+
+def test_demonstrations_of_objects_held_out_for_testing_are_refused():
+    """As mpg-train refuses to train on the unseen-object track, behaviour cloning refuses its demonstrations."""
+    source = DemoSource(
+        folder="d",
+        dataset_id="d-v0",
+        digest="0",
+        env_id="MPG-OccludedHardNovel-v0",
+        env_kwargs={"num_objects": 15},
+        policy="oracle",
+        action_primitives=("move", "push", "grasp"),
+        episodes=1,
+        total_episodes=1,
+        samples=1,
+    )
+    with pytest.raises(HeldOutObjectsError, match="behaviour cloning on demonstrations recorded on MPG-OccludedHardNovel-v0"):
+        refuse_held_out(source)
+    on_stage2 = {**source.to_dict(), "env_id": "MPG-Stage2-v0", "env_kwargs": {"object_set": "random_urdfs_test"}}
+    with pytest.raises(HeldOutObjectsError, match="held out for testing"):
+        refuse_held_out(DemoSource(**on_stage2))
+    refuse_held_out(DemoSource(**{**on_stage2, "env_kwargs": {}}))  # the blocks: allowed
