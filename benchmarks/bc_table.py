@@ -5,8 +5,10 @@
 Reads every run folder ``RESULTS/<track>/bc<N>/`` holding ``weights.safetensors`` (an
 ``mpg-train --baseline bc`` checkpoint: its header names the demonstrations, the settings, the
 steps and the wall time of training), ``bc_progress.csv`` (the seconds of each step) and
-``heldout.json`` (``mpg-eval --json`` of that checkpoint on the track's held-out seeds). Prints a
-Markdown table, one row per track and number of demonstrations, and with ``--plot`` draws
+``heldout.json`` (``mpg-eval --json`` of that checkpoint on its own track's held-out seeds); each
+further ``heldout_<name>.json`` is the same policy on another track's held-out seeds (the
+unseen-object track, which no training may use). Prints a Markdown table, one row per evaluated
+track and number of demonstrations, and with ``--plot`` draws
 held-out success against demonstrations (log scale, 95% intervals as bars). Nothing is run: the
 runs and evaluations are the commands the Benchmark page gives.
 """
@@ -29,51 +31,56 @@ PROGRESS = "bc_progress.csv"
 
 
 def read_runs(results: Path) -> list[dict[str, Any]]:
-    """One row per run folder under ``results`` that holds both files, ordered by track and demos."""
+    """One row per evaluation of each run folder under ``results``, ordered by track and demos."""
     rows = []
     for weights in sorted(results.glob(f"*/bc*/{WEIGHTS}")):
         folder = weights.parent
         if not (folder / EVAL).is_file():
             raise FileNotFoundError(f"{folder} has {WEIGHTS} but no {EVAL}: evaluate it with mpg-eval --json")
         card = read_checkpoint_header(weights)["extra"]["imitation"]
-        ev = json.loads((folder / EVAL).read_text())
         with open(folder / PROGRESS, newline="") as f:
             step_s = [float(row["step_s"]) for row in csv.DictReader(f)]
-        rows.append(
-            {
-                "track": f"{ev['env_id']} ({ev['num_objects']} objects)",
-                "demos": int(card["demo_episodes"]),
-                "samples": int(card["dataset"]["samples"]),
-                "steps": int(card["steps"]),
-                "wall_min": float(card["wall_time_s"]) / 60,
-                "step_s": statistics.median(step_s) if step_s else float("nan"),
-                "rotations": card.get("rotations_per_sample", 16),
-                "turns": bool(card.get("quarter_turns", False)),
-                "episodes": int(ev["episodes"]),
-                "seed": int(ev["seed"]),
-                "success": float(ev["task_success_rate"]),
-                "interval": ev["success_interval"],
-                "motions": float(ev["average_motions"]),
-                "mispicks": float(ev["mispicks_per_episode"]),
-                "mujoco": ev.get("versions", {}).get("mujoco", "3.x"),
-            }
-        )
-    return sorted(rows, key=lambda r: (r["track"], r["demos"]))
+        for evaluation in sorted(folder.glob("heldout*.json")):
+            rows.append(_row(card, json.loads(evaluation.read_text()), step_s))
+    return sorted(rows, key=lambda r: (r["track"], r["trained_on"], r["demos"]))
+
+
+def _row(card: dict[str, Any], ev: dict[str, Any], step_s: list[float]) -> dict[str, Any]:
+    dataset = card["dataset"]
+    objects = dict(dataset.get("env_kwargs") or {}).get("num_objects")
+    return {
+        "track": f"{ev['env_id']} ({ev['num_objects']} objects)",
+        "trained_on": dataset["env_id"] + (f" ({objects} objects)" if objects else ""),
+        "demos": int(card["demo_episodes"]),
+        "samples": int(card["dataset"]["samples"]),
+        "steps": int(card["steps"]),
+        "wall_min": float(card["wall_time_s"]) / 60,
+        "step_s": statistics.median(step_s) if step_s else float("nan"),
+        "rotations": card.get("rotations_per_sample", 16),
+        "turns": bool(card.get("quarter_turns", False)),
+        "episodes": int(ev["episodes"]),
+        "seed": int(ev["seed"]),
+        "success": float(ev["task_success_rate"]),
+        "interval": ev["success_interval"],
+        "motions": float(ev["average_motions"]),
+        "mispicks": float(ev["mispicks_per_episode"]),
+        "mujoco": ev.get("versions", {}).get("mujoco", "3.x"),
+    }
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
     """The table the Benchmark page shows."""
     lines = [
-        "| track | demonstrations (samples) | steps | s per step (median) | training (min) | held-out success [95%] "
-        "| motions | mis-picks / episode |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| track | demonstrations of | demonstrations (samples) | steps | s per step (median) | training (min) "
+        "| held-out success [95%] | motions | mis-picks / episode |",
+        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in rows:
         lo, hi = r["interval"]
+        run = f"{r['demos']} ({r['samples']}) | {r['steps']} | {r['step_s']:.2f} | {r['wall_min']:.0f}"
         lines.append(
-            f"| {r['track']} | {r['demos']} ({r['samples']}) | {r['steps']} | {r['step_s']:.2f} | {r['wall_min']:.0f} | "
-            f"{100 * r['success']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] of {r['episodes']} | {r['motions']:.2f} | "
-            f"{r['mispicks']:.2f} |"
+            f"| {r['track']} | {r['trained_on']} | {run} | {100 * r['success']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] "
+            f"of {r['episodes']} | {r['motions']:.2f} | {r['mispicks']:.2f} |"
         )
     return "\n".join(lines)
 
@@ -86,15 +93,17 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
     fig, ax = plt.subplots(figsize=(5, 3.4))
-    for track in sorted({r["track"] for r in rows}):
-        mine = [r for r in rows if r["track"] == track]
+    for track, trained_on in sorted({(r["track"], r["trained_on"]) for r in rows}):
+        mine = [r for r in rows if r["track"] == track and r["trained_on"] == trained_on]
         x = [r["demos"] for r in mine]
         y = [100 * r["success"] for r in mine]
         err = [
             [100 * (r["success"] - r["interval"][0]) for r in mine],
             [100 * (r["interval"][1] - r["success"]) for r in mine],
         ]
-        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=track)
+        own = track.split(" ")[0] == trained_on.split(" ")[0]
+        label = track if own else f"{track}, copying {trained_on.split(' ')[0]}"
+        ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=label)
     ax.axhline(100, color="grey", linestyle="--", linewidth=1, label="the oracle it copies")
     ax.set_xscale("log")
     ticks = sorted({r["demos"] for r in rows})
