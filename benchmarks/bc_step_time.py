@@ -53,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     batch = {k: torch.from_numpy(v) for k, v in obs.items()}
     with torch.no_grad():
         exact = imitation_loss(flat_q(net(batch, primitives), primitives), torch.from_numpy(actions))
-        rotations, classes = sampled_rotations(rng, actions, 16, 16, 224 * 224)
+        r, size = net.config.num_rotations, net.config.heightmap_size
+        rotations, classes = sampled_rotations(rng, actions, r, r, size * size)
         maps = net.maps_from(net.encode(batch, rotations=torch.from_numpy(rotations)), primitives)
         listed = imitation_loss(flat_q(maps, primitives), torch.from_numpy(classes))
     print(f"check: exact loss {float(exact):.5f}, every rotation listed {float(listed):.5f}")

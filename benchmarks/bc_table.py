@@ -52,7 +52,7 @@ def _row(card: dict[str, Any], ev: dict[str, Any], step_s: list[float]) -> dict[
         "track": f"{ev['env_id']} ({ev['num_objects']} objects)",
         "trained_on": dataset["env_id"] + (f" ({objects} objects)" if objects else ""),
         "demos": int(card["demo_episodes"]),
-        "samples": int(card["dataset"]["samples"]),
+        "samples": int(dataset["samples"]),
         "steps": int(card["steps"]),
         "wall_min": float(card["wall_time_s"]) / 60,
         "step_s": statistics.median(step_s) if step_s else float("nan"),

@@ -256,8 +256,8 @@ class MPGNet(nn.Module):
             shaped = asked.dim() in (1, 2) and asked.shape[0] == b and asked.numel() > 0
             if not shaped or not 0 <= asked.min() <= asked.max() < r:
                 raise ValueError(f"rotations must be ({b},) or ({b}, K) indices in 0..{r - 1}, got {asked.tolist()}")
-            rot = asked.reshape(-1)  # sample-major: each sample's K copies side by side
-            planes = self._rotate(prep.planes.repeat_interleave(rot.numel() // b, dim=0), rot)
+            rot = asked.reshape(-1)  # sample-major: each sample's K copies side by side (one: no copy of the planes)
+            planes = self._rotate(prep.planes.repeat_interleave(asked.shape[1], 0) if asked.dim() == 2 else prep.planes, rot)
         size = trunk_chunk(self.config, self.training, planes)
         return EncodedObs(
             planes=planes,
