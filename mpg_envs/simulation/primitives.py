@@ -11,6 +11,7 @@ every motion where contact can happen is simulated. A primitive's motion is look
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ import numpy as np
 from mpg_envs.grid.primitive_specs import GRASP, MOVE, PUSH, primitive_spec
 from mpg_envs.grid.workspace import check_pixel, check_rotation, pixel_to_world, rotation_angle
 from mpg_envs.simulation.free_space import clutter_height, disc_offsets, free_spot
+from mpg_envs.simulation.motion_memo import MotionMemo
 from mpg_envs.simulation.motions import PrimitiveResult, motion_of, register_motion
 from mpg_envs.simulation.robot import ArmIK, UnreachablePoseError, gripper_states
 from mpg_envs.simulation.world import World, WorldCheckpoint
@@ -66,10 +68,18 @@ or the arm could not reach the pose (nothing moved; see :meth:`PrimitiveExecutor
 
 
 class PrimitiveExecutor:
-    """Runs a primitive's motion (move, push, grasp, or one registered later) on a :class:`World`."""
+    """Runs a primitive's motion (move, push, grasp, or one registered later) on a :class:`World`.
 
-    def __init__(self, world: World, config: PrimitiveConfig = PrimitiveConfig(), ik: ArmIK | None = None):
+    With ``memo`` (the default) a motion asked again from a state it was already run from
+    is not simulated again: its end state and result are restored from a
+    :class:`~mpg_envs.simulation.motion_memo.MotionMemo` (the same bits; a registered motion
+    must, like the built-in ones, depend on nothing but the world and its arguments).
+    Whoever resets ``world`` clears ``memo``.
+    """
+
+    def __init__(self, world: World, config: PrimitiveConfig = PrimitiveConfig(), ik: ArmIK | None = None, memo: bool = True):
         self.world = world
+        self.memo: MotionMemo | None = MotionMemo() if memo else None
         self.config = config
         self.ik = ik if ik is not None else ArmIK(world.robot.config)
         self.gripper = gripper_states(world.robot.config)
@@ -101,6 +111,15 @@ class PrimitiveExecutor:
             raise ValueError(f"depth heightmap must have shape {expected}, got {depth.shape}")
         world = self.world
         start = time.perf_counter()
+        key = None if self.memo is None else self.memo.key(world, primitive, rotation, row, col, depth, target)
+        remembered = None if key is None or self.memo is None else self.memo.recall(key)
+        if remembered is not None:
+            # Run from this very state before: its end state, restored, is the one it would reach.
+            seconds = world.counter.seconds
+            known, end = remembered
+            end.restore()
+            world.counter.seconds = seconds  # no physics ran now
+            return dataclasses.replace(known, physics_seconds=0.0, ik_solves=0, seconds=time.perf_counter() - start)
         steps0, secs0, solves0 = world.counter.steps, world.counter.seconds, self.ik.solves
         target_pose = world.object_pose(target) if target is not None and world.active[target] else None
         checkpoint = WorldCheckpoint(world)
@@ -117,6 +136,8 @@ class PrimitiveExecutor:
         result.physics_seconds = world.counter.seconds - secs0
         result.ik_solves = self.ik.solves - solves0
         result.seconds = time.perf_counter() - start
+        if key is not None and self.memo is not None:
+            self.memo.remember(key, result, WorldCheckpoint(world))
         return result
 
     def _unreachable(self, primitive: str, rotation: int, row: int, col: int) -> PrimitiveResult:

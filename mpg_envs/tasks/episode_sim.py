@@ -118,6 +118,8 @@ class EpisodeSim:
         reuse = self.obs_mode == "raycast" and self._assets is not None and _same_assets(assets, self._assets)
         if reuse and self.world is not None:
             self.world.reset()
+            if self.executor is not None and self.executor.memo is not None:
+                self.executor.memo.clear()  # states of the last episode's world
             return self.world
         hook = None
         if self.obs_mode == "camera":
