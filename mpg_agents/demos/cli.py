@@ -3,7 +3,9 @@
 Bad input (an unknown env id or policy, a missing checkpoint, an output folder that is not new,
 a malformed dataset id, Minari not installed) ends the command before any episode with exit
 status 2 and one line on stderr. An episode that raises ends the recording with exit status 1;
-the episodes before it stay in the folder as a complete dataset of that many episodes.
+the episodes before it stay in the folder as a complete dataset of that many episodes. The same
+command with ``--resume`` continues a recording that stopped (killed, interrupted or failed)
+after its last whole episode (:mod:`mpg_agents.demos.resume`), to the same data.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from mpg_agents.demos.dataset import (
     default_dataset_id,
 )
 from mpg_agents.demos.recording import DemoJob, record_episodes
+from mpg_agents.demos.resume import resume_writer
 from mpg_agents.evaluation.env_options import parse_env_options
 from mpg_agents.evaluation.policy_zoo import BUILTIN, is_builtin
 
@@ -47,6 +50,11 @@ def _parser() -> argparse.ArgumentParser:
         help="episode i is reset with seed + i (held-out test seeds: 500000 on; tuning: 700000 on)",
     )
     parser.add_argument("--out", required=True, help="a new or empty folder for the dataset (Minari's data/ inside)")
+    parser.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the dataset in --out that this same command started and did not finish (whole episodes kept)",
+    )
     parser.add_argument("--num-objects", type=int, help="objects per scene (default: the env's)")
     parser.add_argument(
         "--env-option",
@@ -90,7 +98,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise UsageError(f"--num-objects must be >= 1, got {args.num_objects}")
         if not is_builtin(args.policy):
             check_checkpoint(args.policy)
-        check_new_folder(args.out)
+        if not args.resume:
+            check_new_folder(args.out)
         check_dataset_id(args.dataset_id if args.dataset_id is not None else default_dataset_id(args.out))
         env_kwargs = parse_env_options(args.env_option)
         if args.num_objects is not None:
@@ -106,16 +115,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         env = job.make_env()
         job.make_policy(env)  # a policy that cannot act on this env fails here, before any episode
-        writer = DemoWriter(args.out, env, job, args.dataset_id, args.format)
+        if args.resume:
+            writer = resume_writer(args.out, env, job, args.dataset_id, args.format)
+        else:
+            writer = DemoWriter(args.out, env, job, args.dataset_id, args.format)
     except (ImportError, UsageError, FileNotFoundError, ValueError) as exc:
         return fail(exc)
+    first = writer.episodes
+    if first:
+        print(f"resuming {args.out}: episodes 0-{first - 1} are recorded, {args.episodes - first} to go", flush=True)
     start = time.perf_counter()
     steps = successes = 0
     episode_seconds = 0.0
     if args.workers > 1:
         env.close()  # the workers make their own
     try:
-        for episode in record_episodes(job, args.workers, env if args.workers == 1 else None):
+        for episode in record_episodes(job, args.workers, env if args.workers == 1 else None, start=first):
             writer.add(episode)
             steps += episode.steps
             successes += int(episode.success)
@@ -141,11 +156,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             env.close()
     wall = time.perf_counter() - start
     size, fixed = writer.size_bytes(), writer.metadata_bytes()
+    recorded = writer.episodes - first
+    now = f"{recorded} episodes" + (f" (episodes {first}-{writer.episodes - 1}; {first} recorded before)" if first else "")
     print(
-        f"{writer.dataset_id}: {writer.episodes} episodes ({successes} successful, {steps} steps) "
+        f"{writer.dataset_id}: {now} ({successes} successful, {steps} steps) "
         f"of {job.policy} on {args.env} in {wall:.1f} s on {args.workers} "
-        f"worker{'s' if args.workers > 1 else ''} ({wall / writer.episodes:.2f} s per episode; "
-        f"{episode_seconds / writer.episodes:.2f} s of episode time each); {size / 1e6:.1f} MB in {args.out} "
+        f"worker{'s' if args.workers > 1 else ''} ({wall / max(recorded, 1):.2f} s per episode; "
+        f"{episode_seconds / max(recorded, 1):.2f} s of episode time each); {size / 1e6:.1f} MB in {args.out} "
         f"({(size - fixed) / 1e6 / writer.episodes:.3f} MB per episode and {fixed / 1e6:.1f} MB of metadata)"
     )
     return 0

@@ -157,22 +157,19 @@ class DemoWriter:
                 f"{job.seed}..{job.seed + job.episodes - 1} "
                 "(mpg-demos); infos as the columns named in mpg.info_fields, row 0 the reset's",
                 "requirements": _requirements(),
-                "mpg": {
-                    "env_id": job.env_id,
-                    "env_kwargs": _json_ready(dict(job.env_kwargs)),
-                    "policy": job.policy,
-                    "policy_kwargs": _json_ready(dict(job.policy_kwargs)),
-                    "seed": job.seed,
-                    "episodes": job.episodes,
-                    "reset_options": _json_ready(job.options()),
-                    "info_fields": list(FIELD_NAMES),
-                    "action_primitives": list(mpg_envs.env_primitives(env)),
-                    "package_version": str(mpg_envs.__version__),
-                    "mujoco": running_mujoco(),
-                },
+                "mpg": job_record(job, env),
             }
         )
         self.episodes = 0
+
+    @classmethod
+    def continuing(cls, folder: str | Path, storage: Any, dataset_id: str, episodes: int) -> DemoWriter:
+        """A writer appending to the dataset in ``folder`` (Minari's open ``storage``, id
+        ``dataset_id``) after its first ``episodes`` episodes; :func:`mpg_agents.demos.resume.resume_writer`
+        checks that they are this recording's."""
+        writer = cls.__new__(cls)
+        writer.folder, writer.dataset_id, writer.storage, writer.episodes = Path(folder), dataset_id, storage, episodes
+        return writer
 
     def add(self, episode: RecordedEpisode) -> None:
         """Append ``episode``, the next one in order (its ``index`` must be the count so far).
@@ -209,6 +206,24 @@ class DemoWriter:
         """Bytes of Minari's ``metadata.json`` (a fixed cost: it spells out the observation
         space's bounds, a number per pixel)."""
         return (self.folder / DATA / "metadata.json").stat().st_size
+
+
+def job_record(job: DemoJob, env: gym.Env) -> dict[str, Any]:
+    """What a dataset keeps of its recording under ``"mpg"`` (JSON-ready): env id and keywords,
+    policy, seeds, episodes, reset options, info columns, primitives, package and MuJoCo versions."""
+    return {
+        "env_id": job.env_id,
+        "env_kwargs": _json_ready(dict(job.env_kwargs)),
+        "policy": job.policy,
+        "policy_kwargs": _json_ready(dict(job.policy_kwargs)),
+        "seed": job.seed,
+        "episodes": job.episodes,
+        "reset_options": _json_ready(job.options()),
+        "info_fields": list(FIELD_NAMES),
+        "action_primitives": list(mpg_envs.env_primitives(env)),
+        "package_version": str(mpg_envs.__version__),
+        "mujoco": running_mujoco(),
+    }
 
 
 def _json_ready(value: Any) -> Any:

@@ -184,24 +184,29 @@ def _record_in_worker(index: int) -> RecordedEpisode:
     return record_episode(policy, env, index, job.seed, job.options())
 
 
-def record_episodes(job: DemoJob, workers: int = 1, env: gym.Env | None = None) -> Iterator[RecordedEpisode]:
-    """Every episode of ``job``, in index order; ``workers`` > 1 runs them on that many worker
+def record_episodes(job: DemoJob, workers: int = 1, env: gym.Env | None = None, start: int = 0) -> Iterator[RecordedEpisode]:
+    """Episodes ``start`` on of ``job`` (default: every one), in index order; ``workers`` > 1 runs them on that many worker
     processes (one compute thread each), a record coming back as soon as it and every one
     before it are done. An episode that raises ends the iteration with its exception.
     With one worker the episodes run in this process, on ``env`` when given (it must be
     ``job.make_env()``'s; the caller closes it), else on an env made and closed here.
 
     Raises:
-        ValueError: ``workers`` below 1.
+        ValueError: ``workers`` below 1, or ``start`` outside ``0..episodes``.
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if isinstance(start, bool) or not isinstance(start, int) or not 0 <= start <= job.episodes:
+        raise ValueError(f"start must be an integer in 0..{job.episodes}, got {start!r}")
+    indices = range(start, job.episodes)
+    if not indices:
+        return
     if workers == 1:
         own = env is None
         env = job.make_env() if env is None else env
         try:
             policy = job.make_policy(env)
-            for index in range(job.episodes):
+            for index in indices:
                 yield record_episode(policy, env, index, job.seed, job.options())
         finally:
             if own:
@@ -209,9 +214,9 @@ def record_episodes(job: DemoJob, workers: int = 1, env: gym.Env | None = None) 
         return
     with one_thread_children():  # the workers start (as episodes are submitted) on one thread each
         with ProcessPoolExecutor(
-            min(workers, job.episodes),
+            min(workers, len(indices)),
             mp_context=mp.get_context("forkserver"),
             initializer=_start_worker,
             initargs=(job,),
         ) as pool:
-            yield from pool.map(_record_in_worker, range(job.episodes))
+            yield from pool.map(_record_in_worker, indices)

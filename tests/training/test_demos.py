@@ -123,3 +123,59 @@ def test_a_new_folder_is_absent_or_empty(tmp_path):
     (tmp_path / "dataset" / "data" / "metadata.json").write_text("{}")
     with pytest.raises(ValueError, match="already holds a dataset"):
         check_new_folder(tmp_path / "dataset")
+
+
+def test_a_stopped_recording_resumes_to_the_same_data(recorded, tmp_path, monkeypatch, capsys):
+    import mpg_agents.demos.cli as cli
+
+    out = tmp_path / "stopped"
+    whole = cli.record_episodes
+
+    def stops_after_one(*args, **kwargs):
+        episodes = whole(*args, **kwargs)
+        yield next(episodes)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "record_episodes", stops_after_one)
+    assert main([*COMMAND, "--out", str(out), "--dataset-id", "stage2-oracle-v0"]) == 130
+    assert "1 of 2 episodes" in capsys.readouterr().err
+    monkeypatch.setattr(cli, "record_episodes", whole)
+    (out / "data" / "1").mkdir()  # an episode cut off while it was written
+    (out / "data" / "1" / "part").write_text("cut off")
+    assert main([*COMMAND, "--out", str(out), "--dataset-id", "stage2-oracle-v0", "--resume"]) == 0
+    said = capsys.readouterr().out
+    assert "episodes 0-0 are recorded, 1 to go" in said and "1 episodes (episodes 1-1; 1 recorded before)" in said
+    assert dataset_digest(out) == dataset_digest(recorded)
+    # Resuming a finished recording records nothing and changes nothing.
+    assert main([*COMMAND, "--out", str(out), "--dataset-id", "stage2-oracle-v0", "--resume"]) == 0
+    assert dataset_digest(out) == dataset_digest(recorded)
+
+
+def test_resume_refuses_another_recordings_dataset(tmp_path, capsys):
+    import json
+
+    from mpg_agents.demos.dataset import job_record
+    from mpg_agents.demos.recording import DemoJob
+    from mpg_agents.demos.resume import resume_writer
+
+    job = DemoJob("oracle", "MPG-Stage2-v0", 2, 5, (("num_objects", 2),))
+    env = job.make_env()
+    try:
+        held = {"dataset_id": "stage2-oracle-v0", "data_format": "parquet", "mpg": job_record(job, env)}
+        (tmp_path / "data").mkdir()
+        (tmp_path / "data" / "metadata.json").write_text(json.dumps(held))
+        with pytest.raises(ValueError, match="--resume works with the formats"):
+            resume_writer(tmp_path, env, job, "stage2-oracle-v0", data_format="hdf5")
+    finally:
+        env.close()
+    cases = [
+        (["--seed", "6"], "its mpg is"),
+        (["--num-objects", "3"], "its mpg is"),
+        (["--dataset-id", "other-v0"], "its dataset_id is 'stage2-oracle-v0'"),
+        (["--format", "arrow"], "its data_format is 'parquet'"),
+    ]
+    for extra, says in cases:
+        args = [*COMMAND, "--dataset-id", "stage2-oracle-v0", *extra, "--out", str(tmp_path), "--resume"]
+        assert main(args) == 2
+        assert says in capsys.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "data").iterdir()) == ["metadata.json"]  # nothing written
