@@ -115,10 +115,11 @@ class PrimitiveExecutor:
         remembered = None if key is None or self.memo is None else self.memo.recall(key)
         if remembered is not None:
             # Run from this very state before: its end state, restored, is the one it would reach.
-            seconds = world.counter.seconds
+            steps, seconds = world.counter.steps, world.counter.seconds
             known, end = remembered
             end.restore()
-            world.counter.seconds = seconds  # no physics ran now
+            # The state advanced by the motion's steps; no physics ran now.
+            world.counter.steps, world.counter.seconds = steps + known.physics_steps, seconds
             return dataclasses.replace(known, physics_seconds=0.0, ik_solves=0, seconds=time.perf_counter() - start)
         steps0, secs0, solves0 = world.counter.steps, world.counter.seconds, self.ik.solves
         target_pose = world.object_pose(target) if target is not None and world.active[target] else None
