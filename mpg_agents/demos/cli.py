@@ -139,7 +139,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 print("  " + episode.describe(), flush=True)
     except KeyboardInterrupt:
         print(
-            f"interrupted: {writer.episodes} of {args.episodes} episodes are in {args.out}",
+            f"interrupted: {writer.episodes} of {args.episodes} episodes are in {args.out} "
+            "(the same command with --resume continues)",
             file=sys.stderr,
         )
         return 130
@@ -147,7 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(
             f"error: episode {writer.episodes} (seed {args.seed + writer.episodes}) raised "
             f"{type(exc).__name__}: {exc}; "
-            f"{args.out} holds the {writer.episodes} episodes before it",
+            f"{args.out} holds the {writer.episodes} episodes before it (--resume continues from it)",
             file=sys.stderr,
         )
         return 1
