@@ -137,7 +137,8 @@ class PrimitiveExecutor:
         result.physics_seconds = world.counter.seconds - secs0
         result.ik_solves = self.ik.solves - solves0
         result.seconds = time.perf_counter() - start
-        if key is not None and self.memo is not None:
+        if key is not None and self.memo is not None and not result.unreachable:
+            # (An unreachable pose was undone at once: nothing worth remembering.)
             self.memo.remember(key, result, WorldCheckpoint(world))
         return result
 
