@@ -85,6 +85,19 @@ class MotionMemo:
         self.hits += 1
         return entry
 
+    def replay(self, key: bytes, world: World) -> PrimitiveResult | None:
+        """The motion remembered for ``key``, run again without simulating it: ``world`` put in its
+        end state, its step counter advanced by the motion's steps, and a copy of its result (no
+        physics seconds or IK solves: none were spent); ``None`` when none is remembered."""
+        remembered = self.recall(key)
+        if remembered is None:
+            return None
+        known, end = remembered
+        steps, seconds = world.counter.steps, world.counter.seconds
+        end.restore()
+        world.counter.steps, world.counter.seconds = steps + known.physics_steps, seconds
+        return dataclasses.replace(known, physics_seconds=0.0, ik_solves=0)
+
     def remember(self, key: bytes, result: PrimitiveResult, end: WorldCheckpoint) -> None:
         """Keep ``result`` (a copy) and the end state ``end`` of the motion that started at ``key``."""
         self._entries[key] = (dataclasses.replace(result), end)

@@ -11,7 +11,6 @@ every motion where contact can happen is simulated. A primitive's motion is look
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -111,16 +110,14 @@ class PrimitiveExecutor:
             raise ValueError(f"depth heightmap must have shape {expected}, got {depth.shape}")
         world = self.world
         start = time.perf_counter()
-        key = None if self.memo is None else self.memo.key(world, primitive, rotation, row, col, depth, target)
-        remembered = None if key is None or self.memo is None else self.memo.recall(key)
-        if remembered is not None:
+        memo = self.memo
+        key = memo.key(world, primitive, rotation, row, col, depth, target) if memo is not None else b""
+        if memo is not None:
             # Run from this very state before: its end state, restored, is the one it would reach.
-            steps, seconds = world.counter.steps, world.counter.seconds
-            known, end = remembered
-            end.restore()
-            # The state advanced by the motion's steps; no physics ran now.
-            world.counter.steps, world.counter.seconds = steps + known.physics_steps, seconds
-            return dataclasses.replace(known, physics_seconds=0.0, ik_solves=0, seconds=time.perf_counter() - start)
+            replayed = memo.replay(key, world)
+            if replayed is not None:
+                replayed.seconds = time.perf_counter() - start
+                return replayed
         steps0, secs0, solves0 = world.counter.steps, world.counter.seconds, self.ik.solves
         target_pose = world.object_pose(target) if target is not None and world.active[target] else None
         checkpoint = WorldCheckpoint(world)
@@ -137,9 +134,9 @@ class PrimitiveExecutor:
         result.physics_seconds = world.counter.seconds - secs0
         result.ik_solves = self.ik.solves - solves0
         result.seconds = time.perf_counter() - start
-        if key is not None and self.memo is not None and not result.unreachable:
+        if memo is not None and not result.unreachable:
             # (An unreachable pose was undone at once: nothing worth remembering.)
-            self.memo.remember(key, result, WorldCheckpoint(world))
+            memo.remember(key, result, WorldCheckpoint(world))
         return result
 
     def _unreachable(self, primitive: str, rotation: int, row: int, col: int) -> PrimitiveResult:
