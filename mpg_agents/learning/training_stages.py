@@ -287,10 +287,22 @@ TRAINING_STAGES: tuple[TrainingStage, ...] = (
 
 def stage_for_env(env_id: str, stages: Sequence[TrainingStage] = TRAINING_STAGES) -> TrainingStage:
     """The stage that trains on ``env_id``; an env no stage names (e.g. ``MPG-Occluded-v0``)
-    trains all its primitives together, with no curriculum, budget or discriminator."""
+    trains all its primitives together, with no curriculum, budget or discriminator.
+
+    Raises:
+        ValueError: ``env_id`` is a paper stage's own env, but ``stages`` (a config) moved that
+            stage to another env: the stage's settings would otherwise be dropped without a word.
+    """
     for stage in stages:
         if stage.env_id == env_id:
             return stage
+    for default in TRAINING_STAGES:
+        moved = next((s for s in stages if s.name == default.name and s.env_id != env_id), None)
+        if default.env_id == env_id and moved is not None:
+            raise ValueError(
+                f"--env {env_id}: the config moves {moved.name} to {moved.env_id}; "
+                f"give --env {moved.env_id} to train {moved.name} with its settings"
+            )
     return TrainingStage(env_id, env_id)
 
 

@@ -47,6 +47,11 @@ def test_lookup_selection_and_overrides():
         select_stages(TRAINING_STAGES, ["9"])
     changed = with_overrides(TRAINING_STAGES, {"Stage3": {"objects": [2, 3], "iterations": 7}})
     assert changed[2].objects == (2, 3) and changed[2].iterations == 7
+    # A config that moves Stage V to the hard track: its old env id is refused, naming the new one.
+    moved = with_overrides(TRAINING_STAGES, {"Stage5": {"env_id": "MPG-OccludedHard-v0"}})
+    assert stage_for_env("MPG-OccludedHard-v0", moved) is moved[-1]
+    with pytest.raises(ValueError, match="moves Stage5 to MPG-OccludedHard-v0; give --env MPG-OccludedHard-v0"):
+        stage_for_env("MPG-Stage5-v0", moved)
     with pytest.raises(ValueError, match="training stage settings has unknown TrainingStage fields"):
         with_overrides(TRAINING_STAGES, {"Stage3": {"objetcs": [2, 3]}})
     with pytest.raises(ValueError, match="coordination"):
