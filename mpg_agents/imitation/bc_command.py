@@ -19,6 +19,7 @@ from typing import Any
 from mpg_agents.cli_input import UsageError, check_thread_setting, fail, read_config
 from mpg_agents.imitation.bc_config import BC_FIELDS, BCConfig
 from mpg_agents.imitation.bc_training import StepRecord, train_bc
+from mpg_agents.learning.learner import StopRequested
 from mpg_agents.learning.run_folder import RunFolderBusy
 from mpg_envs.files import WriteFailed
 from mpg_envs.threads import set_torch_threads
@@ -109,5 +110,8 @@ def bc_main(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print("interrupted: the last saved state stays; run the same command to resume", file=sys.stderr)
         return 130
+    except StopRequested:
+        print("stopped: state saved at the last step, run the same command to resume", file=sys.stderr)
+        return 143
     print(json.dumps(summary))
     return 0

@@ -27,6 +27,8 @@ import io
 import json
 import math
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -44,6 +46,7 @@ from mpg_agents.imitation.augment import turn_action, turn_planes
 from mpg_agents.imitation.bc_config import BCConfig, bc_acting_config, bc_net_config
 from mpg_agents.imitation.bc_loss import imitation_loss, sampled_rotations, top1_accuracy
 from mpg_agents.imitation.demo_samples import DemoSamples, DemoSource
+from mpg_agents.learning.learner import StopRequested
 from mpg_agents.learning.run_folder import RunLock, prepare_run_folder, resume_differences
 from mpg_agents.learning.run_state import load_optimizer, save_optimizer, state_folder, write_state
 from mpg_agents.network.mpgnet import MPGNet, flat_q
@@ -192,6 +195,28 @@ def save_bc_state(
     write_state(out, writer)
 
 
+class StopFlag:
+    """SIGINT and SIGTERM ask the loop to stop: it saves the step just taken and raises
+    :class:`~mpg_agents.learning.learner.StopRequested` (a background run, where SIGINT is
+    ignored, stops on SIGTERM without losing the steps since the last regular save). Installed
+    in the main thread only (Python delivers signals there); :meth:`restore` puts the previous
+    handlers back."""
+
+    def __init__(self) -> None:
+        self.asked = False
+        self._previous: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():
+            self._previous = {s: signal.signal(s, self._ask) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def _ask(self, signum: int, frame: Any) -> None:
+        self.asked = True
+
+    def restore(self) -> None:
+        for s, handler in self._previous.items():
+            signal.signal(s, handler)
+        self._previous = {}
+
+
 def draw_batch(rng: np.random.Generator, samples: int, batch_size: int) -> np.ndarray:
     """``batch_size`` sample indices: without replacement, or with it when there are fewer samples."""
     return rng.choice(samples, size=batch_size, replace=samples < batch_size)
@@ -278,6 +303,7 @@ def train_bc(
             counters = json.loads((saved / "counters.json").read_text())
             step, wall_s, loss = int(counters["step"]), float(counters["wall_s"]), float(counters["loss"])
         log = ProgressLog(folder / PROGRESS, resume_at=step)
+        stop = StopFlag()
         try:
             net.train()
             while step < config.steps:
@@ -301,13 +327,16 @@ def train_bc(
                 log.write(done)
                 if on_step is not None:
                     on_step(done)
-                if step % config.save_every == 0 or step == config.steps:
+                if step % config.save_every == 0 or step == config.steps or stop.asked:
                     log.sync()
                     save_mpgnet(net, folder / WEIGHTS, extra=model_card(source, config, step, wall_s, loss), config=acting)
                     save_bc_state(folder, net, optimizer, rng, {"step": step, "wall_s": wall_s, "loss": loss}, record)
+                if stop.asked and step < config.steps:
+                    raise StopRequested()
             if not (folder / WEIGHTS).is_file():  # a finished run resumed with its own steps
                 save_mpgnet(net, folder / WEIGHTS, extra=model_card(source, config, step, wall_s, loss), config=acting)
         finally:
+            stop.restore()
             log.close()
     finally:
         lock.release()

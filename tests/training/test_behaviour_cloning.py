@@ -155,6 +155,33 @@ def test_a_run_killed_with_sigkill_resumes_to_the_weights_of_an_unkilled_one(dem
     assert [r["loss"] for r in progress(killed)] == [r["loss"] for r in progress(straight)]
 
 
+def test_sigterm_saves_the_step_just_taken_and_the_run_resumes_to_the_unstopped_weights(demos, tmp_path):
+    settings = {"batch_size": 2, "save_every": 100, "learning_rate": 1e-3, "seed": 3}  # no regular save before the end
+    straight = tmp_path / "straight"
+    train_bc(BCConfig(steps=12, **settings), demos, straight)
+    config = tmp_path / "bc.toml"
+    config.write_text("batch_size = 2\nsave_every = 100\nlearning_rate = 0.001\nseed = 3\n")
+    stopped = tmp_path / "stopped"
+    command = [sys.executable, "-m", "mpg_agents.cli", "--baseline", "bc", "--demos", str(demos), "--out", str(stopped)]
+    command += ["--steps", "12", "--config", str(config)]
+    env = {**os.environ, "MPG_NUM_THREADS": "1"}
+    run = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert run.stdout is not None
+    for line in run.stdout:  # a line per step here (12 steps: every step is printed)
+        if line.startswith("step 2/12"):
+            run.send_signal(signal.SIGTERM)
+            break
+    _, err = run.communicate(timeout=300)
+    assert run.returncode == 143, err
+    assert "stopped: state saved at the last step" in err
+    saved = json.loads((stopped / "state" / "counters.json").read_text())
+    assert 2 <= saved["step"] < 12 and len(progress(stopped)) == saved["step"]  # nothing lost, nothing beyond
+    assert subprocess.run(command, env=env, capture_output=True, timeout=600).returncode == 0
+    a, b = load_file(str(straight / WEIGHTS)), load_file(str(stopped / WEIGHTS))
+    assert all(np.array_equal(a[k].numpy(), b[k].numpy()) for k in a)
+    assert [r["loss"] for r in progress(stopped)] == [r["loss"] for r in progress(straight)]
+
+
 def test_bad_input_is_one_line_naming_what_is_valid(tmp_path, capsys):
     (tmp_path / "junk").mkdir()
     (tmp_path / "junk" / "notes.txt").write_text("x")
@@ -170,7 +197,10 @@ def test_bad_input_is_one_line_naming_what_is_valid(tmp_path, capsys):
         (["--baseline", "bc", "--demos", str(tmp_path / "none"), *out], "is not a dataset of mpg-demos (no such folder)"),
         (["--baseline", "bc", "--demos", str(tmp_path / "junk"), *out], "(no data/metadata.json in it)"),
         (["--baseline", "bc", "--demos", str(tmp_path / "foreign"), *out], "is not a dataset of mpg-demos"),
-        (["--baseline", "bc", "--demos", str(tmp_path / "junk"), "--steps", "0", *out], "steps (--steps) must be an integer >= 1"),
+        (
+            ["--baseline", "bc", "--demos", str(tmp_path / "junk"), "--steps", "0", *out],
+            "steps (--steps) must be an integer >= 1",
+        ),
         (["--baseline", "bc", "--demos", str(tmp_path / "junk"), "--demo-episodes", "-1", *out], "must be an integer >= 1"),
     ]
     for argv, says in cases:
