@@ -7,7 +7,8 @@ Reads every run folder ``RESULTS/<track>/bc<N>/`` holding ``weights.safetensors`
 steps and the wall time of training), ``bc_progress.csv`` (the seconds of each step) and
 ``heldout.json`` (``mpg-eval --json`` of that checkpoint on its own track's held-out seeds); each
 further ``heldout_<name>.json`` is the same policy on another track's held-out seeds (the
-unseen-object track, which no training may use). Prints a Markdown table, one row per evaluated
+unseen-object track, which no training may use) or under another MuJoCo (each evaluation
+records its version; a row says which). Prints a Markdown table, one row per evaluated
 track and number of demonstrations, and with ``--plot`` draws
 held-out success against demonstrations (log scale, 95% intervals as bars). Nothing is run: the
 runs and evaluations are the commands the Benchmark page gives.
@@ -42,7 +43,7 @@ def read_runs(results: Path) -> list[dict[str, Any]]:
             step_s = [float(row["step_s"]) for row in csv.DictReader(f)]
         for evaluation in sorted(folder.glob("heldout*.json")):
             rows.append(_row(card, json.loads(evaluation.read_text()), step_s))
-    return sorted(rows, key=lambda r: (r["track"], r["trained_on"], r["demos"]))
+    return sorted(rows, key=lambda r: (r["track"], r["trained_on"], r["mujoco"], r["demos"]))
 
 
 def _row(card: dict[str, Any], ev: dict[str, Any], step_s: list[float]) -> dict[str, Any]:
@@ -71,30 +72,37 @@ def _row(card: dict[str, Any], ev: dict[str, Any], step_s: list[float]) -> dict[
 def markdown(rows: list[dict[str, Any]]) -> str:
     """The table the Benchmark page shows."""
     lines = [
-        "| track | demonstrations of | demonstrations (samples) | steps | s per step (median) | training (min) "
+        "| track | demonstrations of | MuJoCo | demonstrations (samples) | steps | s per step (median) | training (min) "
         "| held-out success [95%] | motions | mis-picks / episode |",
-        "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for r in rows:
         lo, hi = r["interval"]
         run = f"{r['demos']} ({r['samples']}) | {r['steps']} | {r['step_s']:.2f} | {r['wall_min']:.0f}"
         lines.append(
-            f"| {r['track']} | {r['trained_on']} | {run} | {100 * r['success']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] "
-            f"of {r['episodes']} | {r['motions']:.2f} | {r['mispicks']:.2f} |"
+            f"| {r['track']} | {r['trained_on']} | {r['mujoco']} | {run} "
+            f"| {100 * r['success']:.0f}% [{100 * lo:.0f}, {100 * hi:.0f}] of {r['episodes']} "
+            f"| {r['motions']:.2f} | {r['mispicks']:.2f} |"
         )
     return "\n".join(lines)
 
 
+def major(version: str) -> str:
+    """``"4"`` of ``"4.0.0"``, ``"3"`` of ``"3.x"``."""
+    return version.split(".")[0]
+
+
 def plot(rows: list[dict[str, Any]], path: Path) -> None:
-    """Held-out success against the number of demonstrations, one line per track."""
+    """Held-out success against the number of demonstrations, one line per track (and MuJoCo major version)."""
     import matplotlib  # noqa: PLC0415 - only the plot needs it
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
     fig, ax = plt.subplots(figsize=(5, 3.4))
-    for track, trained_on in sorted({(r["track"], r["trained_on"]) for r in rows}):
-        mine = [r for r in rows if r["track"] == track and r["trained_on"] == trained_on]
+    majors = sorted({major(r["mujoco"]) for r in rows})
+    for track, trained_on, version in sorted({(r["track"], r["trained_on"], major(r["mujoco"])) for r in rows}):
+        mine = [r for r in rows if (r["track"], r["trained_on"], major(r["mujoco"])) == (track, trained_on, version)]
         x = [r["demos"] for r in mine]
         y = [100 * r["success"] for r in mine]
         err = [
@@ -103,6 +111,7 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
         ]
         own = track.split(" ")[0] == trained_on.split(" ")[0]
         label = track if own else f"{track}, copying {trained_on.split(' ')[0]}"
+        label += f", MuJoCo {version}.x" if len(majors) > 1 else ""
         ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=label)
     ax.axhline(100, color="grey", linestyle="--", linewidth=1, label="the oracle it copies")
     ax.set_xscale("log")
@@ -112,9 +121,8 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     ax.set_xlabel("demonstrations (oracle episodes)")
     ax.set_ylabel("held-out success (%)")
     ax.set_ylim(0, 105)
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2))  # below the axes: no curve hidden
+    fig.savefig(path, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
 
@@ -128,11 +136,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no behaviour-cloning runs with {EVAL} under {args.results}", file=sys.stderr)
         return 1
     print(markdown(rows))
-    settings = {(r["rotations"], r["turns"], r["seed"], r["mujoco"]) for r in rows}
-    for rotations, turns, seed, mujoco in sorted(settings):
+    settings = {(r["rotations"], r["turns"], r["seed"]) for r in rows}
+    for rotations, turns, seed in sorted(settings):
         print(
             f"\nsettings: {rotations} rotations per sample, quarter turns {'on' if turns else 'off'}; "
-            f"held-out seeds from {seed}; MuJoCo {mujoco}"
+            f"held-out seeds from {seed}"
         )
     if args.plot is not None:
         plot(rows, args.plot)
