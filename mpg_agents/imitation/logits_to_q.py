@@ -97,12 +97,13 @@ def rescale_heads(net: MPGNet, scale: float, offset: float) -> None:
 def logits_to_q(src: str | Path, demos: str | Path, dst: str | Path, samples: int = 64, value: float = 1.0) -> dict[str, Any]:
     """Write ``dst``: the behaviour-cloning checkpoint ``src`` with its logits mapped onto the
     return scale, anchored on up to ``samples`` demonstrations of the dataset ``demos`` (evenly
-    spread over its first episodes, those a cloning run reads first). Returns what was measured
+    spread over the episodes the net was cloned from: the dataset's first ``demo_episodes``). Returns what was measured
     and applied (also written in ``dst``'s header as ``logits_to_q``).
 
     Raises:
-        ValueError: ``src`` is not a behaviour-cloning checkpoint, ``samples`` or ``value`` is
-            not positive, or the net gives no scale (:meth:`LogitAnchors.scale_offset`).
+        ValueError: ``src`` is not a behaviour-cloning checkpoint (or is one already mapped),
+            ``demos`` is not the dataset it was cloned from, ``samples`` or ``value`` is not
+            positive, or the net gives no scale (:meth:`LogitAnchors.scale_offset`).
     """
     if samples < 1:
         raise ValueError(f"samples must be >= 1, got {samples}")
@@ -118,7 +119,14 @@ def logits_to_q(src: str | Path, demos: str | Path, dst: str | Path, samples: in
     # The raw maps are all it reads: no finger masks (they need an env's gripper geometry).
     net = MPGNet(MPGNetConfig.from_checkpoint(header["config"], grasp_fingers="any", move_fingers="any"))
     load_mpgnet_weights(net, src)
-    data = DemoSamples(demos)
+    card = extra["imitation"]
+    data = DemoSamples(demos, int(card["demo_episodes"]))  # the episodes it was cloned from
+    cloned_from = card["dataset"]["digest"]
+    if data.source.digest != cloned_from:
+        raise ValueError(
+            f"--demos {str(demos)!r} is not the dataset {src} was cloned from (its digest {data.source.digest[:12]}..., "
+            f"the net's {cloned_from[:12]}...: {card['dataset']['folder']})"
+        )
     primitives = tuple(data.action_primitives)
     indices = np.unique(np.linspace(0, len(data) - 1, min(samples, len(data))).round().astype(np.int64))
     anchors = measure_anchors(net, data, primitives, indices)

@@ -98,6 +98,11 @@ def test_a_cloned_net_becomes_a_starting_q_network_that_reinforcement_learning_t
     command = ["--env", "MPG-Stage2-v0", "--init", str(start), "--config", str(rl_config), "--steps", "2", "--out", str(run)]
     assert train_main(command) == 0
     assert (run / "weights.safetensors").is_file()
+    # Anchored on the dataset it was cloned from only.
+    other = tmp_path / "other"
+    assert demos_main([*record[:-1], "6", "--quiet", "--out", str(other)]) == 0
+    assert main([str(bc / "weights.safetensors"), str(tmp_path / "x.safetensors"), "--demos", str(other)]) == 2
+    assert "is not the dataset" in capsys.readouterr().err
     # Mapped once only: a second map would scale it again.
     assert main([str(start), str(tmp_path / "again.safetensors"), "--demos", str(demos)]) == 2
     assert "already mapped onto the return scale" in capsys.readouterr().err
