@@ -183,7 +183,7 @@ def train_main(argv: Sequence[str] | None = None) -> int:
         print("interrupted: state saved, run the same command to resume", file=sys.stderr)
         return 130
     except Exception as exc:
-        from mpg_agents.learning.learner import StopRequested  # noqa: PLC0415
+        from mpg_agents.learning.stop_signal import StopRequested  # noqa: PLC0415
 
         if isinstance(exc, StopRequested):
             print("stopped: state saved, run the same command to resume", file=sys.stderr)

@@ -19,8 +19,8 @@ from typing import Any
 from mpg_agents.cli_input import UsageError, check_thread_setting, fail, read_config
 from mpg_agents.imitation.bc_config import BC_FIELDS, BCConfig
 from mpg_agents.imitation.bc_training import StepRecord, train_bc
-from mpg_agents.learning.learner import StopRequested
 from mpg_agents.learning.run_folder import RunFolderBusy
+from mpg_agents.learning.stop_signal import StopRequested
 from mpg_envs.files import WriteFailed
 from mpg_envs.threads import set_torch_threads
 

@@ -27,8 +27,6 @@ import io
 import json
 import math
 import os
-import signal
-import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -46,9 +44,9 @@ from mpg_agents.imitation.augment import turn_action, turn_planes
 from mpg_agents.imitation.bc_config import BCConfig, bc_acting_config, bc_net_config
 from mpg_agents.imitation.bc_loss import imitation_loss, sampled_rotations, top1_accuracy
 from mpg_agents.imitation.demo_samples import DemoSamples, DemoSource
-from mpg_agents.learning.learner import StopRequested
 from mpg_agents.learning.run_folder import RunLock, prepare_run_folder, resume_differences
 from mpg_agents.learning.run_state import load_optimizer, save_optimizer, state_folder, write_state
+from mpg_agents.learning.stop_signal import StopFlag, StopRequested
 from mpg_agents.network.mpgnet import MPGNet, flat_q
 from mpg_envs.files import write_text_whole
 from mpg_envs.grid.workspace import NUM_ROTATIONS
@@ -118,6 +116,12 @@ class ProgressLog:
     def close(self) -> None:
         """Close the file."""
         self.file.close()
+
+    def __enter__(self) -> ProgressLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def model_card(source: DemoSource, config: BCConfig, step: int, wall_s: float, loss: float) -> dict[str, Any]:
@@ -193,28 +197,6 @@ def save_bc_state(
         write_text_whole(tmp / "config.json", json.dumps(record))
 
     write_state(out, writer)
-
-
-class StopFlag:
-    """SIGINT and SIGTERM ask the loop to stop: it saves the step just taken and raises
-    :class:`~mpg_agents.learning.learner.StopRequested` (a background run, where SIGINT is
-    ignored, stops on SIGTERM without losing the steps since the last regular save). Installed
-    in the main thread only (Python delivers signals there); :meth:`restore` puts the previous
-    handlers back."""
-
-    def __init__(self) -> None:
-        self.asked = False
-        self._previous: dict[int, Any] = {}
-        if threading.current_thread() is threading.main_thread():
-            self._previous = {s: signal.signal(s, self._ask) for s in (signal.SIGINT, signal.SIGTERM)}
-
-    def _ask(self, signum: int, frame: Any) -> None:
-        self.asked = True
-
-    def restore(self) -> None:
-        for s, handler in self._previous.items():
-            signal.signal(s, handler)
-        self._previous = {}
 
 
 def draw_batch(rng: np.random.Generator, samples: int, batch_size: int) -> np.ndarray:
@@ -302,9 +284,8 @@ def train_bc(
             rng.bit_generator.state = json.loads((saved / "rng.json").read_text())["numpy"]
             counters = json.loads((saved / "counters.json").read_text())
             step, wall_s, loss = int(counters["step"]), float(counters["wall_s"]), float(counters["loss"])
-        log = ProgressLog(folder / PROGRESS, resume_at=step)
-        stop = StopFlag()
-        try:
+        # SIGINT/SIGTERM while it runs: the step just taken is saved, then the run stops.
+        with ProgressLog(folder / PROGRESS, resume_at=step) as log, StopFlag() as stop:
             net.train()
             while step < config.steps:
                 start = time.perf_counter()
@@ -335,9 +316,6 @@ def train_bc(
                     raise StopRequested()
             if not (folder / WEIGHTS).is_file():  # a finished run resumed with its own steps
                 save_mpgnet(net, folder / WEIGHTS, extra=model_card(source, config, step, wall_s, loss), config=acting)
-        finally:
-            stop.restore()
-            log.close()
     finally:
         lock.release()
     return {

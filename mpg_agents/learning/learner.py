@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import json
 import math
-import signal
 import time
 from collections.abc import Callable, Generator, Mapping
 from contextlib import closing
@@ -63,6 +62,7 @@ from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
 from mpg_agents.learning.run_folder import RunLock, check_resume, prepare_run_folder
 from mpg_agents.learning.run_state import Counters, load_run_state, save_run_state, state_folder
 from mpg_agents.learning.stage_calibration import calibrate_from_own_grasps, calibrate_if_due, calibrate_in_scenes
+from mpg_agents.learning.stop_signal import StopFlag, StopRequested
 from mpg_agents.learning.td_step import td_step
 from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
@@ -70,10 +70,6 @@ from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.learning.trials import TRIAL_COUNTERS
 from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.simulation.objects import check_not_held_out
-
-
-class StopRequested(Exception):
-    """Raised inside the loop when SIGINT/SIGTERM arrived; the state is saved first."""
 
 
 class Learner:
@@ -146,7 +142,7 @@ class Learner:
         self.explorer = make_explorer(self.policy, self.stage, self.primitives, self.rng, config)
         self.counters = Counters()
         self.calibration_env: gym.Env | None = None  # made at the first calibration in the stage's scenes
-        self._stop = False
+        self.stop = StopFlag()  # armed while run() learns
         self._log: TrainingLog | None = None
         self.resumed = False
         self._resume()
@@ -202,10 +198,13 @@ class Learner:
             calibrate_in_scenes(self, self.stage.calibration_episodes)
         if self.config.demonstration_episodes and not self.resumed:  # a fresh run: iteration 0, empty replay
             self.add_demonstrations()
-        handlers = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         bar = tqdm(total=self.steps, initial=self.counters.iteration, desc=self.stage.name, unit="it", dynamic_ncols=True)
         try:
-            with TrainingLog(self.out, self.counters.iteration) as self._log, closing(self.steps_to_learn()) as steps:
+            with (
+                self.stop,
+                TrainingLog(self.out, self.counters.iteration) as self._log,
+                closing(self.steps_to_learn()) as steps,
+            ):
                 for step in steps:
                     self.learn_from(step)
                     bar.update(1)
@@ -213,8 +212,6 @@ class Learner:
         finally:
             self._log = None
             bar.close()
-            for s, h in handlers.items():
-                signal.signal(s, h)
         if self.stage.calibrate_every and self.counters.calibrated_at != self.counters.iteration:
             calibrate_in_scenes(self, self.stage.calibration_episodes)  # the weights ship with it
         if self.stage.calibrates_q_star:
@@ -229,9 +226,13 @@ class Learner:
 
     def save_or_stop(self) -> None:
         """Save every ``checkpoint_every`` iterations and at the end; on SIGINT/SIGTERM save and stop."""
-        if self.counters.iteration % self.config.checkpoint_every == 0 or self.counters.iteration == self.steps or self._stop:
+        if (
+            self.counters.iteration % self.config.checkpoint_every == 0
+            or self.counters.iteration == self.steps
+            or self.stop.asked
+        ):
             self.save_state()
-        if self._stop:
+        if self.stop.asked:
             raise StopRequested()
 
     def add_demonstrations(self) -> None:
@@ -247,9 +248,6 @@ class Learner:
         )
         self.log(f"{self.stage.name}: {stats.summary()}")
         self.save_state()
-
-    def _request_stop(self, signum, frame) -> None:
-        self._stop = True
 
     def skipped_scene(self, k: int, error: Exception) -> None:
         self.counters.skipped_scenes += 1

@@ -296,13 +296,13 @@ def stage_for_env(env_id: str, stages: Sequence[TrainingStage] = TRAINING_STAGES
     for stage in stages:
         if stage.env_id == env_id:
             return stage
-    for default in TRAINING_STAGES:
-        moved = next((s for s in stages if s.name == default.name and s.env_id != env_id), None)
-        if default.env_id == env_id and moved is not None:
-            raise ValueError(
-                f"--env {env_id}: the config moves {moved.name} to {moved.env_id}; "
-                f"give --env {moved.env_id} to train {moved.name} with its settings"
-            )
+    paper_stage = next((s.name for s in TRAINING_STAGES if s.env_id == env_id), None)
+    moved = next((s for s in stages if s.name == paper_stage), None)  # no stage of ``stages`` trains on env_id
+    if moved is not None:
+        raise ValueError(
+            f"--env {env_id}: the config moves {moved.name} to {moved.env_id}; "
+            f"give --env {moved.env_id} to train {moved.name} with its settings"
+        )
     return TrainingStage(env_id, env_id)
 
 

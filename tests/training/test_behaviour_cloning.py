@@ -129,17 +129,32 @@ def test_a_stopped_run_resumes_as_if_it_had_not_stopped(demos, tmp_path, draws):
         train_bc(BCConfig(steps=4, demo_episodes=2, **settings), demos, stopped)
 
 
-def test_a_run_killed_with_sigkill_resumes_to_the_weights_of_an_unkilled_one(demos, tmp_path):
-    settings = {"batch_size": 2, "save_every": 1, "learning_rate": 1e-3, "seed": 3}
+def straight_run_and_command(demos: Path, tmp_path: Path, steps: int, save_every: int, out: Path) -> tuple[Path, list[str]]:
+    """A run of ``steps`` trained in this process, and the ``mpg-train`` command of the same run
+    into ``out`` (to be stopped, then resumed, in a process of its own)."""
+    settings = {"batch_size": 2, "save_every": save_every, "learning_rate": 1e-3, "seed": 3}
     straight = tmp_path / "straight"
-    train_bc(BCConfig(steps=4, **settings), demos, straight)
+    train_bc(BCConfig(steps=steps, **settings), demos, straight)
     config = tmp_path / "bc.toml"
-    config.write_text("batch_size = 2\nsave_every = 1\nlearning_rate = 0.001\nseed = 3\n")
+    config.write_text("".join(f"{key} = {value}\n" for key, value in settings.items()))
+    command = [sys.executable, "-m", "mpg_agents.cli", "--baseline", "bc", "--demos", str(demos), "--out", str(out)]
+    return straight, [*command, "--steps", str(steps), "--config", str(config)]
+
+
+ONE_THREAD = {**os.environ, "MPG_NUM_THREADS": "1"}  # as this process: one thread, the same sums
+
+
+def assert_same_run(a: Path, b: Path) -> None:
+    """The same weights, bit for bit, and the same losses step by step."""
+    first, second = load_file(str(a / WEIGHTS)), load_file(str(b / WEIGHTS))
+    assert all(np.array_equal(first[k].numpy(), second[k].numpy()) for k in first)
+    assert [r["loss"] for r in progress(b)] == [r["loss"] for r in progress(a)]
+
+
+def test_a_run_killed_with_sigkill_resumes_to_the_weights_of_an_unkilled_one(demos, tmp_path):
     killed = tmp_path / "killed"
-    command = [sys.executable, "-m", "mpg_agents.cli", "--baseline", "bc", "--demos", str(demos), "--out", str(killed)]
-    command += ["--steps", "4", "--config", str(config)]
-    env = {**os.environ, "MPG_NUM_THREADS": "1"}  # as this process: one thread, the same sums
-    run = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    straight, command = straight_run_and_command(demos, tmp_path, steps=4, save_every=1, out=killed)
+    run = subprocess.Popen(command, env=ONE_THREAD, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 300
     while run.poll() is None and time.monotonic() < deadline:
         if (killed / PROGRESS).is_file() and len(progress(killed)) >= 2:
@@ -148,24 +163,16 @@ def test_a_run_killed_with_sigkill_resumes_to_the_weights_of_an_unkilled_one(dem
         time.sleep(0.05)
     run.wait(timeout=60)
     assert run.returncode == -signal.SIGKILL, "the run ended before it could be killed"
-    assert subprocess.run(command, env=env, capture_output=True, timeout=600).returncode == 0
-    a, b = load_file(str(straight / WEIGHTS)), load_file(str(killed / WEIGHTS))
-    assert all(np.array_equal(a[k].numpy(), b[k].numpy()) for k in a)
+    assert subprocess.run(command, env=ONE_THREAD, capture_output=True, timeout=600).returncode == 0
+    assert_same_run(straight, killed)
     assert [r["step"] for r in progress(killed)] == ["1", "2", "3", "4"]
-    assert [r["loss"] for r in progress(killed)] == [r["loss"] for r in progress(straight)]
 
 
 def test_sigterm_saves_the_step_just_taken_and_the_run_resumes_to_the_unstopped_weights(demos, tmp_path):
-    settings = {"batch_size": 2, "save_every": 100, "learning_rate": 1e-3, "seed": 3}  # no regular save before the end
-    straight = tmp_path / "straight"
-    train_bc(BCConfig(steps=12, **settings), demos, straight)
-    config = tmp_path / "bc.toml"
-    config.write_text("batch_size = 2\nsave_every = 100\nlearning_rate = 0.001\nseed = 3\n")
     stopped = tmp_path / "stopped"
-    command = [sys.executable, "-m", "mpg_agents.cli", "--baseline", "bc", "--demos", str(demos), "--out", str(stopped)]
-    command += ["--steps", "12", "--config", str(config)]
-    env = {**os.environ, "MPG_NUM_THREADS": "1"}
-    run = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # save_every 100: no regular save before the end, so only the stop saves.
+    straight, command = straight_run_and_command(demos, tmp_path, steps=12, save_every=100, out=stopped)
+    run = subprocess.Popen(command, env=ONE_THREAD, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert run.stdout is not None
     for line in run.stdout:  # a line per step here (12 steps: every step is printed)
         if line.startswith("step 2/12"):
@@ -176,10 +183,8 @@ def test_sigterm_saves_the_step_just_taken_and_the_run_resumes_to_the_unstopped_
     assert "stopped: state saved at the last step" in err
     saved = json.loads((stopped / "state" / "counters.json").read_text())
     assert 2 <= saved["step"] < 12 and len(progress(stopped)) == saved["step"]  # nothing lost, nothing beyond
-    assert subprocess.run(command, env=env, capture_output=True, timeout=600).returncode == 0
-    a, b = load_file(str(straight / WEIGHTS)), load_file(str(stopped / WEIGHTS))
-    assert all(np.array_equal(a[k].numpy(), b[k].numpy()) for k in a)
-    assert [r["loss"] for r in progress(stopped)] == [r["loss"] for r in progress(straight)]
+    assert subprocess.run(command, env=ONE_THREAD, capture_output=True, timeout=600).returncode == 0
+    assert_same_run(straight, stopped)
 
 
 def test_bad_input_is_one_line_naming_what_is_valid(tmp_path, capsys):
