@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -23,6 +23,9 @@ import gymnasium as gym
 from mpg_agents.acting.episode_loop import episode_steps
 from mpg_envs.grid.actions import PixelActionSpace
 from mpg_envs.policies.oracle import OraclePolicy
+
+DEMONSTRATIONS_FILE = "demonstrations.json"
+"""What a stage's run folder records of the demonstrations it collected (:meth:`DemoStats.to_dict`)."""
 
 AddTransition = Callable[[Mapping[str, Any], Mapping[str, Any], int, float, bool], None]
 """``add(obs, next_obs, action, reward, terminated)``: stores one unbatched transition."""
@@ -37,6 +40,15 @@ class DemoStats:
     dropped: int  # transitions whose primitive is not in ``keep_primitives``
     successes: int  # episodes that ended with the env's ``is_success``
     seconds: float
+
+    @property
+    def env_steps(self) -> int:
+        """The env steps the oracle took (kept and dropped transitions alike)."""
+        return self.kept + self.dropped
+
+    def to_dict(self) -> dict[str, float | int]:
+        """Plain data for the stage's ``demonstrations.json``."""
+        return {**asdict(self), "env_steps": self.env_steps}
 
     def summary(self) -> str:
         """One log line."""

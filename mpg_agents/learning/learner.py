@@ -55,7 +55,7 @@ from mpg_agents.acting.weights import load_mpgnet_weights
 from mpg_agents.learning.actor_feed import actor_steps
 from mpg_agents.learning.actor_pool import check_actor_backend
 from mpg_agents.learning.actors import ActorStep, build_agent, choose_action, make_explorer, make_training_env
-from mpg_agents.learning.demonstrations import collect_demonstrations
+from mpg_agents.learning.demonstrations import DEMONSTRATIONS_FILE, collect_demonstrations
 from mpg_agents.learning.exploration import TakenAction, linear_epsilon
 from mpg_agents.learning.learner_episodes import own_steps
 from mpg_agents.learning.replay import PrioritizedHeightmapReplayBuffer
@@ -68,6 +68,7 @@ from mpg_agents.learning.train_config import TrainConfig, json_safe
 from mpg_agents.learning.train_log import IterationRecord, TrainingLog
 from mpg_agents.learning.training_stages import TrainingStage, stage_for_env
 from mpg_agents.learning.trials import TRIAL_COUNTERS
+from mpg_envs.files import write_text_whole
 from mpg_envs.grid.primitive_specs import GRASP
 from mpg_envs.simulation.objects import check_not_held_out
 
@@ -247,6 +248,8 @@ class Learner:
             self.store,
         )
         self.log(f"{self.stage.name}: {stats.summary()}")
+        # The oracle's env steps count in the run's budget (mpg_agents.learning.env_steps).
+        write_text_whole(self.out / DEMONSTRATIONS_FILE, json.dumps(stats.to_dict(), indent=1))
         self.save_state()
 
     def skipped_scene(self, k: int, error: Exception) -> None:

@@ -1,5 +1,6 @@
 """Oracle demonstrations seeding the learner's replay (``TrainConfig.demonstration_episodes``)."""
 
+import json
 from dataclasses import asdict, replace
 
 import gymnasium as gym
@@ -7,10 +8,12 @@ import numpy as np
 import pytest
 
 import mpg_envs  # noqa: F401  (registers the envs)
-from mpg_agents.learning.demonstrations import DemoStats, collect_demonstrations
 from mpg_agents.acting.seeds import episode_seed
+from mpg_agents.learning.demonstrations import DEMONSTRATIONS_FILE, DemoStats, collect_demonstrations
+from mpg_agents.learning.env_steps import StageSteps, run_env_steps
 from mpg_agents.learning.learner import Counters, Learner
 from mpg_agents.learning.train_config import TrainConfig
+
 from .tiny import TINY
 
 # The tiny learner settings of tests/training/test_training.py.
@@ -85,6 +88,8 @@ def test_a_fresh_run_starts_from_the_oracles_transitions_and_a_resumed_one_colle
     assert learner.replay.dones[:n, 0].tolist() == [float(c[4]) for c in expected]
     assert asdict(learner.counters) == asdict(Counters())  # no iteration, no episode
     assert (tmp_path / "progress.csv").read_text().splitlines()[1:] == []
+    record = json.loads((tmp_path / DEMONSTRATIONS_FILE).read_text())  # the oracle's env steps, for the budget
+    assert (record["episodes"], record["kept"], record["dropped"], record["env_steps"]) == (1, n, 0, n)
 
     # The collection saved the state: a resumed run keeps the transitions and collects none.
     resumed_logs: list[str] = []
@@ -94,6 +99,7 @@ def test_a_fresh_run_starts_from_the_oracles_transitions_and_a_resumed_one_colle
     resumed.run()
     assert not any("oracle demonstrations" in line for line in resumed_logs)
     assert resumed.counters.iteration == 1 and resumed.replay.size() == n + 1
+    assert run_env_steps(tmp_path) == [StageSteps(tmp_path.name, 1, n, 0)]
     rows = (tmp_path / "progress.csv").read_text().splitlines()[1:]
     assert [r.split(",")[0] for r in rows] == ["1"]  # iterations count from the first training step
     resumed.env.close()
