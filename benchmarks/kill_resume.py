@@ -78,6 +78,17 @@ def saved_counters(out: Path) -> dict | None:
     raise RuntimeError(f"{out}: the saved state cannot be read")
 
 
+def begins_episode(out: Path, counters: dict) -> bool:
+    """Whether the saved state ``counters`` begins an episode: its last iteration ended one (its
+    ``progress.csv`` row names an episode before the state's next one). The episode's own
+    counters (``episode_motions``) are zeroed only when the next episode starts, so they cannot
+    tell; the log's rows are on disk before the state that counts them."""
+    iteration = counters["iteration"]
+    with open(out / "progress.csv", newline="") as f:
+        rows = [r for r in csv.reader(f) if len(r) == len(CSV_COLUMNS) and r[0] == str(iteration)]
+    return bool(rows) and int(rows[-1][CSV_COLUMNS.index("episode")]) < counters["episode"]
+
+
 def check_loadable(out: Path) -> int:
     """Load the saved state's online weights and ``weights.safetensors``; returns the state's iteration."""
     from mpg_agents.acting.weights import load_mpgnet
@@ -177,7 +188,7 @@ def killed_at_episode_saves(root: Path, config: Path, args: argparse.Namespace) 
             counters = saved_counters(out)
             if counters is not None and counters["iteration"] not in seen:
                 seen.add(counters["iteration"])
-                if counters["episode_motions"] == 0 and 0 < counters["iteration"] < steps:
+                if 0 < counters["iteration"] < steps and begins_episode(out, counters):
                     proc.send_signal(signal.SIGKILL)
                     proc.wait()
                     kills, killed = kills + 1, True
