@@ -2,7 +2,7 @@
 
 Per stage folder (a single-stage run's folder, or each ``StageN/`` of a pipeline's):
 
-- **iterations**: one env step of the acting policy each (``state/counters.json``);
+- **iterations**: one env step of the acting policy each (the saved state's ``counters.json``);
 - **demonstrations**: the oracle's env steps put into the replay, kept or dropped
   (``demonstrations.json``, :class:`~mpg_agents.learning.demonstrations.DemoStats`);
 - **calibration grasps**: the greedy grasps of in-scene Q*_g calibrations (the ``grasps`` of each
@@ -24,8 +24,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mpg_agents.learning.demonstrations import DEMONSTRATIONS_FILE
+from mpg_agents.learning.run_state import state_folder
 
-COUNTERS_FILE = Path("state") / "counters.json"
+COUNTERS_FILE = "counters.json"
 CALIBRATION_FILE = "calibration.json"
 
 
@@ -50,10 +51,10 @@ def stage_env_steps(folder: str | Path) -> StageSteps:
         FileNotFoundError: ``folder`` holds no saved state (no training ran there).
     """
     folder = Path(folder)
-    counters = folder / COUNTERS_FILE
-    if not counters.is_file():
-        raise FileNotFoundError(f"{folder} is no stage run folder: it has no {COUNTERS_FILE}")
-    iterations = int(json.loads(counters.read_text())["iteration"])
+    state = state_folder(folder)  # state.old when a kill landed between the two renames of a save
+    if state is None:
+        raise FileNotFoundError(f"{folder} is no stage run folder: it has no saved state")
+    iterations = int(json.loads((state / COUNTERS_FILE).read_text())["iteration"])
     demos = folder / DEMONSTRATIONS_FILE
     demonstrations = int(json.loads(demos.read_text())["env_steps"]) if demos.is_file() else 0
     calibration = folder / CALIBRATION_FILE
@@ -68,11 +69,11 @@ def run_env_steps(run: str | Path) -> list[StageSteps]:
         FileNotFoundError: ``run`` is neither.
     """
     run = Path(run)
-    if (run / COUNTERS_FILE).is_file():
+    if state_folder(run) is not None:
         return [stage_env_steps(run)]
-    stages = sorted(p for p in run.iterdir() if p.is_dir() and (p / COUNTERS_FILE).is_file()) if run.is_dir() else []
+    stages = sorted(p for p in run.iterdir() if p.is_dir() and state_folder(p) is not None) if run.is_dir() else []
     if not stages:
-        raise FileNotFoundError(f"{run} holds no training run (no stage folder with {COUNTERS_FILE})")
+        raise FileNotFoundError(f"{run} holds no training run (no stage folder with a saved state)")
     return [stage_env_steps(p) for p in stages]
 
 

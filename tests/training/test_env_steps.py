@@ -6,11 +6,20 @@ from pathlib import Path
 import pytest
 
 from mpg_agents.learning.env_steps import StageSteps, format_env_steps, main, run_env_steps, stage_env_steps
+from mpg_agents.learning.run_state import STATE_FORMAT
 
 
-def _stage(folder: Path, iterations: int, demo_steps: int | None = None, calibration_grasps: tuple[int, ...] = ()) -> Path:
-    (folder / "state").mkdir(parents=True)
-    (folder / "state" / "counters.json").write_text(json.dumps({"iteration": iterations, "episode": 7}))
+def _stage(
+    folder: Path,
+    iterations: int,
+    demo_steps: int | None = None,
+    calibration_grasps: tuple[int, ...] = (),
+    old_state: bool = False,
+) -> Path:
+    state = folder / ("state.old" if old_state else "state")  # state.old: a kill between a save's renames
+    state.mkdir(parents=True)
+    (state / "FORMAT").write_text(STATE_FORMAT)
+    (state / "counters.json").write_text(json.dumps({"iteration": iterations, "episode": 7}))
     if demo_steps is not None:
         record = {"episodes": 2, "kept": demo_steps - 1, "dropped": 1, "successes": 2, "seconds": 1.5, "env_steps": demo_steps}
         (folder / "demonstrations.json").write_text(json.dumps(record))
@@ -31,7 +40,7 @@ def test_a_stage_counts_iterations_demonstrations_and_every_calibration(tmp_path
 
 def test_a_pipeline_counts_each_stage_folder_in_order_and_sums_them(tmp_path):
     _stage(tmp_path / "Stage2", 450, demo_steps=10)
-    _stage(tmp_path / "Stage1", 200)
+    _stage(tmp_path / "Stage1", 200, old_state=True)
     _stage(tmp_path / "Stage5", 500, calibration_grasps=(30,))
     (tmp_path / "notes").mkdir()  # not a stage: ignored
     stages = run_env_steps(tmp_path)
@@ -50,6 +59,10 @@ def test_a_single_stage_run_folder_is_its_own_stage(tmp_path):
 def test_a_folder_without_a_run_is_refused_by_name(tmp_path):
     with pytest.raises(FileNotFoundError, match="holds no training run"):
         run_env_steps(tmp_path)
+    with pytest.raises(FileNotFoundError, match="no stage run folder"):
+        stage_env_steps(tmp_path)
+    (tmp_path / "state").mkdir()
+    (tmp_path / "state" / "FORMAT").write_text("some other format")  # not a state this version saved
     with pytest.raises(FileNotFoundError, match="no stage run folder"):
         stage_env_steps(tmp_path)
 
