@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from mpg_agents.acting.weights import read_checkpoint_header
+from mpg_envs.simulation.mujoco_version import mujoco_major
 
 EVAL = "heldout.json"
 WEIGHTS = "weights.safetensors"
@@ -87,11 +88,6 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def major(version: str) -> str:
-    """``"4"`` of ``"4.0.0"``, ``"3"`` of ``"3.x"``."""
-    return version.split(".")[0]
-
-
 def plot(rows: list[dict[str, Any]], path: Path) -> None:
     """Held-out success against the number of demonstrations, one line per track (and MuJoCo major version)."""
     import matplotlib  # noqa: PLC0415 - only the plot needs it
@@ -100,9 +96,9 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
     fig, ax = plt.subplots(figsize=(5, 3.4))
-    majors = sorted({major(r["mujoco"]) for r in rows})
-    for track, trained_on, version in sorted({(r["track"], r["trained_on"], major(r["mujoco"])) for r in rows}):
-        mine = [r for r in rows if (r["track"], r["trained_on"], major(r["mujoco"])) == (track, trained_on, version)]
+    majors = sorted({mujoco_major(r["mujoco"]) for r in rows})
+    for track, trained_on, version in sorted({(r["track"], r["trained_on"], mujoco_major(r["mujoco"])) for r in rows}):
+        mine = [r for r in rows if (r["track"], r["trained_on"], mujoco_major(r["mujoco"])) == (track, trained_on, version)]
         x = [r["demos"] for r in mine]
         y = [100 * r["success"] for r in mine]
         err = [

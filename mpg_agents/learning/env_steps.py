@@ -24,10 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mpg_agents.learning.demonstrations import DEMONSTRATIONS_FILE
-from mpg_agents.learning.run_state import state_folder
-
-COUNTERS_FILE = "counters.json"
-CALIBRATION_FILE = "calibration.json"
+from mpg_agents.learning.run_state import COUNTERS_FILE, state_folder
+from mpg_agents.learning.stage_calibration import CALIBRATION_FILE
 
 
 @dataclass(frozen=True)

@@ -186,6 +186,10 @@ def state_folder(run_dir: Path) -> Path | None:
     return None
 
 
+COUNTERS_FILE = "counters.json"
+"""The saved state's counters (:class:`Counters` as JSON)."""
+
+
 def save_run_state(
     run_dir: Path,
     *,
@@ -208,7 +212,7 @@ def save_run_state(
         save_replay(replay, tmp / "replay.npz")
         rngs = {"numpy": rng.bit_generator.state, "replay": replay.rng_state, "torch": torch.get_rng_state().tolist()}
         write_text_whole(tmp / "rng.json", json.dumps(rngs))
-        write_text_whole(tmp / "counters.json", json.dumps(counters))
+        write_text_whole(tmp / COUNTERS_FILE, json.dumps(counters))
         write_text_whole(tmp / "config.json", json.dumps(config))
 
     write_state(run_dir, writer)
@@ -233,5 +237,5 @@ def load_run_state(
     rng.bit_generator.state = rngs["numpy"]
     replay.rng_state = rngs["replay"]
     torch.set_rng_state(torch.tensor(rngs["torch"], dtype=torch.uint8))
-    counters, config = json.loads((folder / "counters.json").read_text()), json.loads((folder / "config.json").read_text())
+    counters, config = json.loads((folder / COUNTERS_FILE).read_text()), json.loads((folder / "config.json").read_text())
     return counters, config, from_header(header)

@@ -16,6 +16,9 @@ from mpg_agents.acting.grasp_threshold import calibrate_q_star, estimate_q_star,
 from mpg_agents.learning.actors import make_training_env
 from mpg_agents.learning.learner_handle import LearnerHandle
 
+CALIBRATION_FILE = "calibration.json"
+"""Every in-scene calibration of a stage, in its run folder (:func:`~mpg_agents.acting.grasp_threshold.write_calibration`)."""
+
 
 def calibrate_in_scenes(learner: LearnerHandle, episodes: int) -> float:
     """Calibrate ``learner``'s Q*_g in its stage's scenes
@@ -45,7 +48,7 @@ def calibrate_in_scenes(learner: LearnerHandle, episodes: int) -> float:
     before = learner.policy.q_star
     learner.policy.set_q_star(measured.q_star)
     c = learner.counters
-    write_calibration(learner.out / "calibration.json", measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
+    write_calibration(learner.out / CALIBRATION_FILE, measured, c.iteration, before, continue_history=c.calibrated_at >= 0)
     learner.log(
         f"{learner.stage.name}: Q*_g {format_q_star(before)} -> {measured.q_star:.4g} "
         f"in its scenes at iteration {c.iteration} "
