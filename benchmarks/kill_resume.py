@@ -65,14 +65,14 @@ def logged_iterations(out: Path) -> tuple[bool, list[int]]:
 
 def saved_counters(out: Path) -> dict | None:
     """The counters of the run's saved state (``None``: nothing saved yet)."""
-    from mpg_agents.learning.run_state import state_folder
+    from mpg_agents.learning.run_state import COUNTERS_FILE, state_folder
 
     for _ in range(50):  # the state folder is swapped by two renames: read again if caught between
         folder = state_folder(out)
         if folder is None:
             return None
         try:
-            return json.loads((folder / "counters.json").read_text())
+            return json.loads((folder / COUNTERS_FILE).read_text())
         except (FileNotFoundError, json.JSONDecodeError):
             time.sleep(0.01)
     raise RuntimeError(f"{out}: the saved state cannot be read")
