@@ -20,12 +20,14 @@ from functools import cached_property
 
 import numpy as np
 
+from mpg_agents.locator.template import ExemplarTemplate, exemplar_template
 from mpg_envs.grid.workspace import Workspace
 from mpg_envs.perception.exemplar_match import (
     Blob,
     MatchSettings,
     colour_gap,
     find_blobs,
+    heights,
     lab_colours,
     pose_table,
     query_model,
@@ -113,6 +115,15 @@ class Exemplar:
         """The footprints and heights a box of the exemplar's extents shows from above
         (:func:`~mpg_envs.perception.exemplar_match.pose_table`; ``None`` without a model)."""
         return None if self.model is None else pose_table(self.model[1])
+
+    @cached_property
+    def template(self) -> ExemplarTemplate | None:
+        """The exemplar's heights above its table turned through the yaws the ``"template"``
+        snapping tries (:func:`~mpg_agents.locator.template.exemplar_template`; its object's
+        pixels as the matcher reads them, above ``min_height``)."""
+        settings = MatchSettings()
+        up = heights(self.query_depth, settings)
+        return exemplar_template(up, up > settings.min_height)
 
     @classmethod
     def of(

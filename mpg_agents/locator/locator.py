@@ -22,8 +22,17 @@ from safetensors.torch import load_file, save
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import RESOLUTION, Exemplar, exemplar_blobs, scene_input
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
+from mpg_agents.locator.template import colour_components, component_parts, fit_template, pick_component
 from mpg_envs.files import write_bytes_whole
-from mpg_envs.perception.exemplar_match import Blob, colour_gap, footprint_sides, lab_colours, pose_fit
+from mpg_envs.perception.exemplar_match import (
+    Blob,
+    MatchSettings,
+    colour_gap,
+    footprint_sides,
+    heights,
+    lab_colours,
+    pose_fit,
+)
 
 HEADER_KEY = "mpg_locator"
 SHIPPED_LOCATOR = Path(__file__).resolve().parent.parent / "checkpoints" / "locator.safetensors"
@@ -33,22 +42,75 @@ SHIPPED_LOCATOR = Path(__file__).resolve().parent.parent / "checkpoints" / "loca
 @dataclass(frozen=True)
 class Location:
     """Where the exemplar's object shows: ``probability`` per pixel (H x W, float32), ``mask``
-    (its pixels above the threshold, uint8), ``seen`` (whether it shows at all) and the
-    ``seen_probability`` that decided it."""
+    (its pixels above the threshold, uint8), ``seen`` (whether it shows at all), the
+    ``seen_probability`` that decided it and, by the ``"template"`` snapping, the chosen object's
+    ``fit`` to the exemplar (``None`` otherwise)."""
 
     probability: np.ndarray
     mask: np.ndarray
     seen: bool
     seen_probability: float
+    fit: float | None = None
 
 
-SNAPS = ("off", "probability", "shape", "pose")
+SNAPS = ("off", "probability", "shape", "pose", "template")
 """How the located mask snaps to the exemplar matcher's blobs: not at all; to the blob whose
 pixels the network rates highest; to the blob whose mean probability times its shape score
 (:func:`~mpg_envs.perception.exemplar_match.shape_score`) is highest; as the last, but an
 uncovered blob (its whole top shows) is weighed by how well it shows the exemplar's box in some
 pose, leaning ones included (:func:`~mpg_envs.perception.exemplar_match.pose_fit`), and one that
-fits no pose by at least the locator's ``pose_floor`` is not the target (see :func:`blob_weights`)."""
+fits no pose by at least the locator's ``pose_floor`` is not the target (see :func:`blob_weights`);
+to the object of the exemplar's colour whose mean probability times its
+:func:`~mpg_agents.locator.template.template_fit` is highest, cut to its blobs that the network
+rates (:func:`template_mask`)."""
+COMPONENT_MIN_HEIGHT = 0.005
+"""Metres above the table a pixel of the exemplar's colour stands to be part of an object by the
+``"template"`` snapping (lower than the matcher's 1 cm: a flat object's rim stays on it)."""
+MISFIT_WEIGHT = 0.1
+"""The ``"template"`` snapping weighs an uncovered blob that fits the exemplar worse than the
+locator's ``min_fit`` by this share of its probability."""
+PART_SHARE = 0.1
+"""The ``"template"`` snapping keeps the chosen object's blobs rated at least this share of its
+best-rated blob."""
+
+
+def template_mask(
+    probability: np.ndarray,
+    obs: Mapping[str, np.ndarray],
+    exemplar: Exemplar,
+    gap: np.ndarray,
+    blobs: list[Blob],
+    min_fit: float = 0.5,
+) -> tuple[np.ndarray, float] | None:
+    """The ``"template"`` snapping's mask (bool) for the located ``probability`` of ``obs``, with
+    the chosen blob's fit: of the matcher's ``blobs``, the one whose mean probability is highest,
+    an uncovered blob (its whole top shows) that fits the exemplar's heights worse than
+    ``min_fit`` (:func:`~mpg_agents.locator.template.fit_template`) weighed down to
+    :data:`MISFIT_WEIGHT` of its probability (a look-alike of another shape in full view; taken
+    still when nothing else rates higher: the target may rest in another pose); grown over the
+    object of the exemplar's colour it lies in (:func:`~mpg_agents.locator.template.colour_components`,
+    ``gap`` the scene's colour gap to it) by that object's blobs rated at least
+    :data:`PART_SHARE` of its best (:func:`~mpg_agents.locator.template.component_parts`).
+    ``None`` when no blob is of its colour."""
+    up = heights(obs["depth"], MatchSettings())
+    template = exemplar.template
+    fits: dict[int, float] = {}
+
+    def weight(pixels: np.ndarray) -> float:
+        blob = by_id[id(pixels)]
+        fits[id(pixels)] = fit_template(template, up, pixels, covered=blob.covered)
+        return 1.0 if blob.covered or fits[id(pixels)] >= min_fit else MISFIT_WEIGHT
+
+    by_id = {id(b.pixels): b for b in blobs}
+    chosen = pick_component(probability, [b.pixels for b in blobs], weight)
+    if chosen is None:
+        return None
+    settings = MatchSettings()
+    components = colour_components(gap, up, settings.colour_distance, COMPONENT_MIN_HEIGHT, settings.min_pixels)
+    home = max(components, key=lambda c: int((c & chosen).sum()), default=None)
+    if home is None or not (home & chosen).any():
+        return chosen, fits[id(chosen)]
+    return component_parts(probability, home, [b.pixels for b in blobs], PART_SHARE) | chosen, fits[id(chosen)]
 
 
 def blob_weights(
@@ -102,15 +164,17 @@ def save_locator(
     rule: CoverRule | None = None,
     snap: str = "off",
     pose_floor: float = 0.1,
+    min_fit: float = 0.0,
 ) -> None:
     """Write ``net`` with its thresholds, search ``rule``, how it snaps to blobs (``snap``,
-    ``pose_floor``) and training ``record`` to ``path`` (whole or not at all)."""
+    ``pose_floor``, ``min_fit``) and training ``record`` to ``path`` (whole or not at all)."""
     header = {
         "config": net.config.to_dict(),
         "threshold": float(threshold),
         "seen_threshold": float(seen_threshold),
         "snap": snap,
         "pose_floor": float(pose_floor),
+        "min_fit": float(min_fit),
         "rule": (CoverRule() if rule is None else rule).to_dict(),
         "record": dict(record),
     }
@@ -135,10 +199,12 @@ class TargetLocator:
     of work: a few tens of milliseconds on one CPU core); ``rule`` is how a policy using it
     judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`); ``snap`` (one
     of :data:`SNAPS`) whether the mask snaps to one of the matcher's blobs (:func:`snap_to_blob`),
-    ``pose_floor`` the least pose fit of an uncovered blob by the ``"pose"`` snapping.
+    ``pose_floor`` the least pose fit of an uncovered blob by the ``"pose"`` snapping, ``min_fit``
+    the least :func:`~mpg_agents.locator.template.fit_template` of the chosen object by the
+    ``"template"`` snapping (one that fits worse is not taken for the target: not seen).
 
     Raises:
-        ValueError: ``snap`` is not one of :data:`SNAPS`, or ``pose_floor`` is outside [0, 1].
+        ValueError: ``snap`` is not one of :data:`SNAPS`, or ``pose_floor`` or ``min_fit`` is outside [0, 1].
     """
 
     def __init__(
@@ -150,12 +216,16 @@ class TargetLocator:
         rule: CoverRule | None = None,
         snap: str = "off",
         pose_floor: float = 0.1,
+        min_fit: float = 0.0,
     ):
         if snap not in SNAPS:
             raise ValueError(f"snap must be one of {SNAPS}, got {snap!r}")
         if not 0.0 <= pose_floor <= 1.0:
             raise ValueError(f"pose_floor must lie in [0, 1], got {pose_floor}")
+        if not 0.0 <= min_fit <= 1.0:
+            raise ValueError(f"min_fit must lie in [0, 1], got {min_fit}")
         self.pose_floor = float(pose_floor)
+        self.min_fit = float(min_fit)
         self.net = net.eval()
         self.snap = snap
         self.threshold = float(threshold)
@@ -169,7 +239,17 @@ class TargetLocator:
 
     def save(self, path: str | Path) -> None:
         """Write this locator (weights, thresholds, rule, record) to ``path``."""
-        save_locator(self.net, path, self.threshold, self.seen_threshold, self.record, self.rule, self.snap, self.pose_floor)
+        save_locator(
+            self.net,
+            path,
+            self.threshold,
+            self.seen_threshold,
+            self.record,
+            self.rule,
+            self.snap,
+            self.pose_floor,
+            self.min_fit,
+        )
 
     @classmethod
     def load(cls, path: str | Path = SHIPPED_LOCATOR) -> TargetLocator:
@@ -180,8 +260,8 @@ class TargetLocator:
         net = LocatorNet(LocatorConfig(**header["config"]))
         net.load_state_dict(load_file(str(path)))
         rule = CoverRule(**header["rule"]) if "rule" in header else CoverRule()
-        snap, floor = header.get("snap", "off"), header.get("pose_floor", 0.1)
-        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, snap, floor)
+        snap, floor, min_fit = header.get("snap", "off"), header.get("pose_floor", 0.1), header.get("min_fit", 0.0)
+        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, snap, floor, min_fit)
 
     def locate(self, obs: Mapping[str, np.ndarray]) -> Location:
         """Where the object of ``obs``' exemplar (``query_color``, ``query_depth``) shows in its
@@ -202,7 +282,12 @@ class TargetLocator:
         if not shown:
             return Location(probability, np.zeros(probability.shape, np.uint8), False, seen_probability)
         mask, ruled_out = None, None
-        if self.snap != "off":
+        if self.snap == "template" and gap is not None:
+            chosen = template_mask(probability, obs, exemplar, gap, blobs, self.min_fit)
+            if chosen is None:  # no object of its colour shaped like it
+                return Location(probability, np.zeros(probability.shape, np.uint8), False, seen_probability)
+            return Location(probability, chosen[0].astype(np.uint8), True, seen_probability, chosen[1])
+        elif self.snap != "off":
             weights, ruled_out = blob_weights(self.snap, blobs, exemplar, self.pose_floor)
             mask = snap_to_blob(probability, [b.pixels for b in blobs], self.threshold, weights)
         if mask is None:

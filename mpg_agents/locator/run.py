@@ -111,7 +111,11 @@ def _note(record: dict[str, Any]) -> str:
 
 
 def model_card(
-    record: dict[str, Any], rule: dict[str, Any] | None = None, snap: str = "off", pose_floor: float | None = None
+    record: dict[str, Any],
+    rule: dict[str, Any] | None = None,
+    snap: str = "off",
+    pose_floor: float | None = None,
+    min_fit: float | None = None,
 ) -> str:
     """The model card's Markdown, from the training record (and, once chosen, the search
     ``rule``, the ``snap`` and the held-out figures the record then holds)."""
@@ -143,7 +147,9 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
 {_band_rows(record["tuning_figures"])}
 """
     tuning = record.get("rule_tuning")
-    floor_note = "" if snap != "pose" or pose_floor is None else f" (least pose fit {pose_floor})"
+    floor_note = {"pose": "" if pose_floor is None else f" (least pose fit {pose_floor})"}.get(snap, "")
+    if snap == "template" and min_fit is not None:
+        floor_note = f" (least template fit {min_fit}, `mpg_agents.locator.template.fit_template`)"
     if rule is not None and tuning is not None:
         card += f"""
 ## Cover and search rule
@@ -158,6 +164,11 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
         if snaps is not None:
             card += f"""The snapping was then tried among {", ".join(f"`{c}`" for c in snaps["candidates"])} on
 {snaps["episodes"]} other tuning episodes per object count, seeds {snaps["seed"]} on: {snaps["result"]}.
+"""
+        template = record.get("template_tuning")
+        if template is not None:
+            card += f"""Then {", ".join(f"`{c}`" for c in template["candidates"])} were played on {template["episodes"]}
+tuning episodes, seeds {template["seed"]} on: {template["result"]}.
 """
     heldout = record.get("heldout")
     if heldout is not None:
@@ -182,7 +193,9 @@ def write_locator(locator: TargetLocator, path: Path) -> Path:
     whole or not at all; returns the card's path."""
     locator.save(path)
     card = path.with_suffix(".md")
-    write_text_whole(card, model_card(locator.record, locator.rule.to_dict(), locator.snap, locator.pose_floor))
+    write_text_whole(
+        card, model_card(locator.record, locator.rule.to_dict(), locator.snap, locator.pose_floor, locator.min_fit)
+    )
     return card
 
 

@@ -141,6 +141,35 @@ def test_a_locator_snapping_by_pose_does_not_see_the_target_where_only_misfits_r
     assert TargetLocator(_Rates(second), 0.5, 0.5, snap="probability").locate(obs).seen  # without the pose check
 
 
+class _RatesTwo(LocatorNet):
+    """A network that rates two regions of the scene the target's, the second higher."""
+
+    def __init__(self, first: tuple[slice, slice], second: tuple[slice, slice]):
+        super().__init__(SMALL)
+        self.first, self.second = first, second
+
+    def scene_logits(self, scene: torch.Tensor, embedding: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        pixels = torch.full(scene.shape[:1] + scene.shape[2:], -10.0)
+        pixels[(slice(None), *self.first)] = 0.5  # probability 0.62
+        pixels[(slice(None), *self.second)] = 2.0  # probability 0.88
+        return pixels, torch.full(scene.shape[:1], 10.0)
+
+
+def test_the_template_snapping_takes_the_object_shaped_like_the_exemplar_over_a_look_alike_rated_higher():
+    obs = _boxes((89, 161, 79))  # the exemplar: the first box (10 x 25)
+    obs["color"][30:50, 40:60], obs["depth"][30:50, 40:60] = (89, 161, 79), 0.03  # the second, 20 x 30, shares its colour
+    first, second = (slice(5, 15), slice(5, 30)), (slice(30, 50), slice(30, 60))
+    net = _RatesTwo(first, second)
+    located = TargetLocator(net, 0.5, 0.5, snap="template", min_fit=0.5).locate(obs)
+    assert located.seen and located.fit is not None and located.fit > 0.9
+    assert located.mask[first].all() and located.mask.sum() == located.mask[first].size
+    by_probability = TargetLocator(net, 0.5, 0.5, snap="probability").locate(obs)
+    assert by_probability.mask[second].all() and by_probability.fit is None  # the look-alike, without the fit
+    # Only the look-alike rated: it is still taken (the target may rest in another pose), with its poor fit.
+    alone = TargetLocator(_Rates(second), 0.5, 0.5, snap="template", min_fit=0.5).locate(obs)
+    assert alone.seen and alone.mask[second].all() and alone.fit is not None and alone.fit < 0.5
+
+
 def test_bad_input_is_named(tmp_path: Path):
     with pytest.raises(KeyError, match="query_color"):
         TargetLocator(LocatorNet(SMALL)).locate({"color": np.zeros((8, 8, 3)), "depth": np.zeros((8, 8))})

@@ -1,0 +1,219 @@
+"""How well a part of the scene shows the exemplar's object, by its height profile turned to
+every yaw: pure numpy and OpenCV, unit-tested by hand.
+
+The matcher's shape score (:func:`~mpg_envs.perception.exemplar_match.shape_score`) judges a
+blob by the box of the exemplar's extents, which is right for the blocks and says little of an
+irregular object. An object dropped into clutter most often rests in the pose the exemplar
+shows it in, turned about the vertical; then its heights, seen from above, are the exemplar's
+turned by some yaw. :func:`template_fit` turns the exemplar's heights above its table through
+:data:`YAWS` and slides them a few pixels over the candidate's heights above the scene's table,
+and keeps the best agreement: the share of the two footprints that overlap (of the candidate's
+alone when it is covered, whose hidden part cannot show), discounted by how far the
+overlapping heights differ (all shifts of one yaw at once, as correlations). 1 is a perfect
+fit; an object of another shape fits worse at every yaw.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+YAWS = 16
+"""Yaws tried, evenly over a turn (22.5 degrees apart, as the actions' rotations; 24 located
+no better on tuning scenes)."""
+SHIFT_PX = 6
+"""Pixels the turned exemplar may slide each way over the candidate (centroids of a partly
+shown object and of the whole one differ)."""
+STRIDE = 3
+"""The fit is worked on every this many pixels each way (6 mm at the default workspace: a
+ninth of the work; every second pixel located no better on tuning scenes)."""
+HEIGHT_SCALE = 0.01
+"""Metres of root-mean-square height difference over the overlap that divide the fit by e
+(``exp(-difference / HEIGHT_SCALE)``)."""
+
+
+def _crop(values: np.ndarray, pixels: np.ndarray, size: int) -> np.ndarray:
+    """``size`` x ``size`` of ``values`` on ``pixels`` (0 elsewhere), centred on their centroid."""
+    rows, cols = np.nonzero(pixels)
+    half = size // 2
+    top, left = int(round(rows.mean())) - half, int(round(cols.mean())) - half
+    out = np.zeros((size, size), np.float32)
+    r0, c0 = max(top, 0), max(left, 0)
+    r1, c1 = min(top + size, pixels.shape[0]), min(left + size, pixels.shape[1])
+    window = (slice(r0, r1), slice(c0, c1))
+    out[r0 - top : r1 - top, c0 - left : c1 - left] = np.where(pixels[window], values[window], 0.0)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class ExemplarTemplate:
+    """The exemplar as :func:`fit_template` compares it, worked out once per exemplar
+    (:func:`exemplar_template`): per yaw, its turned footprint (``on``, 0 or 1) and the
+    3-channel template ``[heights^2, footprint, -2 heights]`` of the squared height differences,
+    ``size`` pixels square, on every ``stride``-th pixel of the heightmaps."""
+
+    on: tuple[np.ndarray, ...]
+    squares: tuple[np.ndarray, ...]
+    size: int
+    stride: int
+
+
+def exemplar_template(
+    query_heights: np.ndarray, query_pixels: np.ndarray, yaws: int = YAWS, stride: int = STRIDE
+) -> ExemplarTemplate | None:
+    """The exemplar (``query_heights`` above its table, metres, and its object's
+    ``query_pixels``) turned through ``yaws`` yaws, on every ``stride``-th pixel (``None`` when
+    no pixel shows the object).
+
+    Raises:
+        ValueError: the arrays' shapes differ, or ``yaws`` or ``stride`` is below 1.
+    """
+    query_heights, query_pixels = np.asarray(query_heights, np.float32), np.asarray(query_pixels, bool)
+    if query_heights.shape != query_pixels.shape:
+        raise ValueError(f"heights and pixels must have the same shape: query {query_heights.shape} and {query_pixels.shape}")
+    if yaws < 1 or stride < 1:
+        raise ValueError(f"yaws and stride must be >= 1; got {yaws}, {stride}")
+    query_heights, query_pixels = query_heights[::stride, ::stride], query_pixels[::stride, ::stride]
+    if not query_pixels.any():
+        return None
+    size = 2 * _radius(query_pixels) + 3  # holds the object at any yaw
+    query = _crop(query_heights, query_pixels, size)
+    query_on = _crop(np.ones_like(query_heights), query_pixels, size)
+    centre = ((size - 1) / 2.0, (size - 1) / 2.0)
+    on, squares = [], []
+    for k in range(yaws):
+        turn = cv2.getRotationMatrix2D(centre, 360.0 * k / yaws, 1.0)
+        turned = cv2.warpAffine(query, turn, (size, size), flags=cv2.INTER_NEAREST)
+        turned_on = (cv2.warpAffine(query_on, turn, (size, size), flags=cv2.INTER_NEAREST) > 0.5).astype(np.float32)
+        on.append(turned_on)
+        squares.append(np.dstack([turned * turned, turned_on, -2.0 * turned]))
+    return ExemplarTemplate(tuple(on), tuple(squares), size, stride)
+
+
+def fit_template(
+    template: ExemplarTemplate | None,
+    heights: np.ndarray,
+    pixels: np.ndarray,
+    covered: bool = False,
+    shift_px: int = SHIFT_PX,
+    height_scale: float = HEIGHT_SCALE,
+) -> float:
+    """The best fit, in [0, 1], of the exemplar's ``template`` (:func:`exemplar_template`) to the
+    candidate ``pixels`` of the scene's ``heights`` (above the table, metres), over its yaws and
+    shifts of up to ``shift_px`` pixels: the overlap of the footprints over their union (over the
+    candidate's alone when ``covered``), times ``exp(-rms height difference / height_scale)`` over
+    the overlap, heights above the table (an object resting on another shows higher and fits
+    worse). Worked on the template's every ``stride``-th pixel (an object a few samples across
+    fits by how its pixels fall on them). 0 without a template or a candidate pixel.
+
+    Raises:
+        ValueError: the arrays' shapes differ, ``shift_px`` is negative or ``height_scale`` not positive.
+    """
+    heights, pixels = np.asarray(heights, np.float32), np.asarray(pixels, bool)
+    if heights.shape != pixels.shape:
+        raise ValueError(f"heights and pixels must have the same shape: scene {heights.shape} and {pixels.shape}")
+    if shift_px < 0 or height_scale <= 0:
+        raise ValueError(f"shift_px must be >= 0 and height_scale > 0; got {shift_px}, {height_scale}")
+    if template is None:
+        return 0.0
+    stride = template.stride
+    heights, pixels, shift_px = heights[::stride, ::stride], pixels[::stride, ::stride], shift_px // stride
+    if not pixels.any():
+        return 0.0
+    window = template.size + 2 * shift_px
+    scene = _crop(heights, pixels, window)
+    scene_on = _crop(np.ones_like(heights), pixels, window)
+    scene_count = float(pixels.sum())  # all of it, also what lies outside the window
+    stacked = np.dstack([scene_on, scene * scene, scene])
+    best = 0.0
+    for turned_on, square in zip(template.on, template.squares):
+        # Every shift at once, as correlations (both profiles are 0 off their footprints): the
+        # overlap, and the squared height differences over it, on_a b^2 + a^2 on_b - 2 a b.
+        both = _correlate(scene_on, turned_on)
+        squared = _correlate(stacked, square)
+        whole = scene_count if covered else scene_count + float(turned_on.sum()) - both
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gap = np.sqrt(np.maximum(squared, 0.0) / both)
+            fit = np.where(both >= 1.0, both / whole * np.exp(-gap / height_scale), 0.0)
+        best = max(best, float(fit.max()))
+    return min(best, 1.0)
+
+
+def template_fit(
+    query_heights: np.ndarray,
+    query_pixels: np.ndarray,
+    heights: np.ndarray,
+    pixels: np.ndarray,
+    covered: bool = False,
+    yaws: int = YAWS,
+    shift_px: int = SHIFT_PX,
+    height_scale: float = HEIGHT_SCALE,
+    stride: int = STRIDE,
+) -> float:
+    """:func:`fit_template` of the exemplar (``query_heights``, ``query_pixels``) turned by
+    :func:`exemplar_template` (``yaws``, ``stride``) to the candidate ``pixels`` of ``heights``."""
+    template = exemplar_template(query_heights, query_pixels, yaws, stride)
+    return fit_template(template, heights, pixels, covered, shift_px, height_scale)
+
+
+def _correlate(image: np.ndarray, template: np.ndarray) -> np.ndarray:
+    """Sums of ``image`` times ``template`` (over channels too) at every placement of the
+    template inside the image."""
+    return cv2.matchTemplate(image, template, cv2.TM_CCORR)
+
+
+def _radius(pixels: np.ndarray) -> int:
+    """Pixels from the centroid of ``pixels`` to the farthest of them, rounded up."""
+    rows, cols = np.nonzero(pixels)
+    return int(np.ceil(np.hypot(rows - rows.mean(), cols - cols.mean()).max())) + 1
+
+
+def colour_components(
+    gap: np.ndarray, heights: np.ndarray, colour_distance: float, min_height: float, min_pixels: int
+) -> list[np.ndarray]:
+    """The connected parts (bool images) of the pixels within ``colour_distance`` of the
+    exemplar's colour (``gap``: each pixel's CIELAB distance to it) standing more than
+    ``min_height`` above the table (``heights``), of at least ``min_pixels`` pixels: one object
+    each, or objects of that colour that touch (the matcher's blobs split those at steps of
+    height, and split an irregular object too)."""
+    on = ((np.asarray(gap) <= colour_distance) & (np.asarray(heights) > min_height)).astype(np.uint8)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(on)
+    return [labels == k for k in range(1, count) if stats[k, cv2.CC_STAT_AREA] >= min_pixels]
+
+
+def pick_component(
+    probability: np.ndarray, components: list[np.ndarray], fit: Callable[[np.ndarray], float]
+) -> np.ndarray | None:
+    """Of ``components``, the one whose mean ``probability`` times its ``fit`` (in [0, 1]) is
+    highest (``None`` when there is none or every product is 0). Components are fitted in
+    falling order of mean probability, and no more once that mean cannot beat the best product:
+    the fit is the costly part."""
+    means = [float(probability[c].mean()) for c in components]
+    best, best_value = None, 0.0
+    for k in np.argsort(means)[::-1]:
+        if means[k] <= best_value:
+            break
+        value = means[k] * fit(components[k])
+        if value > best_value:
+            best, best_value = components[k], value
+    return best
+
+
+def component_parts(probability: np.ndarray, component: np.ndarray, blobs: list[np.ndarray], share: float) -> np.ndarray:
+    """The located pixels within the chosen ``component``: the matcher's ``blobs`` mostly inside
+    it (more than half their pixels) whose mean ``probability`` is at least ``share`` of the
+    highest such mean (so an object of the same colour touching the target, a blob of its own,
+    is cut away); the whole component when no blob lies in it."""
+    parts = [b for b in blobs if (b & component).sum() * 2 > b.sum()]
+    if not parts:
+        return component
+    means = [float(probability[b].mean()) for b in parts]
+    top = max(means)
+    mask = np.zeros(component.shape, bool)
+    for part, mean in zip(parts, means):
+        if mean >= share * top:
+            mask |= part
+    return mask
