@@ -40,11 +40,12 @@ class CoverRule:
     higher_by: float = 0.01  # a neighbour this much higher than the visible top lies on the target
     cover_margin: float = 0.005  # a heap covers the object where it stands this much above the object's height
     search: str = "heap"  # one of SEARCHES
+    misfit_motions: int = 0  # decisions per episode a located object that misfits the exemplar is taken as covered
 
     def __post_init__(self) -> None:
         if self.search not in SEARCHES:
             raise ValueError(f"CoverRule.search must be one of {SEARCHES}, got {self.search!r}")
-        for name in ("area_share", "ring_px", "higher_by", "cover_margin"):
+        for name in ("area_share", "ring_px", "higher_by", "cover_margin", "misfit_motions"):
             if getattr(self, name) < 0:
                 raise ValueError(f"CoverRule.{name} must not be negative, got {getattr(self, name)}")
 

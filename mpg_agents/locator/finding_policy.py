@@ -6,8 +6,11 @@ observation the :class:`~mpg_agents.locator.locator.TargetLocator` locates the t
 is seen, the wrapped policy gets the located pixels as its mask and the cover estimated from
 them (:func:`~mpg_agents.locator.cover.estimate_occluded`); while it is not seen, the wrapped
 policy is pointed at where it may hide (:func:`~mpg_agents.locator.cover.search_mask`, flagged
-covered), so it moves or pushes what stands there and the locator looks again. An observation
-that has a ``mask`` (mask and visible modes) passes through unchanged.
+covered), so it moves or pushes what stands there and the locator looks again. A located object
+that fits the exemplar worse than the locator's ``min_fit`` (by the ``"template"`` snapping) is
+flagged covered the first ``rule.misfit_motions`` times in an episode: the net uncovers around it
+before it may grasp it. An observation that has a ``mask`` (mask and visible modes) passes through
+unchanged.
 """
 
 from __future__ import annotations
@@ -49,9 +52,10 @@ class FindingPolicy:
         self.primitives = getattr(inner, "primitives", ())
         self.last_location: Location | None = None
         self.searching = False
+        self.misfits = 0  # this episode's decisions that took a misfit for covered
 
     def reset(self) -> None:
-        self.last_location, self.searching = None, False
+        self.last_location, self.searching, self.misfits = None, False, 0
         self.inner.reset()
 
     def located_observation(self, obs: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -62,6 +66,10 @@ class FindingPolicy:
         depth = np.asarray(obs["depth"])
         if location.seen:
             mask, occluded = location.mask, estimate_occluded(depth, location.mask, obs["query_depth"], self.rule)
+            misfit = location.fit is not None and location.fit < self.locator.min_fit
+            if misfit and not occluded and self.misfits < self.rule.misfit_motions:
+                # Not shaped like the exemplar: uncover around it before a grasp, the first few times.
+                occluded, self.misfits = True, self.misfits + 1
         else:
             mask, occluded = search_mask(depth, obs["query_depth"], self.rule), True
         return {

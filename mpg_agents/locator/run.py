@@ -170,6 +170,13 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
             card += f"""Then {", ".join(f"`{c}`" for c in template["candidates"])} were played on {template["episodes"]}
 tuning episodes, seeds {template["seed"]} on: {template["result"]}.
 """
+        misfit = record.get("misfit_tuning")
+        if misfit is not None:
+            card += f"""The rule's `misfit_motions` (decisions per episode a located object fitting the exemplar
+worse than the least template fit is taken as covered) was then chosen among
+{", ".join(str(c) for c in misfit["candidates"])} on {misfit["episodes"]} tuning episodes, seeds {misfit["seed"]} on:
+{misfit["result"]}.
+"""
     heldout = record.get("heldout")
     if heldout is not None:
         card += f"""
