@@ -60,9 +60,9 @@ pixels the network rates highest; to the blob whose mean probability times its s
 uncovered blob (its whole top shows) is weighed by how well it shows the exemplar's box in some
 pose, leaning ones included (:func:`~mpg_envs.perception.exemplar_match.pose_fit`), and one that
 fits no pose by at least the locator's ``pose_floor`` is not the target (see :func:`blob_weights`);
-to the object of the exemplar's colour whose mean probability times its
-:func:`~mpg_agents.locator.template.template_fit` is highest, cut to its blobs that the network
-rates (:func:`template_mask`)."""
+to the blob the network rates highest, an uncovered one that fits the exemplar's heights turned to
+any yaw worse than the locator's ``min_fit`` weighed down, grown over its object's rated blobs
+(:func:`template_mask`)."""
 COMPONENT_MIN_HEIGHT = 0.005
 """Metres above the table a pixel of the exemplar's colour stands to be part of an object by the
 ``"template"`` snapping (lower than the matcher's 1 cm: a flat object's rim stays on it)."""
@@ -200,8 +200,10 @@ class TargetLocator:
     judges cover and searches (:class:`~mpg_agents.locator.cover.CoverRule`); ``snap`` (one
     of :data:`SNAPS`) whether the mask snaps to one of the matcher's blobs (:func:`snap_to_blob`),
     ``pose_floor`` the least pose fit of an uncovered blob by the ``"pose"`` snapping, ``min_fit``
-    the least :func:`~mpg_agents.locator.template.fit_template` of the chosen object by the
-    ``"template"`` snapping (one that fits worse is not taken for the target: not seen).
+    the least :func:`~mpg_agents.locator.template.fit_template` of an uncovered blob by the
+    ``"template"`` snapping (one that fits worse keeps :data:`MISFIT_WEIGHT` of its rating, and
+    :class:`~mpg_agents.locator.finding_policy.FindingPolicy` takes it as covered the first
+    ``rule.misfit_motions`` times in an episode).
 
     Raises:
         ValueError: ``snap`` is not one of :data:`SNAPS`, or ``pose_floor`` or ``min_fit`` is outside [0, 1].
@@ -284,9 +286,10 @@ class TargetLocator:
         mask, ruled_out = None, None
         if self.snap == "template" and gap is not None:
             chosen = template_mask(probability, obs, exemplar, gap, blobs, self.min_fit)
-            if chosen is None:  # no object of its colour shaped like it
-                return Location(probability, np.zeros(probability.shape, np.uint8), False, seen_probability)
-            return Location(probability, chosen[0].astype(np.uint8), True, seen_probability, chosen[1])
+            if chosen is not None:
+                return Location(probability, chosen[0].astype(np.uint8), True, seen_probability, chosen[1])
+            # No blob of its colour shows (a camera's light can move every pixel off it): the
+            # network's pixels above the threshold, as without snapping.
         elif self.snap != "off":
             weights, ruled_out = blob_weights(self.snap, blobs, exemplar, self.pose_floor)
             mask = snap_to_blob(probability, [b.pixels for b in blobs], self.threshold, weights)

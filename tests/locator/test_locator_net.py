@@ -170,6 +170,14 @@ def test_the_template_snapping_takes_the_object_shaped_like_the_exemplar_over_a_
     assert alone.seen and alone.mask[second].all() and alone.fit is not None and alone.fit < 0.5
 
 
+def test_the_template_snapping_falls_back_to_the_networks_pixels_where_no_blob_of_the_colour_shows():
+    obs = _boxes((89, 161, 79))
+    obs["color"][5:15, 5:30] = obs["color"][30:50, 30:40] = (225, 87, 89)  # nothing of the exemplar's colour left
+    third = (slice(40, 60), slice(2, 12))
+    located = TargetLocator(_Rates(third), 0.5, 0.5, snap="template", min_fit=0.5).locate(obs)
+    assert located.seen and located.fit is None and located.mask[third].all() and located.mask.sum() == 200
+
+
 def test_bad_input_is_named(tmp_path: Path):
     with pytest.raises(KeyError, match="query_color"):
         TargetLocator(LocatorNet(SMALL)).locate({"color": np.zeros((8, 8, 3)), "depth": np.zeros((8, 8))})
