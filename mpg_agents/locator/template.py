@@ -3,14 +3,16 @@ every yaw: pure numpy and OpenCV, unit-tested by hand.
 
 The matcher's shape score (:func:`~mpg_envs.perception.exemplar_match.shape_score`) judges a
 blob by the box of the exemplar's extents, which is right for the blocks and says little of an
-irregular object. An object dropped into clutter most often rests in the pose the exemplar
-shows it in, turned about the vertical; then its heights, seen from above, are the exemplar's
-turned by some yaw. :func:`template_fit` turns the exemplar's heights above its table through
+irregular object. An object that rests in the pose the exemplar shows it in, turned about the
+vertical, shows the exemplar's heights turned by some yaw (one leaning on another object in a
+heap does not, and fits badly). :func:`template_fit` turns the exemplar's heights above its table through
 :data:`YAWS` and slides them a few pixels over the candidate's heights above the scene's table,
 and keeps the best agreement: the share of the two footprints that overlap (of the candidate's
 alone when it is covered, whose hidden part cannot show), discounted by how far the
 overlapping heights differ (all shifts of one yaw at once, as correlations). 1 is a perfect
-fit; an object of another shape fits worse at every yaw.
+fit; an object of another shape fits worse at every yaw. :func:`colour_components`,
+:func:`pick_component` and :func:`component_parts` are the small steps the locator's
+``"template"`` snapping takes around it.
 """
 
 from __future__ import annotations
