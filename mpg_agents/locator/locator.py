@@ -22,7 +22,7 @@ from safetensors.torch import load_file, save
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import RESOLUTION, Exemplar, exemplar_blobs, scene_input
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
-from mpg_agents.locator.template import colour_components, component_parts, fit_template, pick_component
+from mpg_agents.locator.template import component_of, component_parts, fit_template, pick_candidate
 from mpg_envs.files import write_bytes_whole
 from mpg_envs.perception.exemplar_match import (
     Blob,
@@ -88,29 +88,27 @@ def template_mask(
     ``min_fit`` (:func:`~mpg_agents.locator.template.fit_template`) weighed down to
     :data:`MISFIT_WEIGHT` of its probability (a look-alike of another shape in full view; taken
     still when nothing else rates higher: the target may rest in another pose); grown over the
-    object of the exemplar's colour it lies in (:func:`~mpg_agents.locator.template.colour_components`,
+    object of the exemplar's colour it lies in (:func:`~mpg_agents.locator.template.component_of`,
     ``gap`` the scene's colour gap to it) by that object's blobs rated at least
     :data:`PART_SHARE` of its best (:func:`~mpg_agents.locator.template.component_parts`).
     ``None`` when no blob is of its colour."""
-    up = heights(obs["depth"], MatchSettings())
+    settings = MatchSettings()
+    up = heights(obs["depth"], settings)
     template = exemplar.template
     fits: dict[int, float] = {}
 
-    def weight(pixels: np.ndarray) -> float:
-        blob = by_id[id(pixels)]
-        fits[id(pixels)] = fit_template(template, up, pixels, covered=blob.covered)
-        return 1.0 if blob.covered or fits[id(pixels)] >= min_fit else MISFIT_WEIGHT
+    def weight(k: int) -> float:
+        fits[k] = fit_template(template, up, blobs[k].pixels, covered=blobs[k].covered)
+        return 1.0 if blobs[k].covered or fits[k] >= min_fit else MISFIT_WEIGHT
 
-    by_id = {id(b.pixels): b for b in blobs}
-    chosen = pick_component(probability, [b.pixels for b in blobs], weight)
-    if chosen is None:
+    best = pick_candidate(probability, [b.pixels for b in blobs], weight)
+    if best is None:
         return None
-    settings = MatchSettings()
-    components = colour_components(gap, up, settings.colour_distance, COMPONENT_MIN_HEIGHT, settings.min_pixels)
-    home = max(components, key=lambda c: int((c & chosen).sum()), default=None)
-    if home is None or not (home & chosen).any():
-        return chosen, fits[id(chosen)]
-    return component_parts(probability, home, [b.pixels for b in blobs], PART_SHARE) | chosen, fits[id(chosen)]
+    chosen = blobs[best].pixels
+    home = component_of(chosen, gap, up, settings.colour_distance, COMPONENT_MIN_HEIGHT, settings.min_pixels)
+    if home is None:
+        return chosen, fits[best]
+    return component_parts(probability, home, [b.pixels for b in blobs], PART_SHARE) | chosen, fits[best]
 
 
 def blob_weights(

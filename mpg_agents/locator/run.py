@@ -147,8 +147,10 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
 {_band_rows(record["tuning_figures"])}
 """
     tuning = record.get("rule_tuning")
-    floor_note = {"pose": "" if pose_floor is None else f" (least pose fit {pose_floor})"}.get(snap, "")
-    if snap == "template" and min_fit is not None:
+    floor_note = ""
+    if snap == "pose" and pose_floor is not None:
+        floor_note = f" (least pose fit {pose_floor})"
+    elif snap == "template" and min_fit is not None:
         floor_note = f" (least template fit {min_fit}, `mpg_agents.locator.template.fit_template`)"
     if rule is not None and tuning is not None:
         card += f"""

@@ -10,8 +10,8 @@ heap does not, and fits badly). :func:`template_fit` turns the exemplar's height
 and keeps the best agreement: the share of the two footprints that overlap (of the candidate's
 alone when it is covered, whose hidden part cannot show), discounted by how far the
 overlapping heights differ (all shifts of one yaw at once, as correlations). 1 is a perfect
-fit; an object of another shape fits worse at every yaw. :func:`colour_components`,
-:func:`pick_component` and :func:`component_parts` are the small steps the locator's
+fit; an object of another shape fits worse at every yaw. :func:`pick_candidate`,
+:func:`component_of` and :func:`component_parts` are the small steps the locator's
 ``"template"`` snapping takes around it.
 """
 
@@ -173,34 +173,37 @@ def _radius(pixels: np.ndarray) -> int:
     return int(np.ceil(np.hypot(rows - rows.mean(), cols - cols.mean()).max())) + 1
 
 
-def colour_components(
-    gap: np.ndarray, heights: np.ndarray, colour_distance: float, min_height: float, min_pixels: int
-) -> list[np.ndarray]:
-    """The connected parts (bool images) of the pixels within ``colour_distance`` of the
+def component_of(
+    pixels: np.ndarray, gap: np.ndarray, heights: np.ndarray, colour_distance: float, min_height: float, min_pixels: int
+) -> np.ndarray | None:
+    """The connected part (bool image) of the pixels within ``colour_distance`` of the
     exemplar's colour (``gap``: each pixel's CIELAB distance to it) standing more than
-    ``min_height`` above the table (``heights``), of at least ``min_pixels`` pixels: one object
-    each, or objects of that colour that touch (the matcher's blobs split those at steps of
-    height, and split an irregular object too)."""
+    ``min_height`` above the table (``heights``) that holds most of ``pixels``, of at least
+    ``min_pixels`` pixels (``None`` when no such part holds any of them): one object, or objects of
+    that colour that touch (the matcher's blobs split those at steps of height, and split an
+    irregular object too)."""
     on = ((np.asarray(gap) <= colour_distance) & (np.asarray(heights) > min_height)).astype(np.uint8)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(on)
-    return [labels == k for k in range(1, count) if stats[k, cv2.CC_STAT_AREA] >= min_pixels]
+    held = np.bincount(labels[np.asarray(pixels, bool)], minlength=count)
+    held[0] = 0  # off every part
+    held[stats[:, cv2.CC_STAT_AREA] < min_pixels] = 0
+    best = int(np.argmax(held))
+    return labels == best if held[best] > 0 else None
 
 
-def pick_component(
-    probability: np.ndarray, components: list[np.ndarray], fit: Callable[[np.ndarray], float]
-) -> np.ndarray | None:
-    """Of ``components``, the one whose mean ``probability`` times its ``fit`` (in [0, 1]) is
-    highest (``None`` when there is none or every product is 0). Components are fitted in
-    falling order of mean probability, and no more once that mean cannot beat the best product:
-    the fit is the costly part."""
-    means = [float(probability[c].mean()) for c in components]
+def pick_candidate(probability: np.ndarray, candidates: list[np.ndarray], weight: Callable[[int], float]) -> int | None:
+    """The index of the candidate (bool image) whose mean ``probability`` times its ``weight``
+    (in [0, 1], asked by index) is highest (``None`` when there is none or every product is 0).
+    Candidates are weighed in falling order of mean probability, and no more once that mean cannot
+    beat the best product: the weight is the costly part."""
+    means = [float(probability[c].mean()) for c in candidates]
     best, best_value = None, 0.0
     for k in np.argsort(means)[::-1]:
         if means[k] <= best_value:
             break
-        value = means[k] * fit(components[k])
+        value = means[k] * weight(int(k))
         if value > best_value:
-            best, best_value = components[k], value
+            best, best_value = int(k), value
     return best
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpg_agents.locator.template import colour_components, component_parts, pick_component, template_fit
+from mpg_agents.locator.template import component_of, component_parts, pick_candidate, template_fit
 
 
 def _box(rows: slice, cols: slice, height: float, size: int = 120) -> tuple[np.ndarray, np.ndarray]:
@@ -53,32 +53,44 @@ def test_nothing_to_fit_gives_zero_and_bad_input_is_named():
         template_fit(*query, *query, yaws=0)
 
 
-def test_colour_components_keep_objects_of_the_colour_standing_high_enough():
+def test_the_component_of_a_blob_is_the_object_of_the_colour_standing_high_enough_that_holds_it():
     gap = np.full((20, 20), 50.0, np.float32)
     heights = np.zeros((20, 20), np.float32)
     gap[2:6, 2:6], heights[2:6, 2:6] = 5.0, 0.03  # 16 pixels of the colour, standing: kept
     gap[10:12, 10:12], heights[10:12, 10:12] = 5.0, 0.03  # 4 pixels: under min_pixels
     gap[15:19, 2:6], heights[15:19, 2:6] = 5.0, 0.001  # of the colour, but flat on the table
     heights[15:19, 12:16] = 0.03  # standing, of another colour
-    parts = colour_components(gap, heights, 14.0, 0.005, 5)
-    assert len(parts) == 1 and parts[0].sum() == 16 and parts[0][2:6, 2:6].all()
+
+    def blob(rows: slice, cols: slice) -> np.ndarray:
+        pixels = np.zeros((20, 20), bool)
+        pixels[rows, cols] = True
+        return pixels
+
+    part = component_of(blob(slice(3, 5), slice(3, 5)), gap, heights, 14.0, 0.005, 5)
+    assert part is not None and part.sum() == 16 and part[2:6, 2:6].all()
+    for rows, cols in ((slice(10, 12), slice(10, 12)), (slice(15, 19), slice(2, 6)), (slice(15, 19), slice(12, 16))):
+        assert component_of(blob(rows, cols), gap, heights, 14.0, 0.005, 5) is None
+    # A blob reaching over two parts belongs to the one holding most of it.
+    gap[2:6, 8:10], heights[2:6, 8:10] = 5.0, 0.03  # a second part, 8 pixels
+    part = component_of(blob(slice(2, 6), slice(5, 10)), gap, heights, 14.0, 0.005, 5)
+    assert part is not None and part.sum() == 8 and part[2:6, 8:10].all()
 
 
-def test_pick_component_weighs_mean_probability_by_fit_and_stops_when_no_better_can_come():
+def test_pick_candidate_weighs_mean_probability_by_fit_and_stops_when_no_better_can_come():
     probability = np.zeros((10, 10), np.float32)
     a, b, c = (np.zeros((10, 10), bool) for _ in range(3))
     a[0:2, 0:2], b[5:7, 5:7], c[8:10, 0:2] = True, True, True
     probability[a], probability[b], probability[c] = 0.9, 0.6, 0.2
-    fitted = []
+    weighed = []
 
-    def fit(pixels: np.ndarray) -> float:
-        fitted.append(float(probability[pixels].mean()))
-        return 0.5 if pixels is a else 1.0
+    def fit(k: int) -> float:
+        weighed.append(k)
+        return 0.5 if k == 0 else 1.0
 
-    assert pick_component(probability, [a, b, c], fit) is b  # 0.9 * 0.5 < 0.6 * 1.0
-    assert fitted == pytest.approx([0.9, 0.6])  # c (0.2) cannot beat 0.6: never fitted
-    assert pick_component(probability, [], fit) is None
-    assert pick_component(probability, [a], lambda pixels: 0.0) is None
+    assert pick_candidate(probability, [a, b, c], fit) == 1  # 0.9 * 0.5 < 0.6 * 1.0
+    assert weighed == [0, 1]  # c (0.2) cannot beat 0.6: never weighed
+    assert pick_candidate(probability, [], fit) is None
+    assert pick_candidate(probability, [a], lambda k: 0.0) is None
 
 
 def test_component_parts_cut_away_a_touching_blob_the_network_does_not_rate():
