@@ -22,7 +22,7 @@ from safetensors.torch import load_file, save
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import RESOLUTION, Exemplar, exemplar_blobs, scene_input
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
-from mpg_agents.locator.template import component_of, component_parts, fit_template, pick_candidate
+from mpg_agents.locator.template import component_of, component_parts, fit_template, grow_by_fit, pick_candidate
 from mpg_envs.files import write_bytes_whole
 from mpg_envs.perception.exemplar_match import (
     Blob,
@@ -70,8 +70,13 @@ MISFIT_WEIGHT = 0.1
 """The ``"template"`` snapping weighs an uncovered blob that fits the exemplar worse than the
 locator's ``min_fit`` by this share of its probability."""
 PART_SHARE = 0.1
-"""The ``"template"`` snapping keeps the chosen object's blobs rated at least this share of its
-best-rated blob."""
+"""The ``"template"`` snapping grows the chosen blob over its object's blobs rated at least this
+share of its best-rated blob."""
+GROWTHS = ("rated", "fit")
+"""How the ``"template"`` snapping grows the chosen blob over the other blobs of the object of
+the exemplar's colour it lies in (rated at least :data:`PART_SHARE` of its best): over all of them
+(an object of that colour touching the target comes with it), or over each whose addition leaves
+the grown object fitting the exemplar at least as well (:func:`~mpg_agents.locator.template.grow_by_fit`)."""
 
 
 def template_mask(
@@ -81,6 +86,7 @@ def template_mask(
     gap: np.ndarray,
     blobs: list[Blob],
     min_fit: float = 0.5,
+    grow: str = "rated",
 ) -> tuple[np.ndarray, float] | None:
     """The ``"template"`` snapping's mask (bool) for the located ``probability`` of ``obs``, with
     the chosen blob's fit: of the matcher's ``blobs``, the one whose mean probability is highest,
@@ -90,7 +96,7 @@ def template_mask(
     still when nothing else rates higher: the target may rest in another pose); grown over the
     object of the exemplar's colour it lies in (:func:`~mpg_agents.locator.template.component_of`,
     ``gap`` the scene's colour gap to it) by that object's blobs rated at least
-    :data:`PART_SHARE` of its best (:func:`~mpg_agents.locator.template.component_parts`).
+    :data:`PART_SHARE` of its best, by the growth ``grow`` (one of :data:`GROWTHS`).
     ``None`` when no blob is of its colour."""
     settings = MatchSettings()
     up = heights(obs["depth"], settings)
@@ -108,7 +114,20 @@ def template_mask(
     home = component_of(chosen, gap, up, settings.colour_distance, COMPONENT_MIN_HEIGHT, settings.min_pixels)
     if home is None:
         return chosen, fits[best]
-    return component_parts(probability, home, [b.pixels for b in blobs], PART_SHARE) | chosen, fits[best]
+    if grow == "rated":
+        return component_parts(probability, home, [b.pixels for b in blobs], PART_SHARE) | chosen, fits[best]
+    rated = [float(probability[b.pixels].mean()) for b in blobs]
+    inside = [k for k, b in enumerate(blobs) if (b.pixels & home).sum() * 2 > b.pixels.sum()]
+    top = max(rated[k] for k in inside) if inside else rated[best]
+    parts = sorted((k for k in inside if k != best and rated[k] >= PART_SHARE * top), key=lambda k: -rated[k])
+
+    def grown_fit(pixels: np.ndarray, covered: bool) -> float:
+        return fit_template(template, up, pixels, covered=covered)
+
+    grown = grow_by_fit(
+        chosen, blobs[best].covered, fits[best], [(blobs[k].pixels, blobs[k].covered) for k in parts], grown_fit
+    )
+    return grown, fits[best]
 
 
 def blob_weights(
@@ -163,9 +182,10 @@ def save_locator(
     snap: str = "off",
     pose_floor: float = 0.1,
     min_fit: float = 0.0,
+    grow: str = "rated",
 ) -> None:
     """Write ``net`` with its thresholds, search ``rule``, how it snaps to blobs (``snap``,
-    ``pose_floor``, ``min_fit``) and training ``record`` to ``path`` (whole or not at all)."""
+    ``pose_floor``, ``min_fit``, ``grow``) and training ``record`` to ``path`` (whole or not at all)."""
     header = {
         "config": net.config.to_dict(),
         "threshold": float(threshold),
@@ -173,6 +193,7 @@ def save_locator(
         "snap": snap,
         "pose_floor": float(pose_floor),
         "min_fit": float(min_fit),
+        "grow": grow,
         "rule": (CoverRule() if rule is None else rule).to_dict(),
         "record": dict(record),
     }
@@ -201,10 +222,12 @@ class TargetLocator:
     the least :func:`~mpg_agents.locator.template.fit_template` of an uncovered blob by the
     ``"template"`` snapping (one that fits worse keeps :data:`MISFIT_WEIGHT` of its rating, and
     :class:`~mpg_agents.locator.finding_policy.FindingPolicy` takes it as covered the first
-    ``rule.misfit_motions`` times in an episode).
+    ``rule.misfit_motions`` times in an episode), ``grow`` how it grows the chosen blob over its
+    object (one of :data:`GROWTHS`).
 
     Raises:
-        ValueError: ``snap`` is not one of :data:`SNAPS`, or ``pose_floor`` or ``min_fit`` is outside [0, 1].
+        ValueError: ``snap`` or ``grow`` is not one of :data:`SNAPS` or :data:`GROWTHS`, or
+            ``pose_floor`` or ``min_fit`` is outside [0, 1].
     """
 
     def __init__(
@@ -217,15 +240,19 @@ class TargetLocator:
         snap: str = "off",
         pose_floor: float = 0.1,
         min_fit: float = 0.0,
+        grow: str = "rated",
     ):
         if snap not in SNAPS:
             raise ValueError(f"snap must be one of {SNAPS}, got {snap!r}")
+        if grow not in GROWTHS:
+            raise ValueError(f"grow must be one of {GROWTHS}, got {grow!r}")
         if not 0.0 <= pose_floor <= 1.0:
             raise ValueError(f"pose_floor must lie in [0, 1], got {pose_floor}")
         if not 0.0 <= min_fit <= 1.0:
             raise ValueError(f"min_fit must lie in [0, 1], got {min_fit}")
         self.pose_floor = float(pose_floor)
         self.min_fit = float(min_fit)
+        self.grow = grow
         self.net = net.eval()
         self.snap = snap
         self.threshold = float(threshold)
@@ -249,6 +276,7 @@ class TargetLocator:
             self.snap,
             self.pose_floor,
             self.min_fit,
+            self.grow,
         )
 
     @classmethod
@@ -261,7 +289,8 @@ class TargetLocator:
         net.load_state_dict(load_file(str(path)))
         rule = CoverRule(**header["rule"]) if "rule" in header else CoverRule()
         snap, floor, min_fit = header.get("snap", "off"), header.get("pose_floor", 0.1), header.get("min_fit", 0.0)
-        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, snap, floor, min_fit)
+        grow = header.get("grow", "rated")  # files written before the choice grew over every rated blob
+        return cls(net, header["threshold"], header["seen_threshold"], header.get("record"), rule, snap, floor, min_fit, grow)
 
     def locate(self, obs: Mapping[str, np.ndarray]) -> Location:
         """Where the object of ``obs``' exemplar (``query_color``, ``query_depth``) shows in its
@@ -283,7 +312,7 @@ class TargetLocator:
             return Location(probability, np.zeros(probability.shape, np.uint8), False, seen_probability)
         mask, ruled_out = None, None
         if self.snap == "template" and gap is not None:
-            chosen = template_mask(probability, obs, exemplar, gap, blobs, self.min_fit)
+            chosen = template_mask(probability, obs, exemplar, gap, blobs, self.min_fit, self.grow)
             if chosen is not None:
                 return Location(probability, chosen[0].astype(np.uint8), True, seen_probability, chosen[1])
             # No blob of its colour shows (a camera's light can move every pixel off it): the

@@ -116,9 +116,10 @@ def model_card(
     snap: str = "off",
     pose_floor: float | None = None,
     min_fit: float | None = None,
+    grow: str = "rated",
 ) -> str:
     """The model card's Markdown, from the training record (and, once chosen, the search
-    ``rule``, the ``snap`` and the held-out figures the record then holds)."""
+    ``rule``, the ``snap`` with its settings and the held-out figures the record then holds)."""
     card = f"""# Target locator (`locator.safetensors`)
 
 Finds the exemplar's object in the colour and depth heightmaps: a per-pixel probability that
@@ -151,7 +152,7 @@ reads the exemplar matcher's colour-and-shape cues (`mpg_agents.locator.features
     if snap == "pose" and pose_floor is not None:
         floor_note = f" (least pose fit {pose_floor})"
     elif snap == "template" and min_fit is not None:
-        floor_note = f" (least template fit {min_fit}, `mpg_agents.locator.template.fit_template`)"
+        floor_note = f" (least template fit {min_fit}, `mpg_agents.locator.template.fit_template`; growth `{grow}`)"
     if rule is not None and tuning is not None:
         card += f"""
 ## Cover and search rule
@@ -179,6 +180,12 @@ worse than the least template fit is taken as covered) was then chosen among
 {", ".join(str(c) for c in misfit["candidates"])} on {misfit["episodes"]} tuning episodes, seeds {misfit["seed"]} on:
 {misfit["result"]}.
 """
+        growth = record.get("growth_tuning")
+        if growth is not None:
+            card += f"""How the chosen blob grows over its object (`mpg_agents.locator.locator.GROWTHS`) was then chosen
+among {", ".join(f"`{c}`" for c in growth["candidates"])} on {growth["episodes"]} tuning episodes, seeds {growth["seed"]} on:
+{growth["result"]}.
+"""
     heldout = record.get("heldout")
     if heldout is not None:
         card += f"""
@@ -194,6 +201,21 @@ worse than the least template fit is taken as covered) was then chosen among
 """
     else:
         card += "\nHeld-out figures on the benchmark's exemplar tracks: `benchmarks/locator_eval.py`.\n"
+    hidden = record.get("heldout_hidden")
+    if hidden is not None:
+        rows = "\n".join(
+            f"| {cell} | {c['hidden_states']:.0f} | {c['false_claims']:.0f} | {c['false_claim_rate']:.1%} "
+            f"[{c['interval_95'][0]:.1%}, {c['interval_95'][1]:.1%}] |"
+            for cell, c in hidden["cells"].items()
+        )
+        card += f"""
+Targets fully hidden at the reset (`benchmarks/locator_eval.py --hidden`: each seed's scene drawn
+with the target's visible fraction 0, seeds {hidden["seed"]} on, the reset's state located):
+
+| cell | hidden states | "seen" claimed | rate [95%] |
+|---|---:|---:|---:|
+{rows}
+"""
     return card
 
 
@@ -203,7 +225,8 @@ def write_locator(locator: TargetLocator, path: Path) -> Path:
     locator.save(path)
     card = path.with_suffix(".md")
     write_text_whole(
-        card, model_card(locator.record, locator.rule.to_dict(), locator.snap, locator.pose_floor, locator.min_fit)
+        card,
+        model_card(locator.record, locator.rule.to_dict(), locator.snap, locator.pose_floor, locator.min_fit, locator.grow),
     )
     return card
 

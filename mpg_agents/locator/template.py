@@ -11,8 +11,8 @@ and keeps the best agreement: the share of the two footprints that overlap (of t
 alone when it is covered, whose hidden part cannot show), discounted by how far the
 overlapping heights differ (all shifts of one yaw at once, as correlations). 1 is a perfect
 fit; an object of another shape fits worse at every yaw. :func:`pick_candidate`,
-:func:`component_of` and :func:`component_parts` are the small steps the locator's
-``"template"`` snapping takes around it.
+:func:`component_of`, :func:`component_parts` and :func:`grow_by_fit` are the small steps the
+locator's ``"template"`` snapping takes around it.
 """
 
 from __future__ import annotations
@@ -222,3 +222,24 @@ def component_parts(probability: np.ndarray, component: np.ndarray, blobs: list[
         if mean >= share * top:
             mask |= part
     return mask
+
+
+def grow_by_fit(
+    chosen: np.ndarray,
+    covered: bool,
+    chosen_fit: float,
+    parts: list[tuple[np.ndarray, bool]],
+    fit: Callable[[np.ndarray, bool], float],
+) -> np.ndarray:
+    """The ``chosen`` blob (bool image; ``covered``, fitting the exemplar by ``chosen_fit``)
+    grown by each of ``parts`` (``(pixels, covered)``, in the order tried) whose addition leaves
+    the grown object fitting at least as well, by ``fit(pixels, covered)`` (an object covered
+    when any of its parts is): the parts of an irregular object that the matcher split at steps
+    of height join it, an object of the same colour touching it (another shape) does not."""
+    grown, best = np.asarray(chosen, bool).copy(), float(chosen_fit)
+    for pixels, part_covered in parts:
+        trial = grown | np.asarray(pixels, bool)
+        value = fit(trial, covered or part_covered)
+        if value >= best:
+            grown, best, covered = trial, value, covered or part_covered
+    return grown

@@ -57,6 +57,9 @@ def test_a_saved_locator_loads_and_locates_the_same(tmp_path: Path):
         TargetLocator(net, snap="pose", pose_floor=1.5)
     save_locator(net, path, 0.5, 0.7, {}, snap="pose", pose_floor=0.25)
     assert TargetLocator.load(path).pose_floor == 0.25 and TargetLocator.load(path).snap == "pose"
+    assert TargetLocator.load(path).grow == "rated"  # the default growth
+    save_locator(net, path, 0.5, 0.7, {}, snap="template", min_fit=0.5, grow="fit")
+    assert TargetLocator.load(path).grow == "fit" and TargetLocator.load(path).min_fit == 0.5
     save_locator(net, path, 0.5, 0.7, {"steps": 3})
     obs = _obs(np.random.default_rng(0))
     a, b = TargetLocator(net, 0.5, 0.7).locate(obs), TargetLocator.load(path).locate(obs)
@@ -170,6 +173,18 @@ def test_the_template_snapping_takes_the_object_shaped_like_the_exemplar_over_a_
     assert alone.seen and alone.mask[second].all() and alone.fit is not None and alone.fit < 0.5
 
 
+def test_fit_growth_leaves_out_a_touching_object_of_the_same_colour_that_rated_growth_takes():
+    obs = _boxes((89, 161, 79))  # the exemplar: the first box (10 x 25, 3 cm)
+    obs["color"][15:25, 5:30], obs["depth"][15:25, 5:30] = (89, 161, 79), 0.05  # another shape of its colour, touching it
+    first, both = (slice(5, 15), slice(5, 30)), (slice(5, 25), slice(5, 30))
+    rated = TargetLocator(_Rates(both), 0.5, 0.5, snap="template", min_fit=0.5).locate(obs)
+    assert rated.mask[both].all()  # grown over the whole object of the colour
+    grown = TargetLocator(_Rates(both), 0.5, 0.5, snap="template", min_fit=0.5, grow="fit").locate(obs)
+    assert grown.seen and grown.mask[first].all() and grown.mask.sum() == grown.mask[first].size and grown.fit > 0.9
+    with pytest.raises(ValueError, match="grow must be one of"):
+        TargetLocator(LocatorNet(SMALL), grow="all")
+
+
 def test_the_template_snapping_falls_back_to_the_networks_pixels_where_no_blob_of_the_colour_shows():
     obs = _boxes((89, 161, 79))
     obs["color"][5:15, 5:30] = obs["color"][30:50, 30:40] = (225, 87, 89)  # nothing of the exemplar's colour left
@@ -265,3 +280,7 @@ def test_a_locator_is_written_with_its_model_card_beside_it(tmp_path: Path):
     card = write_locator(TargetLocator(LocatorNet(SMALL), 0.5, 0.7, record), tmp_path / "locator.safetensors")
     assert card == tmp_path / "locator.md" and "mpg-train-locator --out x" in card.read_text()
     assert TargetLocator.load(tmp_path / "locator.safetensors").record == record
+    hidden = {"false_claim_rate": 0.1, "interval_95": [0.03, 0.3], "hidden_states": 20.0, "false_claims": 2.0}
+    record["heldout_hidden"] = {"seed": 500000, "cells": {"MPG-OccludedHardExemplar-v0 30": hidden}}
+    card = write_locator(TargetLocator(LocatorNet(SMALL), 0.5, 0.7, record), tmp_path / "locator.safetensors")
+    assert "| MPG-OccludedHardExemplar-v0 30 | 20 | 2 | 10.0% [3.0%, 30.0%] |" in card.read_text()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpg_agents.locator.template import component_of, component_parts, pick_candidate, template_fit
+from mpg_agents.locator.template import component_of, component_parts, grow_by_fit, pick_candidate, template_fit
 
 
 def _box(rows: slice, cols: slice, height: float, size: int = 120) -> tuple[np.ndarray, np.ndarray]:
@@ -103,3 +103,17 @@ def test_component_parts_cut_away_a_touching_blob_the_network_does_not_rate():
     assert np.array_equal(component_parts(probability, component, [left, right], 0.1), left)
     assert np.array_equal(component_parts(probability, component, [], 0.1), component)  # no blob: all of it
 
+
+def test_grow_by_fit_keeps_a_part_that_fits_as_well_and_leaves_one_that_fits_worse():
+    chosen, half, other = (np.zeros((6, 6), bool) for _ in range(3))
+    chosen[0:2, 0:3], half[2:4, 0:3], other[0:2, 3:6] = True, True, True
+    asked: list[tuple[int, bool]] = []
+
+    def fit(pixels: np.ndarray, covered: bool) -> float:
+        asked.append((int(pixels.sum()), covered))
+        return 0.9 if not (pixels & other).any() else 0.2  # the chosen blob with its other half: the exemplar
+
+    grown = grow_by_fit(chosen, False, 0.4, [(other, False), (half, True)], fit)
+    assert np.array_equal(grown, chosen | half)
+    assert asked == [(12, False), (12, True)]  # tried in the order given; a covered part makes the object covered
+    assert np.array_equal(grow_by_fit(chosen, False, 0.4, [], fit), chosen) and grown is not chosen
