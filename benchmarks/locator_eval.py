@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import gymnasium as gym
+import mujoco
 import torch
 
 import mpg_envs  # noqa: F401  (registers the ids)
@@ -108,6 +109,7 @@ def main() -> None:
         "episodes": args.episodes,
         "motions": args.motions,
         "torch_threads": args.torch_threads,
+        "mujoco": mujoco.__version__,
         "cells": {},
     }
     pooled: dict[str, list] = {"masks": [], "seen": [], "labels": [], "visible": []}
