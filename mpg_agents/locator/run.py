@@ -216,6 +216,8 @@ with the target's visible fraction 0, seeds {hidden["seed"]} on, the reset's sta
 |---|---:|---:|---:|
 {rows}
 """
+        notes = [f"{cell}: {c['stopped']}." for cell, c in hidden["cells"].items() if c.get("stopped")]
+        card += "".join(f"\n{note}\n" for note in notes)
     return card
 
 
