@@ -97,7 +97,9 @@ def template_mask(
     object of the exemplar's colour it lies in (:func:`~mpg_agents.locator.template.component_of`,
     ``gap`` the scene's colour gap to it) by that object's blobs rated at least
     :data:`PART_SHARE` of its best, by the growth ``grow`` (one of :data:`GROWTHS`).
-    ``None`` when no blob is of its colour."""
+    ``None`` when no blob is of its colour. ``ValueError`` when ``grow`` is not one of :data:`GROWTHS`."""
+    if grow not in GROWTHS:
+        raise ValueError(f"grow must be one of {GROWTHS}, got {grow!r}")
     settings = MatchSettings()
     up = heights(obs["depth"], settings)
     template = exemplar.template
