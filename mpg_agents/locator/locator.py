@@ -22,7 +22,14 @@ from safetensors.torch import load_file, save
 from mpg_agents.locator.cover import CoverRule
 from mpg_agents.locator.features import RESOLUTION, Exemplar, exemplar_blobs, scene_input
 from mpg_agents.locator.net import LocatorConfig, LocatorNet
-from mpg_agents.locator.template import component_of, component_parts, fit_template, grow_by_fit, pick_candidate
+from mpg_agents.locator.template import (
+    component_of,
+    component_parts,
+    fit_template,
+    grow_by_fit,
+    pick_candidate,
+    rated_parts,
+)
 from mpg_envs.files import write_bytes_whole
 from mpg_envs.perception.exemplar_match import (
     Blob,
@@ -109,7 +116,8 @@ def template_mask(
         fits[k] = fit_template(template, up, blobs[k].pixels, covered=blobs[k].covered)
         return 1.0 if blobs[k].covered or fits[k] >= min_fit else MISFIT_WEIGHT
 
-    best = pick_candidate(probability, [b.pixels for b in blobs], weight)
+    pixels = [b.pixels for b in blobs]
+    best = pick_candidate(probability, pixels, weight)
     if best is None:
         return None
     chosen = blobs[best].pixels
@@ -117,14 +125,11 @@ def template_mask(
     if home is None:
         return chosen, fits[best]
     if grow == "rated":
-        return component_parts(probability, home, [b.pixels for b in blobs], PART_SHARE) | chosen, fits[best]
-    rated = [float(probability[b.pixels].mean()) for b in blobs]
-    inside = [k for k, b in enumerate(blobs) if (b.pixels & home).sum() * 2 > b.pixels.sum()]
-    top = max(rated[k] for k in inside) if inside else rated[best]
-    parts = sorted((k for k in inside if k != best and rated[k] >= PART_SHARE * top), key=lambda k: -rated[k])
+        return component_parts(probability, home, pixels, PART_SHARE) | chosen, fits[best]
+    parts = [k for k in rated_parts(probability, home, pixels, PART_SHARE) if k != best]
 
-    def grown_fit(pixels: np.ndarray, covered: bool) -> float:
-        return fit_template(template, up, pixels, covered=covered)
+    def grown_fit(grown: np.ndarray, covered: bool) -> float:
+        return fit_template(template, up, grown, covered=covered)
 
     grown = grow_by_fit(
         chosen, blobs[best].covered, fits[best], [(blobs[k].pixels, blobs[k].covered) for k in parts], grown_fit

@@ -11,8 +11,8 @@ and keeps the best agreement: the share of the two footprints that overlap (of t
 alone when it is covered, whose hidden part cannot show), discounted by how far the
 overlapping heights differ (all shifts of one yaw at once, as correlations). 1 is a perfect
 fit; an object of another shape fits worse at every yaw. :func:`pick_candidate`,
-:func:`component_of`, :func:`component_parts` and :func:`grow_by_fit` are the small steps the
-locator's ``"template"`` snapping takes around it.
+:func:`component_of`, :func:`rated_parts`, :func:`component_parts` and :func:`grow_by_fit` are
+the small steps the locator's ``"template"`` snapping takes around it.
 """
 
 from __future__ import annotations
@@ -207,20 +207,32 @@ def pick_candidate(probability: np.ndarray, candidates: list[np.ndarray], weight
     return best
 
 
+def rated_parts(probability: np.ndarray, component: np.ndarray, blobs: list[np.ndarray], share: float) -> list[int]:
+    """Indices of the matcher's ``blobs`` mostly inside ``component`` (more than half their
+    pixels) whose mean ``probability`` is at least ``share`` of the highest such mean, highest
+    first (empty only when no blob lies in it).
+
+    Raises:
+        ValueError: ``share`` is outside (0, 1].
+    """
+    if not 0.0 < share <= 1.0:
+        raise ValueError(f"share must lie in (0, 1], got {share}")
+    inside = [k for k, b in enumerate(blobs) if (b & component).sum() * 2 > b.sum()]
+    means = {k: float(probability[blobs[k]].mean()) for k in inside}
+    top = max(means.values(), default=0.0)
+    return sorted((k for k in inside if means[k] >= share * top), key=lambda k: -means[k])
+
+
 def component_parts(probability: np.ndarray, component: np.ndarray, blobs: list[np.ndarray], share: float) -> np.ndarray:
-    """The located pixels within the chosen ``component``: the matcher's ``blobs`` mostly inside
-    it (more than half their pixels) whose mean ``probability`` is at least ``share`` of the
-    highest such mean (so an object of the same colour touching the target, a blob of its own,
-    is cut away); the whole component when no blob lies in it."""
-    parts = [b for b in blobs if (b & component).sum() * 2 > b.sum()]
+    """The located pixels within the chosen ``component``: its :func:`rated_parts` (so an object
+    of the same colour touching the target, a blob of its own, is cut away when the network does
+    not rate it); the whole component when no blob lies in it."""
+    parts = rated_parts(probability, component, blobs, share)
     if not parts:
         return component
-    means = [float(probability[b].mean()) for b in parts]
-    top = max(means)
     mask = np.zeros(component.shape, bool)
-    for part, mean in zip(parts, means):
-        if mean >= share * top:
-            mask |= part
+    for k in parts:
+        mask |= blobs[k]
     return mask
 
 

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mpg_agents.locator.template import component_of, component_parts, grow_by_fit, pick_candidate, template_fit
+from mpg_agents.locator.template import (
+    component_of,
+    component_parts,
+    grow_by_fit,
+    pick_candidate,
+    rated_parts,
+    template_fit,
+)
 
 
 def _box(rows: slice, cols: slice, height: float, size: int = 120) -> tuple[np.ndarray, np.ndarray]:
@@ -117,3 +124,17 @@ def test_grow_by_fit_keeps_a_part_that_fits_as_well_and_leaves_one_that_fits_wor
     assert np.array_equal(grown, chosen | half)
     assert asked == [(12, False), (12, True)]  # tried in the order given; a covered part makes the object covered
     assert np.array_equal(grow_by_fit(chosen, False, 0.4, [], fit), chosen) and grown is not chosen
+
+
+def test_rated_parts_are_the_blobs_inside_rated_near_the_best_highest_first():
+    probability = np.zeros((10, 10), np.float32)
+    component = np.zeros((10, 10), bool)
+    component[0:4, 0:9] = True
+    left, middle, right, outside = (np.zeros((10, 10), bool) for _ in range(4))
+    left[0:4, 0:3], middle[0:4, 3:6], right[0:4, 6:9], outside[5:9, 0:3] = True, True, True, True
+    probability[left], probability[middle], probability[right], probability[outside] = 0.3, 0.8, 0.05, 0.9
+    # outside lies off the component; right rates under 0.1 of the best inside (0.8)
+    assert rated_parts(probability, component, [left, middle, right, outside], 0.1) == [1, 0]
+    assert rated_parts(probability, component, [outside], 0.1) == []
+    with pytest.raises(ValueError, match=r"share must lie in \(0, 1\]"):
+        rated_parts(probability, component, [left], 1.5)
