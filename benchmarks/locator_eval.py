@@ -30,6 +30,7 @@ import json
 import statistics
 import time
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import mujoco
@@ -72,14 +73,64 @@ def hidden_claims(locator: TargetLocator, env: gym.Env, seeds: range, seconds: l
         claims += bool(locator.locate(obs).seen)
         seconds.append(time.perf_counter() - started)
         states += 1
-    low, high = wilson_interval(claims, states) if states else (float("nan"), float("nan"))
+    return {**claim_figures(claims, states), "seeds_without_scene": float(skipped)}
+
+
+def claim_figures(claims: int, states: int) -> dict[str, Any]:
+    """``claims`` "seen" of ``states`` hidden-target states: the counts, the rate and its 95%
+    Wilson interval (NaN without a state)."""
+    nan = float("nan")
     return {
         "hidden_states": float(states),
         "false_claims": float(claims),
-        "false_claim_rate": claims / states if states else float("nan"),
-        "interval_95": [low, high],
-        "seeds_without_scene": float(skipped),
+        "false_claim_rate": claims / states if states else nan,
+        "interval_95": list(wilson_interval(claims, states)) if states else [nan, nan],
     }
+
+
+def hidden_report(locator: TargetLocator, args: argparse.Namespace, report: dict[str, Any], seconds: list[float]) -> None:
+    """``--hidden``: each cell's false claims, and pooled, into ``report``."""
+    report["hidden"] = True
+    for track in args.tracks:
+        for n in args.objects:
+            env = hidden_env(track, n, args.scene_tries)
+            try:
+                figures = hidden_claims(locator, env, range(args.seed, args.seed + args.episodes), seconds)
+            finally:
+                env.close()
+            report["cells"][f"{track} {n}"] = figures
+            print(f"{track}, {n} objects, target hidden: {json.dumps(figures)}", flush=True)
+    cells = report["cells"].values()
+    report["pooled"] = claim_figures(int(sum(c["false_claims"] for c in cells)), int(sum(c["hidden_states"] for c in cells)))
+
+
+def band_report(locator: TargetLocator, args: argparse.Namespace, report: dict[str, Any], seconds: list[float]) -> None:
+    """Each cell's IoU and "seen" claims by visibility band, and pooled, into ``report``."""
+    pooled: dict[str, list] = {"masks": [], "seen": [], "labels": [], "visible": []}
+    for track in args.tracks:
+        for n in args.objects:
+            env = gym.make(track, num_objects=n)
+            source = SampleSource(track, track, (n,), args.motions, 1.0)
+            masks, seen, labels, visible = [], [], [], []
+            try:
+                for seed in range(args.seed, args.seed + args.episodes):
+                    for sample in episode_samples(env, source, seed):
+                        obs = sample_observation(sample)
+                        started = time.perf_counter()
+                        location = locator.locate(obs)
+                        seconds.append(time.perf_counter() - started)
+                        masks.append(location.mask)
+                        seen.append(location.seen)
+                        labels.append(sample["label"])
+                        visible.append(float(sample["visible_fraction"]))
+            finally:
+                env.close()
+            figures = locator_figures(masks, seen, labels, visible)
+            report["cells"][f"{track} {n}"] = figures
+            print(f"{track}, {n} objects: {json.dumps(figures)}", flush=True)
+            for key, values in zip(("masks", "seen", "labels", "visible"), (masks, seen, labels, visible)):
+                pooled[key].extend(values)
+    report["pooled"] = locator_figures(pooled["masks"], pooled["seen"], pooled["labels"], pooled["visible"])
 
 
 def main() -> None:
@@ -112,66 +163,18 @@ def main() -> None:
         "mujoco": mujoco.__version__,
         "cells": {},
     }
-    pooled: dict[str, list] = {"masks": [], "seen": [], "labels": [], "visible": []}
     seconds: list[float] = []
-    if args.hidden:
-        report["hidden"] = True
-        for track in args.tracks:
-            for n in args.objects:
-                env = hidden_env(track, n, args.scene_tries)
-                try:
-                    figures = hidden_claims(locator, env, range(args.seed, args.seed + args.episodes), seconds)
-                finally:
-                    env.close()
-                report["cells"][f"{track} {n}"] = figures
-                print(f"{track}, {n} objects, target hidden: {json.dumps(figures)}", flush=True)
-        cells = list(report["cells"].values())
-        states, claims = sum(c["hidden_states"] for c in cells), sum(c["false_claims"] for c in cells)
-        report["pooled"] = {
-            "hidden_states": states,
-            "false_claims": claims,
-            "false_claim_rate": claims / states if states else float("nan"),
-            "interval_95": list(wilson_interval(int(claims), int(states))) if states else None,
-        }
-        report["median_decision_s"] = statistics.median(seconds) if seconds else float("nan")
-        print(f"pooled: {json.dumps(report['pooled'])}")
-        if args.json is not None:
-            write_text_whole(args.json, json.dumps(report, indent=2) + "\n")
-        if args.record:
-            locator.record["heldout_hidden"] = report
-            print(f"kept the figures in {args.locator} and wrote {write_locator(locator, Path(args.locator))}")
-        return
-    for track in args.tracks:
-        for n in args.objects:
-            env = gym.make(track, num_objects=n)
-            source = SampleSource(track, track, (n,), args.motions, 1.0)
-            masks, seen, labels, visible = [], [], [], []
-            try:
-                for seed in range(args.seed, args.seed + args.episodes):
-                    for sample in episode_samples(env, source, seed):
-                        obs = sample_observation(sample)
-                        started = time.perf_counter()
-                        location = locator.locate(obs)
-                        seconds.append(time.perf_counter() - started)
-                        masks.append(location.mask)
-                        seen.append(location.seen)
-                        labels.append(sample["label"])
-                        visible.append(float(sample["visible_fraction"]))
-            finally:
-                env.close()
-            figures = locator_figures(masks, seen, labels, visible)
-            report["cells"][f"{track} {n}"] = figures
-            print(f"{track}, {n} objects: {json.dumps(figures)}", flush=True)
-            for key, values in zip(("masks", "seen", "labels", "visible"), (masks, seen, labels, visible)):
-                pooled[key].extend(values)
-    report["pooled"] = locator_figures(pooled["masks"], pooled["seen"], pooled["labels"], pooled["visible"])
-    report["median_decision_s"] = statistics.median(seconds)
+    (hidden_report if args.hidden else band_report)(locator, args, report, seconds)
+    report["median_decision_s"] = statistics.median(seconds) if seconds else float("nan")
     print(f"pooled: {json.dumps(report['pooled'])}")
     print(f"median seconds per locator decision ({args.torch_threads} torch threads): {report['median_decision_s']:.4f}")
     if args.json is not None:
         write_text_whole(args.json, json.dumps(report, indent=2) + "\n")
     if args.record:
-        locator.record["heldout"] = {**report, "cells": list(report["cells"])}
+        if args.hidden:
+            locator.record["heldout_hidden"] = report
+        else:
+            locator.record["heldout"] = {**report, "cells": list(report["cells"])}
         card = write_locator(locator, Path(args.locator))
         print(f"kept the figures in {args.locator} and wrote {card}")
 
